@@ -1,0 +1,47 @@
+"""NaN-safe elementary functions (the double-``where`` trick).
+
+``jnp.sqrt`` has an infinite derivative at 0, and ``jnp.where`` does not stop
+it: the cotangent of the branch not taken is 0, and ``0 * inf`` is NaN. The
+functions here substitute a harmless argument where the input is singular,
+evaluate, and select again, so values *and* gradients stay finite
+(jax-md ``util.safe_mask``, optax ``safe_norm``).
+"""
+
+import jax.numpy as jnp
+
+
+def safe_sqrt(x):
+    """``sqrt(max(x, 0))`` whose gradient is 0, not NaN/inf, where ``x <= 0``."""
+    positive = x > 0
+    x_safe = jnp.where(positive, x, jnp.ones_like(x))
+    return jnp.where(positive, jnp.sqrt(x_safe), jnp.zeros_like(x))
+
+
+def sqrt_difference_of_squares(r, x):
+    """``sqrt(r**2 - x**2)`` as ``sqrt((r - x)(r + x))``, NaN-safe at ``|x| = r``.
+
+    The factored form keeps full relative accuracy when ``x << r`` (no
+    cancellation in ``r**2 - x**2``) and when ``x -> r``.
+    """
+    return safe_sqrt((r - x) * (r + x))
+
+
+def safe_divide(numerator, denominator, fill=0.0):
+    """``numerator / denominator`` with ``fill`` (and zero gradient) where the denominator is 0."""
+    nonzero = denominator != 0
+    safe_den = jnp.where(nonzero, denominator, jnp.ones_like(denominator))
+    return jnp.where(nonzero, numerator / safe_den, fill)
+
+
+def as_float_arrays(*values):
+    """Broadcast ``values`` to one shape and one floating dtype.
+
+    The dtype follows JAX's promotion rules (a float32 array with Python
+    scalars stays float32); integer-only input becomes the default float
+    (float64 once ``sintercond`` is imported).
+    """
+    arrays = [jnp.asarray(v) for v in values]
+    dtype = jnp.result_type(*arrays)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(float)
+    return jnp.broadcast_arrays(*(a.astype(dtype) for a in arrays))

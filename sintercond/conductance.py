@@ -1,0 +1,286 @@
+"""Thermal conductance of a pair of particles, for the pipe-network DEM.
+
+A conductance law turns the pair geometry (radii ``r_i``, ``r_j``, overlap
+``h``, and a neck or contact radius ``a`` from a neck model of
+:mod:`sintercond.neck`) and the materials (conductivities ``kappa_i``,
+``kappa_j``) into the conductance ``K_ij`` of the pipe joining the two centres,
+so that the heat flow into ``i`` is ``K_ij (T_j - T_i)`` (Rojek et al. 2022,
+Eq. 4). Units: lengths in m and conductivities in W/(m K) give W/K; any
+consistent set works.
+
+Every law is one :class:`ConductanceLaw` with the same signature, so the
+thermal DEM can take any of them by name (:data:`CONDUCTANCE_LAWS`) or as an
+object, with its fittable parameters passed explicitly (``params``):
+
+========================  ======================================  =================
+law                       pair conductance                        default neck
+========================  ======================================  =================
+``rojek``                 halves ``s kappa pi a`` in series       volume_conserving
+``argento_bouvard``       the same with ``s = 1/0.899``           volume_conserving
+``batchelor_obrien``      halves ``4 kappa a`` in series          volume_conserving
+``conductivity``          ``k_ij pi a^2 / d``                     intersection
+``feng``                  2-D pipe halves in series               intersection
+========================  ======================================  =================
+
+The neck radius each law uses is stated above and can be swapped with
+``neck_model=``. Laws that look alike differ by conventions: Rojek's ``a`` is
+the cylindrical-neck radius, Quintana-Ruiz's the lens radius. Pairs with
+``h <= 0`` have ``K = 0`` with zero gradient; pairs where the neck model is
+undefined give NaN (see :mod:`sintercond.neck`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import NamedTuple
+
+import jax.numpy as jnp
+
+from sintercond._numerics import as_float_arrays, safe_divide
+from sintercond.neck import NECK_MODELS
+
+ROJEK_SLOPE = 1.064
+"""Slope of Rojek et al. (2022), Eq. 40: ``K_i / K_cyl = 1.064 a / r``."""
+
+ARGENTO_BOUVARD_SLOPE = 1.0 / 0.899
+"""Argento & Bouvard (1996) ``R/R_cyl = 0.899 (a/r)^-1``, as a Rojek slope (Eq. 42: 1.112)."""
+
+BATCHELOR_OBRIEN_SLOPE = 4.0 / math.pi
+"""``4 kappa a`` per half (isothermal disc on a half-space) as a Rojek slope."""
+
+
+def series_conductance(k_i, k_j, contact_resistance=0.0):
+    """Conductances in series: ``1 / (1/k_i + 1/k_j + R_c)``.
+
+    Rojek et al. (2022), Eqs. 5-9 (Eq. 8 with ``R_c = 1/K_c``, Eq. 9 with
+    ``R_c = 0``), evaluated as ``k_i k_j / (k_i + k_j + k_i k_j R_c)`` so that
+    zero conductances give 0 (with zero gradient) rather than ``1/0``.
+
+    Args:
+      k_i, k_j: conductances >= 0 (W/K).
+      contact_resistance: ``R_c >= 0`` (K/W); 0 for a perfect interface.
+
+    Returns:
+      The series conductance (W/K).
+    """
+    k_i, k_j, r_c = as_float_arrays(k_i, k_j, contact_resistance)
+    return safe_divide(k_i * k_j, k_i + k_j + k_i * k_j * r_c)
+
+
+# --------------------------------------------------------------------------
+# the laws, as functions of the neck radius
+
+
+def _linear_neck_law(a, r_i, r_j, h, kappa_i, kappa_j, params):
+    """Halves ``K_k = s kappa_k pi a`` (Rojek Eq. 43) in series (Eqs. 8-9)."""
+    slope = params["slope"]
+    return series_conductance(
+        slope * kappa_i * jnp.pi * a, slope * kappa_j * jnp.pi * a, params["contact_resistance"]
+    )
+
+
+def _conductivity_law(a, r_i, r_j, h, kappa_i, kappa_j, params):
+    """``k_ij A / d``, Quintana-Ruiz & Campello (2020), Eqs. 32, 34, 35."""
+    d = r_i + r_j - h
+    k_ij = (r_i + r_j) / (r_i / kappa_i + r_j / kappa_j)
+    return k_ij * jnp.pi * a**2 / d
+
+
+def _feng_half_conductance(a, r, kappa, thickness):
+    """Feng et al. (2009) 2-D disc conductance, Quintana-Ruiz Eq. 36.
+
+    ``alpha`` is the half-angle of the contact arc seen from the centre,
+    ``sin(alpha) = a / r``; the result is per unit out-of-plane thickness
+    times ``thickness``.
+    """
+    alpha = jnp.arcsin(jnp.clip(a / r, 0.0, 1.0))
+    return thickness * jnp.pi * kappa / (-jnp.log(alpha) + 1.5 + alpha**2 / 36.0 + alpha**4 / 2700.0)
+
+
+def _feng_law(a, r_i, r_j, h, kappa_i, kappa_j, params):
+    t = params["thickness"]
+    return series_conductance(
+        _feng_half_conductance(a, r_i, kappa_i, t),
+        _feng_half_conductance(a, r_j, kappa_j, t),
+        params["contact_resistance"],
+    )
+
+
+class ConductanceLaw(NamedTuple):
+    """A pair conductance law.
+
+    Attributes:
+      name: registry key.
+      from_neck: ``fn(a, r_i, r_j, h, kappa_i, kappa_j, params) -> K_ij`` (W/K),
+        called only for pairs in contact (``h > 0``, ``a > 0``).
+      default_params: the law's parameters and their defaults; these are
+        the differentiable (fittable) inputs.
+      neck_model: default key of :data:`sintercond.neck.NECK_MODELS`.
+      reference: paper and equations.
+    """
+
+    name: str
+    from_neck: Callable
+    default_params: Mapping[str, float]
+    neck_model: str
+    reference: str
+
+
+CONDUCTANCE_LAWS: dict[str, ConductanceLaw] = {
+    law.name: law
+    for law in (
+        ConductanceLaw(
+            "rojek", _linear_neck_law,
+            {"slope": ROJEK_SLOPE, "contact_resistance": 0.0},
+            "volume_conserving", "Rojek et al. 2022, Eqs. 8-9, 40, 43",
+        ),
+        ConductanceLaw(
+            "argento_bouvard", _linear_neck_law,
+            {"slope": ARGENTO_BOUVARD_SLOPE, "contact_resistance": 0.0},
+            "volume_conserving", "Argento & Bouvard 1996, via Rojek et al. 2022, Eqs. 41-42",
+        ),
+        ConductanceLaw(
+            "batchelor_obrien", _linear_neck_law,
+            {"slope": BATCHELOR_OBRIEN_SLOPE, "contact_resistance": 0.0},
+            "volume_conserving", "Batchelor & O'Brien 1977 (2 kappa a), Dryden & Zok 2004, Eq. 37",
+        ),
+        ConductanceLaw(
+            "conductivity", _conductivity_law, {},
+            "intersection", "Quintana-Ruiz & Campello 2020, Eqs. 32-35",
+        ),
+        ConductanceLaw(
+            "feng", _feng_law,
+            {"thickness": 1.0, "contact_resistance": 0.0},
+            "intersection", "Feng et al. 2009, via Quintana-Ruiz & Campello 2020, Eq. 36",
+        ),
+    )
+}
+"""The conductance laws by name."""
+
+
+def pair_conductance(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_model=None):
+    """Conductance ``K_ij`` of a particle pair under any law.
+
+    Args:
+      law: a :class:`ConductanceLaw` or a key of :data:`CONDUCTANCE_LAWS`.
+      r_i, r_j: radii, > 0 (m).
+      h: overlap ``r_i + r_j - d`` (m); ``h <= 0`` gives 0.
+      kappa_i: conductivity of particle i, > 0 (W/(m K)).
+      kappa_j: conductivity of particle j; defaults to ``kappa_i``.
+      params: overrides of ``law.default_params`` (arrays allowed: these
+        are what a fit differentiates).
+      neck_model: key of :data:`sintercond.neck.NECK_MODELS`; defaults to
+        the law's.
+
+    Returns:
+      ``K_ij`` (W/K), broadcast shape of the geometry and materials.
+    """
+    law = _resolve_law(law)
+    params = _merge_params(law, params)
+    kappa_j = kappa_i if kappa_j is None else kappa_j
+    r_i, r_j, h, kappa_i, kappa_j = as_float_arrays(r_i, r_j, h, kappa_i, kappa_j)
+    neck_fn = NECK_MODELS[_resolve_neck_model(law, neck_model)]
+    a = neck_fn(r_i, r_j, h)
+    # Double where: laws may hold log(a) or 1/a, so out-of-contact pairs are
+    # evaluated at a harmless in-contact point and then masked.
+    contact = (h > 0) & (a > 0)
+    undefined = jnp.isnan(a)
+    a_safe = jnp.where(contact, a, 0.5 * jnp.minimum(r_i, r_j))
+    h_safe = jnp.where(contact, h, 0.0)
+    k = law.from_neck(a_safe, r_i, r_j, h_safe, kappa_i, kappa_j, params)
+    return jnp.where(undefined, jnp.nan, jnp.where(contact, k, 0.0))
+
+
+def rojek_pair_conductance(r_i, r_j, h, kappa, slope=ROJEK_SLOPE, contact_conductance=None, *, kappa_j=None):
+    """Rojek et al. (2022) pair conductance of two sintered spheres.
+
+    Each half is ``K_k = slope * kappa_k * pi * a`` (Eq. 43) with ``a`` the
+    volume-conserving neck radius (:func:`sintercond.neck.neck_radius`); the
+    halves combine in series (Eq. 9), with a finite contact conductance
+    ``K_c`` in series as well when given (Eq. 8). For equal materials and no
+    contact resistance this is ``slope * kappa * pi * a / 2`` (Eq. 45).
+
+    Args:
+      r_i, r_j: radii, > 0 (m).
+      h: overlap (m), ``<= max_overlap(r_i, r_j)``; ``h <= 0`` gives 0.
+      kappa: conductivity of particle i (and j unless ``kappa_j``), W/(m K).
+      slope: ``s`` of ``K_i / K_cyl = s a / r`` (Eq. 40), fittable.
+      contact_conductance: ``K_c`` (W/K), or None for a perfect interface.
+      kappa_j: conductivity of particle j, if different.
+
+    Returns:
+      ``K_ij`` (W/K).
+    """
+    contact_resistance = 0.0 if contact_conductance is None else 1.0 / jnp.asarray(contact_conductance)
+    return pair_conductance(
+        "rojek", r_i, r_j, h, kappa, kappa_j,
+        params={"slope": slope, "contact_resistance": contact_resistance},
+    )
+
+
+def argento_bouvard_pair_conductance(r_i, r_j, h, kappa, *, kappa_j=None):
+    """Argento & Bouvard (1996) law as Rojek's with slope ``1/0.899 = 1.112`` (Rojek Eq. 42)."""
+    return pair_conductance("argento_bouvard", r_i, r_j, h, kappa, kappa_j)
+
+
+def batchelor_obrien_pair_conductance(r_i, r_j, h, kappa, *, kappa_j=None, neck_model=None):
+    """Batchelor & O'Brien (1977) small-contact conductance ``2 kappa a``.
+
+    Each half is an isothermal disc of radius ``a`` on a half-space,
+    ``4 kappa_k a``; in series these give ``2 kappa a`` for equal materials
+    (Dryden & Zok 2004, Eq. 37). ``a`` is the volume-conserving neck unless
+    ``neck_model`` says otherwise.
+    """
+    return pair_conductance("batchelor_obrien", r_i, r_j, h, kappa, kappa_j, neck_model=neck_model)
+
+
+def conductivity_pair_conductance(r_i, r_j, h, kappa_i, kappa_j=None, *, neck_model=None):
+    """Conductivity-based pair conductance ``k_ij A_ij / d`` (Quintana-Ruiz & Campello 2020).
+
+    ``A_ij = pi a^2`` with ``a`` the lens radius (Eqs. 33-34) unless
+    ``neck_model`` says otherwise, ``d = r_i + r_j - h`` the centre distance
+    (Eq. 32), and ``(r_i + r_j) / k_ij = r_i / k_i + r_j / k_j`` (Eq. 35).
+    """
+    return pair_conductance("conductivity", r_i, r_j, h, kappa_i, kappa_j, neck_model=neck_model)
+
+
+def feng_pair_conductance(r_i, r_j, h, kappa_i, kappa_j=None, *, thickness=1.0, neck_model=None):
+    """Feng et al. (2009) 2-D pipe-network conductance (Quintana-Ruiz Eq. 36).
+
+    Per disc ``K_k = pi kappa_k t / (-ln alpha_k + 3/2 + alpha_k^2/36 + alpha_k^4/2700)``
+    with ``sin(alpha_k) = a / r_k`` (``a`` the lens radius by default) and
+    ``t`` the out-of-plane thickness (m; the default 1 gives the conductance
+    per unit thickness, W/(m K)); the two discs in series. A 2-D model: use
+    it for disc packings.
+    """
+    return pair_conductance(
+        "feng", r_i, r_j, h, kappa_i, kappa_j,
+        params={"thickness": thickness}, neck_model=neck_model,
+    )
+
+
+def _resolve_law(law) -> ConductanceLaw:
+    if isinstance(law, ConductanceLaw):
+        return law
+    try:
+        return CONDUCTANCE_LAWS[law]
+    except (KeyError, TypeError):
+        raise ValueError(f"law must be one of {sorted(CONDUCTANCE_LAWS)} or a ConductanceLaw; got {law!r}") from None
+
+
+def _resolve_neck_model(law: ConductanceLaw, neck_model) -> str:
+    name = law.neck_model if neck_model is None else neck_model
+    if name not in NECK_MODELS:
+        raise ValueError(f"neck_model must be one of {sorted(NECK_MODELS)}; got {name!r}")
+    return name
+
+
+def _merge_params(law: ConductanceLaw, params) -> dict:
+    params = {} if params is None else dict(params)
+    unknown = set(params) - set(law.default_params)
+    if unknown:
+        raise ValueError(
+            f"params of law {law.name!r} must be among {sorted(law.default_params)}; got unknown {sorted(unknown)}"
+        )
+    return {**law.default_params, **params}
