@@ -331,6 +331,10 @@ def test_beyond_max_overlap_is_nan_and_flagged():
     assert list(status) == [NeckStatus.NO_CONTACT, NeckStatus.NO_CONTACT, NeckStatus.OK, NeckStatus.OK,
                             NeckStatus.BEYOND_MAX_OVERLAP, NeckStatus.BEYOND_MAX_OVERLAP]
     assert np.asarray(jax.jit(neck_status)(1.0, 1.0, h)).tolist() == status.tolist()
+    # gradients: zero for no contact and beyond h_max, so masking the NaN out
+    # of a sum leaves the valid entries' gradients intact
+    g = np.asarray(jax.grad(lambda x: jnp.sum(jnp.where(x <= 2 / 3, neck_radius(1.0, 1.0, x), 0.0)))(h))
+    assert np.all(np.isfinite(g)) and g[0] == g[1] == g[4] == g[5] == 0.0 and g[2] > 0
 
 
 def test_invalid_radii_are_nan_and_flagged():

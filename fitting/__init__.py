@@ -1,0 +1,6 @@
+"""Calibration of sintercond's model parameters against reference data (optax).
+
+The fitting core, reference data and the fits themselves arrive with the
+fitting issue; this package is installed now so that its import path is
+stable.
+"""

@@ -1,0 +1,29 @@
+"""The README's main job: `sintercond` with no arguments prints the Rojek demo table."""
+
+import subprocess
+import sys
+
+import pytest
+
+from sintercond import cli
+
+
+def test_demo_table_has_paper_values(capsys):
+    assert cli.main([]) == 0
+    out = capsys.readouterr().out
+    # Rojek et al. 2022: a = 0.741466 mm (h = 0.2 mm), a = 0.419186 mm and K = 0.276035 W/K (h = 0.06 mm)
+    assert "0.741466" in out and "0.419186" in out and "0.276035" in out
+    assert len([line for line in out.splitlines() if line.startswith("  1.000000")]) == len(cli.ROJEK_CASES_MM)
+
+
+def test_demo_rejects_bad_kappa(capsys):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["demo", "--kappa", "-3"])
+    assert exc.value.code == 2
+    assert "--kappa must be finite and > 0" in capsys.readouterr().err
+
+
+def test_console_script_runs():
+    # the installed entry point, as a user runs it
+    result = subprocess.run([sys.executable, "-m", "sintercond.cli", "demo"], capture_output=True, text=True, check=True)
+    assert "K_rojek" in result.stdout
