@@ -27,6 +27,7 @@ from sintercond.conductance import (  # noqa: E402
     pair_conductance,
     rojek_pair_conductance,
     series_conductance,
+    validate_pair_conductance_inputs,
 )
 from sintercond.neck import (  # noqa: E402
     NECK_MODELS,
@@ -65,4 +66,5 @@ __all__ = [
     "rojek_pair_conductance",
     "series_conductance",
     "validate_neck_inputs",
+    "validate_pair_conductance_inputs",
 ]

@@ -38,7 +38,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, safe_divide
-from sintercond.neck import NECK_MODELS
+from sintercond._validation import concrete_arrays, require_positive
+from sintercond.neck import NECK_MODELS, validate_neck_inputs
 
 ROJEK_SLOPE = 1.064
 """Slope of Rojek et al. (2022), Eq. 40: ``K_i / K_cyl = 1.064 a / r``."""
@@ -118,6 +119,7 @@ class ConductanceLaw(NamedTuple):
         the differentiable (fittable) inputs.
       neck_model: default key of :data:`sintercond.neck.NECK_MODELS`.
       reference: paper and equations.
+      params_allowing_zero: parameters that may be 0; all others must be > 0.
     """
 
     name: str
@@ -125,6 +127,7 @@ class ConductanceLaw(NamedTuple):
     default_params: Mapping[str, float]
     neck_model: str
     reference: str
+    params_allowing_zero: tuple[str, ...] = ()
 
 
 CONDUCTANCE_LAWS: dict[str, ConductanceLaw] = {
@@ -133,17 +136,18 @@ CONDUCTANCE_LAWS: dict[str, ConductanceLaw] = {
         ConductanceLaw(
             "rojek", _linear_neck_law,
             {"slope": ROJEK_SLOPE, "contact_resistance": 0.0},
-            "volume_conserving", "Rojek et al. 2022, Eqs. 8-9, 40, 43",
+            "volume_conserving", "Rojek et al. 2022, Eqs. 8-9, 40, 43", ("contact_resistance",),
         ),
         ConductanceLaw(
             "argento_bouvard", _linear_neck_law,
             {"slope": ARGENTO_BOUVARD_SLOPE, "contact_resistance": 0.0},
-            "volume_conserving", "Argento & Bouvard 1996, via Rojek et al. 2022, Eqs. 41-42",
+            "volume_conserving", "Argento & Bouvard 1996, via Rojek et al. 2022, Eqs. 41-42", ("contact_resistance",),
         ),
         ConductanceLaw(
             "batchelor_obrien", _linear_neck_law,
             {"slope": BATCHELOR_OBRIEN_SLOPE, "contact_resistance": 0.0},
             "volume_conserving", "Batchelor & O'Brien 1977 (2 kappa a), Dryden & Zok 2004, Eq. 37",
+            ("contact_resistance",),
         ),
         ConductanceLaw(
             "conductivity", _conductivity_law, {},
@@ -152,7 +156,7 @@ CONDUCTANCE_LAWS: dict[str, ConductanceLaw] = {
         ConductanceLaw(
             "feng", _feng_law,
             {"thickness": 1.0, "contact_resistance": 0.0},
-            "intersection", "Feng et al. 2009, via Quintana-Ruiz & Campello 2020, Eq. 36",
+            "intersection", "Feng et al. 2009, via Quintana-Ruiz & Campello 2020, Eq. 36", ("contact_resistance",),
         ),
     )
 }
@@ -190,6 +194,28 @@ def pair_conductance(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_
     h_safe = jnp.where(contact, h, 0.0)
     k = law.from_neck(a_safe, r_i, r_j, h_safe, kappa_i, kappa_j, params)
     return jnp.where(undefined, jnp.nan, jnp.where(contact, k, 0.0))
+
+
+def validate_pair_conductance_inputs(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_model=None):
+    """Raise ``ValueError`` naming the field unless :func:`pair_conductance` input is valid.
+
+    For concrete input at an API boundary, before anything is compiled:
+    the law and neck model exist, the parameters are known, finite and
+    positive (``contact_resistance`` may be 0), the conductivities finite and
+    > 0, and the geometry inside the neck model's domain
+    (:func:`sintercond.neck.validate_neck_inputs`).
+    """
+    law = _resolve_law(law)
+    params = _merge_params(law, params)
+    model = _resolve_neck_model(law, neck_model)
+    for name, value in params.items():
+        (value,) = concrete_arrays("validate_pair_conductance_inputs", value)
+        require_positive(f"params[{name!r}] of law {law.name!r}", value, allow_zero=name in law.params_allowing_zero)
+    kappas = {"kappa_i": kappa_i} if kappa_j is None else {"kappa_i": kappa_i, "kappa_j": kappa_j}
+    for name, value in kappas.items():
+        (value,) = concrete_arrays("validate_pair_conductance_inputs", value)
+        require_positive(f"{name} (W/(m K))", value)
+    validate_neck_inputs(r_i, r_j, h, model=model)
 
 
 def rojek_pair_conductance(r_i, r_j, h, kappa, slope=ROJEK_SLOPE, contact_conductance=None, *, kappa_j=None):

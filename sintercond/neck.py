@@ -68,6 +68,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond._numerics import as_float_arrays, safe_sqrt, sqrt_difference_of_squares
+from sintercond._validation import concrete_arrays, fail_where, require_finite, require_positive
 
 DEFAULT_NEWTON_ITERATIONS = 5
 """Newton steps of :func:`neck_radius`; 5 reach ~4e-16 relative error in float64."""
@@ -238,45 +239,53 @@ def neck_status(r_i, r_j, h):
     return _status(r_i, r_j, h)
 
 
-def validate_neck_inputs(r_i, r_j, h, *, names=("r_i", "r_j", "h")):
-    """Raise ``ValueError`` unless every pair has a volume-conserving neck or no contact.
+def validate_neck_inputs(r_i, r_j, h, *, model="volume_conserving", names=("r_i", "r_j", "h")):
+    """Raise ``ValueError`` unless every pair is inside the domain of a neck model.
 
     For concrete input at an API boundary (scene loading, user calls),
-    before anything is compiled. The message names the field, the allowed
-    range and the first offending entry.
+    before anything is compiled. Radii must be finite and > 0, ``h`` finite;
+    ``h`` is further bounded by ``max_overlap(r_i, r_j)`` for the
+    volume-conserving neck and below ``2 min(r_i, r_j)`` for the intersection
+    radius (Coble and Hertz take any ``h``). The message names the field, the
+    allowed range and the first offending entry.
 
     Args:
-      r_i, r_j: sphere radii (length); must be finite and > 0.
-      h: overlaps (length); must be finite and ``<= max_overlap(r_i, r_j)``.
+      r_i, r_j: sphere radii (length).
+      h: overlaps (length); ``h <= 0`` (no contact) is always allowed.
+      model: key of :data:`NECK_MODELS`.
       names: the field names to use in messages.
 
     Raises:
       ValueError: on the first invalid field.
       TypeError: if called on traced values (use :func:`neck_status` there).
     """
-    try:
-        r_i, r_j, h = (np.asarray(x, dtype=np.float64) for x in (r_i, r_j, h))
-    except jax.errors.TracerArrayConversionError as err:
-        raise TypeError("validate_neck_inputs needs concrete values; under jit use neck_status") from err
-    r_i, r_j, h = np.broadcast_arrays(r_i, r_j, h)
-    for name, r in zip(names[:2], (r_i, r_j)):
-        bad = ~(np.isfinite(r) & (r >= np.finfo(np.float64).tiny))
-        if bad.any():
-            idx = _first_index(bad)
-            raise ValueError(f"{name} must be finite and > 0; got {float(r[idx])!r} at index {idx}")
-    bad = ~np.isfinite(h)
-    if bad.any():
-        idx = _first_index(bad)
-        raise ValueError(f"{names[2]} must be finite; got {float(h[idx])!r} at index {idx}")
-    h_max = np.asarray(max_overlap(r_i, r_j), dtype=np.float64)
-    bad = h > h_max * (1.0 + _MAX_OVERLAP_SLACK_ULPS * np.finfo(np.float64).eps)
-    if bad.any():
-        idx = _first_index(bad)
-        raise ValueError(
-            f"{names[2]} must be <= max_overlap({names[0]}, {names[1]}) "
-            f"(no volume-conserving neck with a <= min(r_i, r_j) exists beyond it); "
-            f"got {names[2]}={float(h[idx])!r} with {names[0]}={float(r_i[idx])!r}, "
-            f"{names[1]}={float(r_j[idx])!r}, max_overlap={float(h_max[idx])!r} at index {idx}"
+    if model not in NECK_MODELS:
+        raise ValueError(f"model must be one of {sorted(NECK_MODELS)}; got {model!r}")
+    r_i, r_j, h = concrete_arrays("validate_neck_inputs", r_i, r_j, h)
+    name_i, name_j, name_h = names
+    require_positive(name_i, r_i)
+    require_positive(name_j, r_j)
+    require_finite(name_h, h)
+    if model == "volume_conserving":
+        h_max = np.asarray(max_overlap(r_i, r_j), dtype=np.float64)
+        fail_where(
+            h > h_max * (1.0 + _MAX_OVERLAP_SLACK_ULPS * np.finfo(np.float64).eps),
+            lambda i: (
+                f"{name_h} must be <= max_overlap({name_i}, {name_j}) "
+                f"(no volume-conserving neck with a <= min(r_i, r_j) exists beyond it); "
+                f"got {name_h}={float(h[i])!r} with {name_i}={float(r_i[i])!r}, "
+                f"{name_j}={float(r_j[i])!r}, max_overlap={float(h_max[i])!r} at index {i}"
+            ),
+        )
+    elif model == "intersection":
+        h_limit = 2.0 * np.minimum(r_i, r_j)
+        fail_where(
+            h >= h_limit,
+            lambda i: (
+                f"{name_h} must be < 2 min({name_i}, {name_j}) for the intersection radius "
+                f"(one sphere swallows the other beyond it); got {name_h}={float(h[i])!r}, "
+                f"limit {float(h_limit[i])!r} at index {i}"
+            ),
         )
 
 
@@ -313,10 +322,6 @@ def _status(r_i, r_j, h):
         jnp.where(h <= 0, NeckStatus.NO_CONTACT,
                   jnp.where(beyond, NeckStatus.BEYOND_MAX_OVERLAP, NeckStatus.OK)),
     ).astype(jnp.int32)
-
-
-def _first_index(mask):
-    return tuple(int(i) for i in np.argwhere(mask)[0])
 
 
 def _cap_height(a, r):

@@ -16,6 +16,7 @@ from sintercond.conductance import (
     pair_conductance,
     rojek_pair_conductance,
     series_conductance,
+    validate_pair_conductance_inputs,
 )
 from sintercond.neck import intersection_radius, max_overlap, neck_radius
 
@@ -198,3 +199,21 @@ def test_bad_law_names_and_params():
         pair_conductance("rojek", 1.0, 1.0, 0.1, 1.0, params={"slop": 1.0})
     with pytest.raises(ValueError, match="neck_model must be one of"):
         pair_conductance("rojek", 1.0, 1.0, 0.1, 1.0, neck_model="spline")
+
+
+def test_validate_pair_conductance_inputs():
+    validate_pair_conductance_inputs("rojek", 1e-3, 3e-3, [0.06e-3, -1.0], 394.0)
+    validate_pair_conductance_inputs("conductivity", 1e-3, 3e-3, 1e-3, 50.0, 200.0)  # lens: beyond h_max is fine
+    cases = [
+        (("rojek", 1e-3, 1e-3, 0.7e-3, 394.0), r"h must be <= max_overlap\(r_i, r_j\)"),
+        (("rojek", 1e-3, 1e-3, 1e-4, -394.0), r"kappa_i \(W/\(m K\)\) must be finite and > 0; got -394\.0"),
+        (("rojek", 1e-3, 1e-3, 1e-4, 394.0, np.nan), r"kappa_j \(W/\(m K\)\) must be finite and > 0"),
+        (("rojek", 1e-3, 1e-3, 1e-4, 394.0, None, {"slope": 0.0}), r"params\['slope'\] of law 'rojek' must be finite and > 0"),
+        (("rojek", 1e-3, 1e-3, 1e-4, 394.0, None, {"contact_resistance": -1.0}), r"params\['contact_resistance'\].* >= 0"),
+        (("conductivity", 1e-3, 3e-3, 2e-3, 50.0), r"h must be < 2 min\(r_i, r_j\)"),
+        (("feng", -1e-3, 3e-3, 1e-4, 50.0), r"r_i must be finite and > 0"),
+    ]
+    for args, message in cases:
+        with pytest.raises(ValueError, match=message):
+            validate_pair_conductance_inputs(*args)
+    validate_pair_conductance_inputs("rojek", 1e-3, 1e-3, 1e-4, 394.0, params={"contact_resistance": 0.0})

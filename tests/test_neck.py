@@ -354,8 +354,17 @@ def test_validate_names_field_and_range():
         validate_neck_inputs([1.0, 1.0], [1.0, -2.0], 0.1)
     with pytest.raises(ValueError, match=r"h must be finite"):
         validate_neck_inputs(1.0, 1.0, np.nan)
-    with pytest.raises(TypeError, match="neck_status"):
+    with pytest.raises(TypeError, match="needs concrete values"):
         jax.jit(validate_neck_inputs)(1.0, 1.0, 0.1)
+    # other models have other domains
+    validate_neck_inputs(1.0, 1.0, 0.7, model="coble")
+    validate_neck_inputs(1.0, 1.0, 1.9, model="intersection")
+    with pytest.raises(ValueError, match=r"h must be < 2 min\(r_i, r_j\) for the intersection radius"):
+        validate_neck_inputs(1.0, 3.0, 2.0, model="intersection")
+    with pytest.raises(ValueError, match="model must be one of"):
+        validate_neck_inputs(1.0, 1.0, 0.1, model="spline")
+    with pytest.raises(ValueError, match=r"r_i must be finite and > 0; got 1e-320"):
+        validate_neck_inputs(1e-320, 1.0, 0.0)
 
 
 # ---------------------------------------------------------------- transformations, dtypes

@@ -1,0 +1,44 @@
+"""Checks of concrete user input at API boundaries, before anything is compiled.
+
+Each check raises ``ValueError`` naming the field, the allowed range and the
+first offending entry. They need concrete values; under ``jit`` invalid
+states are flagged instead (e.g. :func:`sintercond.neck.neck_status`).
+"""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+
+
+def concrete_arrays(caller: str, *values):
+    """The values as broadcast float64 NumPy arrays; ``TypeError`` under tracing."""
+    try:
+        arrays = [np.asarray(v, dtype=np.float64) for v in values]
+    except jax.errors.TracerArrayConversionError as err:
+        raise TypeError(f"{caller} needs concrete values, not traced ones; validate before jit") from err
+    return np.broadcast_arrays(*arrays)
+
+
+def first_index(mask) -> tuple[int, ...]:
+    return tuple(int(i) for i in np.argwhere(mask)[0])
+
+
+def fail_where(bad, message) -> None:
+    """Raise ``ValueError(message(idx))`` at the first True entry of ``bad``."""
+    bad = np.asarray(bad)
+    if bad.any():
+        raise ValueError(message(first_index(bad)))
+
+
+def require_finite(name: str, values) -> None:
+    fail_where(~np.isfinite(values), lambda i: f"{name} must be finite; got {float(values[i])!r} at index {i}")
+
+
+def require_positive(name: str, values, *, allow_zero: bool = False) -> None:
+    """Finite and > 0 (>= 0 with ``allow_zero``); > 0 means a normal float, >= 2.2e-308."""
+    if allow_zero:
+        bad, rule = ~(np.isfinite(values) & (values >= 0)), ">= 0"
+    else:
+        bad, rule = ~(np.isfinite(values) & (values >= np.finfo(np.float64).tiny)), "> 0"
+    fail_where(bad, lambda i: f"{name} must be finite and {rule}; got {float(values[i])!r} at index {i}")
