@@ -16,7 +16,7 @@ import jax as _jax
 if _os.environ.get("SINTERCOND_ENABLE_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
     _jax.config.update("jax_enable_x64", True)
 
-from sintercond import conductance, neck  # noqa: E402
+from sintercond import conductance, dryden_zok, effective, neck  # noqa: E402
 from sintercond.conductance import (  # noqa: E402
     CONDUCTANCE_LAWS,
     ConductanceLaw,
@@ -28,6 +28,12 @@ from sintercond.conductance import (  # noqa: E402
     rojek_pair_conductance,
     series_conductance,
     validate_pair_conductance_inputs,
+)
+from sintercond.effective import (  # noqa: E402
+    dryden_zok_conductivity,
+    dryden_zok_sigma,
+    hashin_shtrikman_bounds,
+    maxwell_conductivity,
 )
 from sintercond.neck import (  # noqa: E402
     NECK_MODELS,
@@ -53,6 +59,12 @@ __all__ = [
     "batchelor_obrien_pair_conductance",
     "coble_radius",
     "conductance",
+    "dryden_zok",
+    "dryden_zok_conductivity",
+    "dryden_zok_sigma",
+    "effective",
+    "hashin_shtrikman_bounds",
+    "maxwell_conductivity",
     "conductivity_pair_conductance",
     "feng_pair_conductance",
     "hertz_radius",
