@@ -1,0 +1,139 @@
+"""Thermal pipe network: contacts vs brute force, conservation, analytic solutions, limits, steady state."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from sintercond import geometry, network, packing, thermal
+from sintercond.conductance import rojek_pair_conductance
+
+A, R = 1.0e-4, 0.52e-4  # lattice spacing and radius (m): sintered SC lattice, h = 2R - A
+
+
+def sc_lattice(nx, ny=1, nz=1, a=A, r=R):
+    g = [np.arange(k) * a for k in (nx, ny, nz)]
+    centres = np.array(np.meshgrid(*g, indexing="ij")).reshape(3, -1).T
+    return centres, np.full(len(centres), r)
+
+
+@pytest.fixture(scope="module")
+def bed():
+    b = packing.powder_bed(320.0, 260.0, seed=5)
+    return b.centres * 1e-6, b.radii * 1e-6
+
+
+def test_contacts_equal_brute_force(bed):
+    centres, radii = bed
+    table = network.find_contacts(centres, radii, tolerance=1e-9)
+    rows = np.arange(len(radii))[:, None]
+    found = {(i, j) for i, j in zip(*np.nonzero(table != rows)) for j in [table[i, j]] if i < j}
+    brute = {tuple(p) for p in geometry.contacts(centres, radii, tolerance=1e-9)}
+    assert found == brute and len(brute) > len(radii)
+
+
+def test_contact_table_conductances(bed):
+    centres, radii = bed
+    t = network.contact_table(centres, radii, 20.0)
+    pairs = t.pairs()
+    i, j = pairs[:, 0], pairs[:, 1]
+    h = radii[i] + radii[j] - np.linalg.norm(centres[i] - centres[j], axis=1)
+    expected = np.asarray(rojek_pair_conductance(radii[i], radii[j], np.maximum(h, 0), 20.0))
+    nbr = np.asarray(t.neighbors)
+    k = np.array([np.asarray(t.conductance)[a, list(nbr[a]).index(b)] for a, b in pairs])
+    np.testing.assert_allclose(k, expected, rtol=1e-14)
+    # symmetric network: K_ij stored on both rows
+    k_back = np.array([np.asarray(t.conductance)[b, list(nbr[b]).index(a)] for a, b in pairs])
+    np.testing.assert_array_equal(k, k_back)
+
+
+def test_insulated_packing_conserves_heat(bed):
+    centres, radii = bed
+    t = network.contact_table(centres, radii, 20.0)
+    capacity = jnp.asarray(4 / 3 * np.pi * radii**3 * 4430 * 560)  # Ti6Al4V rho c (J/K)
+    temperature = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
+    dt = float(thermal.stable_time_step(capacity, t))
+    final, saved = thermal.simulate(temperature, t, capacity, dt, n_steps=400, save_every=100)
+    energy = jnp.sum(capacity * saved, axis=1)
+    np.testing.assert_allclose(energy, float(jnp.sum(capacity * temperature)), rtol=1e-13)
+    # discrete maximum principle at the stable step
+    assert float(saved.min()) >= float(temperature.min()) - 1e-9 and float(saved.max()) <= float(temperature.max()) + 1e-9
+    implicit, _ = thermal.simulate(temperature, t, capacity, 50 * dt, n_steps=8, save_every=8, method="implicit")
+    assert float(jnp.sum(capacity * implicit)) == pytest.approx(float(jnp.sum(capacity * temperature)), rel=1e-11)
+
+
+def test_two_particle_relaxation_matches_analytic():
+    centres, radii = sc_lattice(2)
+    t = network.contact_table(centres, radii, 20.0)
+    k = float(rojek_pair_conductance(R, R, 2 * R - A, 20.0))
+    capacity = jnp.array([2e-3, 5e-3])
+    rate = k * (1 / 2e-3 + 1 / 5e-3)  # d(T1 - T2)/dt = -rate (T1 - T2)
+    t_end = 3.0 / rate
+    temperature = jnp.array([1000.0, 300.0])
+    errors = []
+    for n_steps in (100, 200, 400):
+        final, _ = thermal.simulate(temperature, t, capacity, t_end / n_steps, n_steps=n_steps, save_every=n_steps)
+        errors.append(abs(float(final[0] - final[1]) - 700 * np.exp(-rate * t_end)))
+    assert errors[0] / errors[1] == pytest.approx(2.0, rel=0.05) and errors[1] / errors[2] == pytest.approx(2.0, rel=0.05)
+    assert errors[-1] < 2e-3 * 700
+    final, _ = thermal.simulate(temperature, t, capacity, t_end / 400, n_steps=400, save_every=400, method="implicit")
+    assert abs(float(final[0] - final[1]) - 700 * np.exp(-rate * t_end)) < 2e-3 * 700
+
+
+def test_chain_converges_to_the_heat_equation():
+    # A chain of N particles with ends held at 0 relaxes its lowest mode at
+    # (2K/C)(1 - cos(pi/(N-1))), the continuum rate pi^2 D / L^2 with D = K a^2 / C
+    # up to O(1/N^2).
+    ratios = []
+    for n in (6, 11, 21, 41):
+        centres, radii = sc_lattice(n)
+        t = network.contact_table(centres, radii, 20.0)
+        k = float(rojek_pair_conductance(R, R, 2 * R - A, 20.0))
+        x = np.arange(n) * A
+        length = (n - 1) * A
+        mode = jnp.asarray(np.sin(np.pi * x / length))
+        held = jnp.asarray((x == 0) | (x == length))
+        capacity = 1e-3
+        dt = 0.05 * float(thermal.stable_time_step(capacity, t))
+        steps = 2000
+        final, _ = thermal.simulate(mode, t, capacity, dt, n_steps=steps, save_every=steps, fixed_mask=held,
+                                    fixed_temperature=0.0)
+        rate = -np.log(float(final[n // 2]) / float(mode[n // 2])) / (steps * dt)
+        ratios.append(rate / (np.pi**2 * k * A**2 / capacity / length**2))
+    errors = np.abs(np.array(ratios) - 1)
+    assert np.all(np.diff(errors) < 0) and errors[-1] < 2e-3
+
+
+def test_explicit_implicit_and_steady_agree():
+    centres, radii = sc_lattice(6, 2, 2)
+    t = network.contact_table(centres, radii, 20.0)
+    hot = jnp.asarray(centres[:, 0] == 0)
+    cold = jnp.asarray(centres[:, 0] == centres[:, 0].max())
+    fixed = hot | cold
+    held = jnp.where(hot, 900.0, 300.0)
+    steady = thermal.steady_state(t, fixed, held)
+    np.testing.assert_allclose(steady, 900 - 600 * centres[:, 0] / centres[:, 0].max(), rtol=1e-11)  # linear
+    capacity = 1e-3
+    dt = float(thermal.stable_time_step(capacity, t))
+    start = jnp.where(fixed, held, 300.0)
+    explicit, _ = thermal.simulate(start, t, capacity, dt, n_steps=4000, save_every=4000, fixed_mask=fixed,
+                                   fixed_temperature=held)
+    implicit, _ = thermal.simulate(start, t, capacity, 200 * dt, n_steps=100, save_every=100, fixed_mask=fixed,
+                                   fixed_temperature=held, method="implicit")
+    np.testing.assert_allclose(explicit, steady, rtol=1e-8)
+    np.testing.assert_allclose(implicit, steady, rtol=1e-8)
+
+
+@pytest.mark.parametrize("shape", [(2, 1, 1), (5, 1, 1), (4, 3, 2)])
+def test_sc_lattice_conductivity_is_pair_conductance_over_spacing(shape):
+    centres, radii = sc_lattice(*shape)
+    k_star = thermal.steady_state_conductivity(centres, radii, 20.0, axis=0)
+    assert k_star == pytest.approx(float(rojek_pair_conductance(R, R, 2 * R - A, 20.0)) / A, rel=1e-12)
+
+
+def test_bad_packing_input():
+    centres, radii = sc_lattice(3)
+    with pytest.raises(ValueError, match="h must be <= max_overlap"):
+        network.contact_table(centres, np.full(3, 0.9 * A), 20.0)  # overlap beyond the neck model's range
+    with pytest.raises(ValueError, match="kappa_i"):
+        network.contact_table(centres, radii, -1.0)
