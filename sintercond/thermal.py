@@ -49,9 +49,18 @@ def _apply_fixed(temperature, fixed_mask, fixed_temperature):
     return jnp.where(fixed_mask, fixed_temperature, temperature)
 
 
-def explicit_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None):
-    """One explicit Euler step, ``T + dt / C * sum_j K_ij (T_j - T_i)``; held particles stay held."""
-    new = temperature + dt * heat_inflow(temperature, table) / capacity
+def explicit_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
+                        source=None, time=0.0):
+    """One explicit Euler step, ``T + dt / C * (sum_j K_ij (T_j - T_i) + Q(T, t))``; held particles stay held.
+
+    ``source(temperature, time) -> [n]`` adds heat powers in W (external
+    devices, convection, radiation: :mod:`sintercond.heat_sources`); None
+    traces nothing. Nonlinear sources (radiation) can tighten the stable step.
+    """
+    inflow = heat_inflow(temperature, table)
+    if source is not None:
+        inflow = inflow + source(temperature, time)
+    new = temperature + dt * inflow / capacity
     return _apply_fixed(new, fixed_mask, fixed_temperature)
 
 
@@ -81,21 +90,29 @@ def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_ma
     return jnp.where(free, solution, held)
 
 
-@functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method"))
+@functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
 def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every=1, fixed_mask=None,
-             fixed_temperature=None, method="explicit"):
+             fixed_temperature=None, method="explicit", source=None):
     """Advance ``n_steps`` steps with ``lax.scan``; returns ``(final, saved [n_steps // save_every, n])``.
 
     ``method``: ``"explicit"`` (check ``dt <= stable_time_step`` first) or
-    ``"implicit"`` (backward Euler, any ``dt``).
+    ``"implicit"`` (backward Euler, any ``dt``; conduction only). ``source``:
+    see :func:`explicit_euler_step` (a hashable callable; explicit only).
     """
-    step = explicit_euler_step if method == "explicit" else backward_euler_step
+    if method == "implicit" and source is not None:
+        raise ValueError("source terms need method='explicit'")
 
-    def chunk(t, _):
-        t = jax.lax.fori_loop(0, save_every, lambda _, x: step(x, table, capacity, dt, fixed_mask, fixed_temperature), t)
-        return t, t
+    def step(x, k):
+        if method == "explicit":
+            return explicit_euler_step(x, table, capacity, dt, fixed_mask, fixed_temperature, source, k * dt)
+        return backward_euler_step(x, table, capacity, dt, fixed_mask, fixed_temperature)
 
-    final, saved = jax.lax.scan(chunk, temperature, None, length=n_steps // save_every)
+    def chunk(carry, _):
+        t, k = carry
+        t = jax.lax.fori_loop(0, save_every, lambda m, x: step(x, k + m), t)
+        return (t, k + save_every), t
+
+    (final, _), saved = jax.lax.scan(chunk, (temperature, 0), None, length=n_steps // save_every)
     return final, saved
 
 
