@@ -43,6 +43,21 @@ def stable_time_step(capacity, table: ContactTable):
     return jnp.min(jnp.where(total > 0, capacity / jnp.where(total > 0, total, 1.0), jnp.inf))
 
 
+def check_time_step(dt, capacity, table: ContactTable) -> float:
+    """Raise ``ValueError`` if an explicit step ``dt`` exceeds :func:`stable_time_step`; returns the limit.
+
+    For concrete input at the API boundary (scene loading), before anything
+    is compiled.
+    """
+    limit = float(stable_time_step(capacity, table))
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be finite and > 0 s; got {dt!r}")
+    if dt > limit:
+        raise ValueError(f"dt = {dt:.6g} s exceeds the explicit stability limit min(C_i / sum_j K_ij) = {limit:.6g} s; "
+                         f"use dt <= {limit:.6g} s or the implicit integrator")
+    return limit
+
+
 def _apply_fixed(temperature, fixed_mask, fixed_temperature):
     if fixed_mask is None:
         return temperature

@@ -137,3 +137,35 @@ def test_bad_packing_input():
         network.contact_table(centres, np.full(3, 0.9 * A), 20.0)  # overlap beyond the neck model's range
     with pytest.raises(ValueError, match="kappa_i"):
         network.contact_table(centres, radii, -1.0)
+
+
+def test_unstable_step_is_refused():
+    centres, radii = sc_lattice(4)
+    t = network.contact_table(centres, radii, 20.0)
+    limit = thermal.check_time_step(1e-6, 1e-3, t)
+    with pytest.raises(ValueError, match=r"dt = .* exceeds the explicit stability limit"):
+        thermal.check_time_step(1.5 * limit, 1e-3, t)
+    with pytest.raises(ValueError, match="dt must be finite and > 0"):
+        thermal.check_time_step(-1.0, 1e-3, t)
+    # and the limit is real: 2.5x above it the explicit step blows up (largest mode |1 - 2.5 * lambda| > 1)
+    start = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
+    final, _ = thermal.simulate(start, t, 1e-3, 2.5 * limit, n_steps=200, save_every=200)
+    assert float(jnp.max(jnp.abs(final))) > 1e4
+
+
+def test_quintana_ruiz_5_3_setup_inside_hashin_shtrikman():
+    # A settled random bed between a hot and a cold face, k = 100 W/(m K), the
+    # conductivity-based law (Quintana-Ruiz Eqs. 32-35, lens radius). Our bed is
+    # built geometrically with small settling overlaps (no Hertz mechanics yet),
+    # so its contacts are far smaller than their 5.3 example's: k* is small,
+    # but it must lie inside the HS bounds [0, 2 k f / (3 - f)].
+    from sintercond.effective import hashin_shtrikman_bounds
+
+    bed = packing.powder_bed(320.0, 480.0, diameter_range=(45.0, 150.0), seed=7)
+    centres, radii, box = packing.rev_box(bed, 200.0)
+    m = geometry.rev_measures(centres, radii, box)
+    k_star = thermal.steady_state_conductivity(centres * 1e-6, radii * 1e-6, 100.0, axis=2, law="conductivity",
+                                               box=(box[0] * 1e-6, box[1] * 1e-6))
+    lower, upper = hashin_shtrikman_bounds(0.0, 100.0, m.n)
+    assert float(lower) <= k_star <= float(upper)
+    assert k_star > 0
