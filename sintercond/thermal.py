@@ -107,12 +107,13 @@ def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_ma
 
 @functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
 def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every=1, fixed_mask=None,
-             fixed_temperature=None, method="explicit", source=None):
+             fixed_temperature=None, method="explicit", source=None, start_step=0):
     """Advance ``n_steps`` steps with ``lax.scan``; returns ``(final, saved [n_steps // save_every, n])``.
 
     ``method``: ``"explicit"`` (check ``dt <= stable_time_step`` first) or
     ``"implicit"`` (backward Euler, any ``dt``; conduction only). ``source``:
-    see :func:`explicit_euler_step` (a hashable callable; explicit only).
+    see :func:`explicit_euler_step` (a hashable callable; explicit only),
+    called with the time ``(start_step + k) dt`` of step ``k``.
     """
     if method == "implicit" and source is not None:
         raise ValueError("source terms need method='explicit'")
@@ -127,7 +128,7 @@ def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every
         t = jax.lax.fori_loop(0, save_every, lambda m, x: step(x, k + m), t)
         return (t, k + save_every), t
 
-    (final, _), saved = jax.lax.scan(chunk, (temperature, 0), None, length=n_steps // save_every)
+    (final, _), saved = jax.lax.scan(chunk, (temperature, start_step), None, length=n_steps // save_every)
     return final, saved
 
 

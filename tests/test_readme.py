@@ -13,4 +13,4 @@ def test_ci_runs_the_readme_test_command():
 
 def test_readme_main_job_command_is_the_installed_entry_point():
     readme = (ROOT / "README.md").read_text()
-    assert "python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && .venv/bin/sintercond" in readme
+    assert "python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && .venv/bin/sintercond run" in readme

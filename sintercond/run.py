@@ -1,0 +1,268 @@
+"""Run a scene: build the packing and network, step in chunks, write outputs and checkpoints.
+
+Outputs in the run directory: ``scene.json`` (the validated scene),
+``packing.npz`` (centres, radii), ``vtp/step_XXXXXXXX.vtp`` (VTK PolyData,
+ParaView) and/or ``dump.lammpstrj`` (LAMMPS dump, OVITO) every
+``output_every`` steps, ``checkpoint.npz`` every ``checkpoint_every`` steps
+(written to a temporary file and renamed, so a killed run leaves the last
+complete checkpoint). :func:`resume` continues from it and gives results
+identical to an uninterrupted run: the same compiled chunk runs on the same
+inputs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm import tqdm
+
+from sintercond import heat_sources, network, packing, thermal
+from sintercond.scene import SceneError, validate_scene
+
+
+@dataclasses.dataclass(frozen=True)
+class Model:
+    """Everything a run needs, built from a scene."""
+
+    centres: np.ndarray
+    radii: np.ndarray
+    table: network.ContactTable
+    capacity: jax.Array
+    fixed_mask: jax.Array | None
+    fixed_temperature: jax.Array | None
+    source: object
+    dt: float
+    n_steps: int
+
+
+def build_packing(scene):
+    p = scene["packing"]
+    if p["kind"] == "simple_cubic":
+        nx, ny, nz = p["counts"]
+        grid = np.array(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")).reshape(3, -1).T
+        centres = grid * p["spacing"] + p["radius"]
+        return centres, np.full(len(centres), p["radius"])
+    bed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0))
+    return bed.centres, bed.radii * (1.0 + p.get("sinter_swelling", 0.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class _Source:
+    """Hashable heat-source term (static under jit): beam, convection, radiation as configured."""
+
+    radii: tuple
+    centres: tuple
+    beam: tuple | None
+    convection: tuple | None
+    radiation: tuple | None
+    surface_z: float
+
+    def __call__(self, temperature, t):
+        radii = jnp.asarray(self.radii)
+        power = jnp.zeros_like(temperature)
+        if self.beam is not None:
+            intensity, attenuation, spot, absorptance, speed, path = self.beam
+            spot_xy = heat_sources.beam_position(t, jnp.asarray(path), speed)
+            depth = heat_sources.beam_depth(jnp.asarray(self.centres), radii, spot_xy, spot, self.surface_z)
+            power = power + heat_sources.laser_power(radii, depth, intensity, attenuation, absorptance)
+        if self.convection is not None:
+            t_env, k_env, nusselt = self.convection
+            power = power + heat_sources.convection_power(radii, temperature, t_env, k_env, nusselt)
+        if self.radiation is not None:
+            t_env, emissivity = self.radiation
+            power = power + heat_sources.radiation_power(radii, temperature, t_env, emissivity)
+        return power
+
+
+def build_model(scene, centres=None, radii=None) -> Model:
+    """Packing, network, capacities, held particles, sources and time step of a validated scene."""
+    if centres is None:
+        centres, radii = build_packing(scene)
+    m, c = scene["material"], scene["conduction"]
+    try:
+        table = network.contact_table(centres, radii, m["conductivity"], c["law"], c.get("params"), c.get("neck_model"))
+    except ValueError as err:
+        raise SceneError(f"the packing does not fit the conduction model: {err}") from None
+    capacity = jnp.asarray(4.0 / 3.0 * np.pi * radii**3 * m["density"] * m["specific_heat"])
+    fixed_mask = fixed_temperature = None
+    if "floor_temperature" in scene.get("boundary", {}):
+        bottom = centres[:, 2] - radii
+        fixed_mask = jnp.asarray(bottom <= bottom.min() + 1e-3 * np.mean(radii))
+        fixed_temperature = jnp.asarray(scene["boundary"]["floor_temperature"])
+    beam = scene.get("beam")
+    conv = scene.get("convection")
+    rad = scene.get("radiation")
+    source = None
+    if beam or conv or rad:
+        source = _Source(
+            radii=tuple(radii.tolist()), centres=tuple(map(tuple, centres.tolist())),
+            beam=None if beam is None else (beam["intensity"], beam["attenuation"], beam["spot_radius"],
+                                            beam["absorptance"], beam["speed"], tuple(map(tuple, beam["path"]))),
+            convection=None if conv is None else (conv["environment_temperature"], conv["environment_conductivity"],
+                                                  conv.get("nusselt", 2.0)),
+            radiation=None if rad is None else (rad["environment_temperature"], rad["emissivity"]),
+            surface_z=float(np.max(centres[:, 2] + radii)),
+        )
+    run = scene["run"]
+    limit = float(thermal.stable_time_step(capacity, table))
+    if run["dt"] == "auto":
+        dt = 0.9 * limit if np.isfinite(limit) else run["duration"] / 1000
+    else:
+        try:
+            dt = run["dt"]
+            thermal.check_time_step(dt, capacity, table)
+        except ValueError as err:
+            raise SceneError(f"run.dt: {err}") from None
+    n_steps = max(1, int(np.ceil(run["duration"] / dt)))
+    chunk = run["output_every"]
+    n_steps = int(np.ceil(n_steps / chunk) * chunk)
+    return Model(centres, radii, table, capacity, fixed_mask, fixed_temperature, source, dt, n_steps)
+
+
+def write_vtp(path, centres, radii, temperature, step, t):
+    """VTK XML PolyData (ASCII) with one vertex per particle: temperature, radius, id."""
+    n = len(radii)
+
+    def array(name, values, kind="Float64", components=1):
+        body = " ".join(repr(float(v)) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
+        return (f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}" format="ascii">'
+                f"{body}</DataArray>")
+
+    xml = (
+        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">\n<PolyData>\n'
+        f'<FieldData>{array("TIME", [t])}{array("STEP", [step], "Int64")}</FieldData>\n'
+        f'<Piece NumberOfPoints="{n}" NumberOfVerts="{n}" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">\n'
+        f'<Points>{array("position", centres, components=3)}</Points>\n'
+        f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
+        f'<PointData Scalars="temperature">{array("temperature", temperature)}{array("radius", radii)}'
+        f'{array("id", np.arange(n), "Int64")}</PointData>\n</Piece>\n</PolyData>\n</VTKFile>\n'
+    )
+    _atomic_write_text(path, xml)
+
+
+def append_lammps(path, centres, radii, temperature, step):
+    lo, hi = centres.min(axis=0) - radii.max(), centres.max(axis=0) + radii.max()
+    lines = [f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
+    lines += [f"{lo[k]!r} {hi[k]!r}\n" for k in range(3)]
+    lines.append("ITEM: ATOMS id radius x y z temperature\n")
+    lines += [f"{i + 1} {r!r} {x!r} {y!r} {z!r} {t!r}\n" for i, (r, (x, y, z), t) in
+              enumerate(zip(radii.tolist(), centres.tolist(), np.asarray(temperature).tolist()))]
+    with open(path, "a") as f:
+        f.write("".join(lines))
+
+
+def _atomic_write_text(path, text):
+    tmp = Path(str(path) + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _save_checkpoint(directory, temperature, step):
+    tmp = directory / "checkpoint.tmp.npz"
+    np.savez(tmp, temperature=np.asarray(temperature), step=step)
+    os.replace(tmp, directory / "checkpoint.npz")
+
+
+def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None):
+    """Run a validated scene into ``out_dir``; returns ``(final temperatures, summary dict)``.
+
+    ``stop_after_chunks`` stops early as a kill would, right after that many
+    chunks (for tests of resume).
+    """
+    out = Path(out_dir)
+    if _start is None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "scene.json").write_text(json.dumps(scene, indent=1))
+        model = build_model(scene)
+        np.savez(out / "packing.npz", centres=model.centres, radii=model.radii)
+        temperature = jnp.full(len(model.radii), scene["initial"]["temperature"])
+        if model.fixed_mask is not None:
+            temperature = jnp.where(model.fixed_mask, model.fixed_temperature, temperature)
+        step = 0
+        if (out / "dump.lammpstrj").exists():
+            (out / "dump.lammpstrj").unlink()
+        _write_outputs(scene, out, model, temperature, step)
+    else:
+        model, temperature, step = _start
+    run = scene["run"]
+    chunk = run["output_every"]
+
+    def advance(t, start_step):
+        return thermal.simulate(t, model.table, model.capacity, model.dt, n_steps=chunk, save_every=chunk,
+                                fixed_mask=model.fixed_mask, fixed_temperature=model.fixed_temperature,
+                                source=model.source, start_step=start_step)[0]
+
+    advance = jax.jit(advance)
+    wall = time.perf_counter()
+    chunks_done = 0
+    bar = tqdm(total=model.n_steps, initial=step, unit="step", disable=not progress, desc="sintercond run")
+    while step < model.n_steps:
+        temperature = advance(temperature, step)
+        step += chunk
+        bar.update(chunk)
+        if not bool(jnp.all(jnp.isfinite(temperature))):
+            bar.close()
+            raise FloatingPointError(f"non-finite temperature at step {step}; reduce run.dt")
+        _write_outputs(scene, out, model, temperature, step)
+        if step % run["checkpoint_every"] == 0 or step >= model.n_steps:
+            _save_checkpoint(out, temperature, step)
+        chunks_done += 1
+        if stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps:
+            bar.close()
+            return temperature, None
+    bar.close()
+    elapsed = time.perf_counter() - wall
+    summary = {
+        "particles": len(model.radii), "contacts": int(len(model.table.pairs())), "steps": step,
+        "dt_s": model.dt, "simulated_s": step * model.dt, "wall_s": elapsed,
+        "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()), "T_max_K": float(temperature.max()),
+    }
+    return temperature, summary
+
+
+def _write_outputs(scene, out, model, temperature, step):
+    formats = scene["run"]["formats"]
+    t = step * model.dt
+    if "vtp" in formats:
+        (out / "vtp").mkdir(exist_ok=True)
+        write_vtp(out / "vtp" / f"step_{step:08d}.vtp", model.centres, model.radii, temperature, step, t)
+    if "lammps" in formats:
+        append_lammps(out / "dump.lammpstrj", model.centres, model.radii, temperature, step)
+
+
+def resume(out_dir, progress=True, stop_after_chunks=None):
+    """Continue the run in ``out_dir`` from its last checkpoint."""
+    out = Path(out_dir)
+    if not (out / "checkpoint.npz").exists():
+        raise SceneError(f"{str(out)!r} has no checkpoint.npz to resume from")
+    scene = validate_scene(json.loads((out / "scene.json").read_text()))
+    packed = np.load(out / "packing.npz")
+    model = build_model(scene, packed["centres"], packed["radii"])
+    state = np.load(out / "checkpoint.npz")
+    step = int(state["step"])
+    # outputs written after the checkpoint by the interrupted run are redone
+    for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
+        if int(f.stem.split("_")[1]) > step:
+            f.unlink()
+    if (out / "dump.lammpstrj").exists():
+        _truncate_lammps(out / "dump.lammpstrj", step)
+    return run_scene(scene, out, progress, stop_after_chunks, _start=(model, jnp.asarray(state["temperature"]), step))
+
+
+def _truncate_lammps(path, last_step):
+    text = path.read_text()
+    frames = text.split("ITEM: TIMESTEP\n")
+    kept = [f for f in frames[1:] if int(f.split("\n", 1)[0]) <= last_step]
+    path.write_text("".join("ITEM: TIMESTEP\n" + f for f in kept))
+
+
+def summary_table(summary) -> str:
+    width = max(len(k) for k in summary)
+    return "\n".join(f"{k:<{width}}  {v:.6g}" if isinstance(v, float) else f"{k:<{width}}  {v}" for k, v in summary.items())

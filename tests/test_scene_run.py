@@ -1,0 +1,108 @@
+"""Scene files, `sintercond run`, outputs, checkpoints and exact resume."""
+
+import copy
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from sintercond import run as runner
+from sintercond.scene import SceneError, load_scene, validate_scene
+
+SMALL = {
+    "packing": {"kind": "simple_cubic", "counts": [6, 3, 3], "spacing": 1e-4, "radius": 0.52e-4},
+    "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 12.6},
+    "conduction": {"law": "rojek"},
+    "initial": {"temperature": 300.0},
+    "boundary": {"floor_temperature": 300.0},
+    "beam": {"intensity": 2e8, "attenuation": 2e4, "spot_radius": 1e-4, "absorptance": 0.7, "speed": 0.05,
+             "path": [[0.0, 1e-4], [6e-4, 1e-4]]},
+    "radiation": {"environment_temperature": 300.0, "emissivity": 0.4},
+    "run": {"duration": 6e-3, "dt": "auto", "output_every": 5, "checkpoint_every": 10, "formats": ["vtp", "lammps"]},
+}
+
+
+def test_default_scene_is_valid():
+    scene = load_scene(None)
+    assert scene["packing"]["kind"] == "powder_bed" and scene["run"]["dt"] == "auto"
+
+
+@pytest.mark.parametrize(
+    "mutate,message",
+    [
+        (lambda s: s["material"].update(colour="red"), r"unknown key material\.colour"),
+        (lambda s: s.update(mechanics={}), r"unknown section \[mechanics\]"),
+        (lambda s: s["material"].update(density=-1.0), r"material\.density must be > 0; got -1\.0"),
+        (lambda s: s["material"].update(conductivity="high"), r"material\.conductivity must be a number"),
+        (lambda s: s["packing"].update(radius=1.2e-4), r"packing\.radius must be in \[spacing/2, spacing\]"),
+        (lambda s: s["conduction"].update(law="magic"), r"conduction\.law must be one of"),
+        (lambda s: s["conduction"].update(params={"slop": 1.0}), r"unknown key conduction\.params\.slop"),
+        (lambda s: s["run"].update(checkpoint_every=7), r"run\.checkpoint_every \(7\) must be a multiple"),
+        (lambda s: s["run"].update(dt=-1.0), r"run\.dt must be"),
+        (lambda s: s["beam"].update(absorptance=1.5), r"beam\.absorptance must be in \[0, 1\]"),
+        (lambda s: s.pop("initial"), r"missing section \[initial\]"),
+        (lambda s: s["run"].update(formats=["xyz"]), r"run\.formats"),
+    ],
+)
+def test_bad_scenes_name_the_field(mutate, message):
+    scene = copy.deepcopy(SMALL)
+    mutate(scene)
+    with pytest.raises(SceneError, match=message):
+        validate_scene(scene)
+
+
+def test_unstable_dt_and_overlap_beyond_the_neck_model():
+    scene = copy.deepcopy(SMALL)
+    scene["run"]["dt"] = 1.0
+    with pytest.raises(SceneError, match=r"run\.dt: dt = 1 s exceeds the explicit stability limit"):
+        runner.build_model(validate_scene(scene))
+    scene = copy.deepcopy(SMALL)
+    scene["packing"]["radius"] = 0.9e-4  # h = 2r - a = 0.8e-4 > max_overlap = 2r/3: caught by the neck model
+    with pytest.raises(SceneError, match="max_overlap"):
+        runner.build_model(validate_scene(scene))
+
+
+def test_run_writes_outputs_and_resume_is_exact(tmp_path):
+    scene = validate_scene(copy.deepcopy(SMALL))
+    full, summary = runner.run_scene(scene, tmp_path / "full", progress=False)
+    assert summary["steps"] % 5 == 0 and summary["T_max_K"] > 300.0
+    # killed after 3 chunks (15 steps; last checkpoint at 10), then resumed
+    runner.run_scene(validate_scene(copy.deepcopy(SMALL)), tmp_path / "cut", progress=False, stop_after_chunks=3)
+    (tmp_path / "cut" / "checkpoint.tmp.npz").write_bytes(b"half-written")  # a kill during the next write
+    resumed, _ = runner.resume(tmp_path / "cut", progress=False)
+    np.testing.assert_array_equal(np.asarray(resumed), np.asarray(full))
+    # outputs of the resumed run equal the uninterrupted run's
+    full_files = sorted(p.name for p in (tmp_path / "full" / "vtp").iterdir())
+    assert full_files == sorted(p.name for p in (tmp_path / "cut" / "vtp").iterdir())
+    for name in full_files:
+        assert (tmp_path / "full" / "vtp" / name).read_text() == (tmp_path / "cut" / "vtp" / name).read_text()
+    assert (tmp_path / "full" / "dump.lammpstrj").read_text() == (tmp_path / "cut" / "dump.lammpstrj").read_text()
+
+
+def test_vtp_is_valid_polydata(tmp_path):
+    centres = np.random.default_rng(0).uniform(size=(4, 3))
+    runner.write_vtp(tmp_path / "x.vtp", centres, np.full(4, 0.1), np.arange(4.0) + 300, 7, 1e-3)
+    root = ET.parse(tmp_path / "x.vtp").getroot()
+    piece = root.find("PolyData/Piece")
+    assert root.get("type") == "PolyData" and piece.get("NumberOfPoints") == "4"
+    points = np.array(piece.find("Points/DataArray").text.split(), float).reshape(4, 3)
+    np.testing.assert_array_equal(points, centres)
+    temps = [a for a in piece.find("PointData") if a.get("Name") == "temperature"][0]
+    np.testing.assert_array_equal(np.array(temps.text.split(), float), np.arange(4.0) + 300)
+
+
+def test_cli_run_and_errors(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(
+        '[packing]\nkind = "simple_cubic"\ncounts = [3, 1, 1]\nspacing = 1e-4\nradius = 0.52e-4\n'
+        '[material]\ndensity = -1\nspecific_heat = 560.0\nconductivity = 12.6\n'
+        '[conduction]\nlaw = "rojek"\n[initial]\ntemperature = 300.0\n'
+        '[run]\nduration = 1e-3\noutput_every = 5\ncheckpoint_every = 5\n'
+    )
+    result = subprocess.run([sys.executable, "-m", "sintercond.cli", "run", str(bad)], capture_output=True, text=True)
+    assert result.returncode == 2 and "material.density must be > 0" in result.stderr and "Traceback" not in result.stderr
+    result = subprocess.run([sys.executable, "-m", "sintercond.cli", "run", str(tmp_path / "none.toml")],
+                            capture_output=True, text=True)
+    assert result.returncode == 2 and "does not exist" in result.stderr
