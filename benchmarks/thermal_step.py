@@ -1,6 +1,6 @@
 """Particle-steps per second of the static conduction step: JAX (padded table) against SciPy CSR.
 
-Usage: python benchmarks/thermal_step.py [--sizes 10000 100000]
+Usage: python benchmarks/thermal_step.py [--sizes 10000 100000 1000000]
 
 A jittered, sintered simple-cubic packing (spacing a, radii 0.53 a +- 2 %,
 positions +- 2 % of a; ~6 contacts per particle), float64, explicit Euler
@@ -12,6 +12,7 @@ its section of benchmarks/RESULTS.md.
 """
 
 import argparse
+import resource
 import time
 
 import jax
@@ -37,7 +38,7 @@ def jittered_packing(n, seed=0):
 
 def main():
     parser = argparse.ArgumentParser()
-    parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     args = parser.parse_args()
     rows = []
     for n in args.sizes:
@@ -74,8 +75,9 @@ def main():
                 ref = scipy_run(t_np)
                 best = min(best, time.perf_counter() - s)
             err = float(np.max(np.abs(np.asarray(run(temperature)) - ref)))
+            peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
             rows.append((f"{len(r):,}", order_name, f"{len(r) * STEPS / t_jax:.2e}", f"{len(r) * STEPS / best:.2e}",
-                         f"{best / t_jax:.2f}", f"{err:.1e}", f"{build:.1f}"))
+                         f"{best / t_jax:.2f}", f"{err:.1e}", f"{build:.1f}", f"{peak_gb:.1f}"))
             print(*rows[-1], sep="\t", flush=True)
     body = (
         "## Thermal step: static conduction, particle-steps per second\n\n"
@@ -83,7 +85,7 @@ def main():
         f"{STEPS} steps: JAX `simulate` (padded contact table, one `lax.scan`) against SciPy CSR mat-vec in a "
         "Python loop, on the same particle order. 'build' is `contact_table` (jax-md cell list + conductances).\n\n"
         + markdown_table(("particles", "order", "JAX particle-steps/s", "SciPy CSR particle-steps/s",
-                          "JAX / SciPy", "max |T_jax - T_scipy| (K)", "build (s)"), rows)
+                          "JAX / SciPy", "max |T_jax - T_scipy| (K)", "build (s)", "peak RSS so far (GB)"), rows)
     )
     write_section("thermal_step", "python benchmarks/thermal_step.py", body)
 
