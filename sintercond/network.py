@@ -32,10 +32,19 @@ class ContactTable:
     Attributes:
       neighbors: ``[n, m]`` int32 contact indices; padding points at the row's own particle.
       conductance: ``[n, m]`` conductances ``K_ij`` (W/K); 0 on padding.
+      wall_conductance: ``[n]`` conductance to a conducting wall (W/K), or None.
+      wall_temperature: ``[n]`` temperature of that wall (K), or None.
     """
 
     neighbors: jax.Array
     conductance: jax.Array
+    wall_conductance: jax.Array | None = None
+    wall_temperature: jax.Array | None = None
+
+    def with_walls(self, wall_conductance, wall_temperature) -> "ContactTable":
+        """The same network coupled to conducting walls (per particle ``K_iw`` and ``T_w``)."""
+        return dataclasses.replace(self, wall_conductance=jnp.asarray(wall_conductance),
+                                   wall_temperature=jnp.asarray(wall_temperature))
 
     @property
     def n_particles(self) -> int:
@@ -131,8 +140,54 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
 
 
 def heat_inflow(temperature, table: ContactTable):
-    """``sum_j K_ij (T_j - T_i)`` for every particle (W), Rojek et al. Eqs. 3-4."""
-    return jnp.sum(table.conductance * (temperature[table.neighbors] - temperature[:, None]), axis=1)
+    """``sum_j K_ij (T_j - T_i) + K_iw (T_w - T_i)`` for every particle (W), Rojek et al. Eqs. 3-4."""
+    return wall_inflow(table, temperature.dtype) - laplacian(temperature, table)
+
+
+def laplacian(x, table: ContactTable):
+    """The linear part ``(L x)_i = sum_j K_ij (x_i - x_j) + K_iw x_i`` (symmetric, positive semidefinite)."""
+    lx = jnp.sum(table.conductance * (x[:, None] - x[table.neighbors]), axis=1)
+    if table.wall_conductance is not None:
+        lx = lx + table.wall_conductance * x
+    return lx
+
+
+def wall_inflow(table: ContactTable, dtype):
+    """The constant part ``K_iw T_w`` (W); 0 without walls."""
+    if table.wall_conductance is None:
+        return jnp.zeros(table.neighbors.shape[0], dtype)
+    return table.wall_conductance * table.wall_temperature
+
+
+def total_conductance(table: ContactTable):
+    """``sum_j K_ij + K_iw`` per particle (W/K): the diagonal of the Laplacian."""
+    total = jnp.sum(table.conductance, axis=1)
+    return total if table.wall_conductance is None else total + table.wall_conductance
+
+
+def wall_conductance(centres, radii, kappa, axis, position, law="rojek", params=None, neck_model=None,
+                     wall_kappa=None, wall_radius_factor=1e3):
+    """Conductance of each particle to a plane wall ``p[axis] = position`` (0 if not touching).
+
+    The wall enters the pair law as a sphere ``wall_radius_factor`` times the
+    largest particle radius, its surface on the plane; the overlap is the
+    particle's penetration ``r - |c[axis] - position|``. Validated like any pair
+    (overlaps inside the neck model's domain).
+    """
+    centres = np.asarray(centres, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    kappa = np.broadcast_to(np.asarray(kappa, dtype=np.float64), radii.shape)
+    wall_kappa = kappa if wall_kappa is None else np.broadcast_to(np.asarray(wall_kappa, dtype=np.float64), radii.shape)
+    h = radii - np.abs(centres[:, axis] - position)
+    touching = h > 0
+    k = np.zeros(len(radii))
+    if touching.any():
+        r_wall = np.full(int(touching.sum()), wall_radius_factor * float(radii.max()))
+        validate_pair_conductance_inputs(law, radii[touching], r_wall, h[touching], kappa[touching],
+                                         wall_kappa[touching], params, neck_model)
+        k[touching] = np.asarray(pair_conductance(law, radii[touching], r_wall, h[touching], kappa[touching],
+                                                  wall_kappa[touching], params=params, neck_model=neck_model))
+    return k
 
 
 def morton_order(centres, bits=10):

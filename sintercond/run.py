@@ -53,24 +53,28 @@ def build_packing(scene):
     return bed.centres, bed.radii * (1.0 + p.get("sinter_swelling", 0.0))
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class _Source:
-    """Hashable heat-source term (static under jit): beam, convection, radiation as configured."""
+    """Heat-source term (a static argument under jit, hashed by identity): beam, convection, radiation.
 
-    radii: tuple
-    centres: tuple
+    ``eq=False`` keeps hashing O(1): one compiled chunk per run, not a hash of
+    every particle's coordinates at every call.
+    """
+
+    radii: jax.Array
+    centres: jax.Array
     beam: tuple | None
     convection: tuple | None
     radiation: tuple | None
     surface_z: float
 
     def __call__(self, temperature, t):
-        radii = jnp.asarray(self.radii)
+        radii = self.radii
         power = jnp.zeros_like(temperature)
         if self.beam is not None:
             intensity, attenuation, spot, absorptance, speed, path = self.beam
             spot_xy = heat_sources.beam_position(t, jnp.asarray(path), speed)
-            depth = heat_sources.beam_depth(jnp.asarray(self.centres), radii, spot_xy, spot, self.surface_z)
+            depth = heat_sources.beam_depth(self.centres, radii, spot_xy, spot, self.surface_z)
             power = power + heat_sources.laser_power(radii, depth, intensity, attenuation, absorptance)
         if self.convection is not None:
             t_env, k_env, nusselt = self.convection
@@ -91,18 +95,14 @@ def build_model(scene, centres=None, radii=None) -> Model:
     except ValueError as err:
         raise SceneError(f"the packing does not fit the conduction model: {err}") from None
     capacity = jnp.asarray(4.0 / 3.0 * np.pi * radii**3 * m["density"] * m["specific_heat"])
-    fixed_mask = fixed_temperature = None
-    if "floor_temperature" in scene.get("boundary", {}):
-        bottom = centres[:, 2] - radii
-        fixed_mask = jnp.asarray(bottom <= bottom.min() + 1e-3 * np.mean(radii))
-        fixed_temperature = jnp.asarray(scene["boundary"]["floor_temperature"])
+    table, fixed_mask, fixed_temperature = _apply_walls(scene, centres, radii, table)
     beam = scene.get("beam")
     conv = scene.get("convection")
     rad = scene.get("radiation")
     source = None
     if beam or conv or rad:
         source = _Source(
-            radii=tuple(radii.tolist()), centres=tuple(map(tuple, centres.tolist())),
+            radii=jnp.asarray(radii), centres=jnp.asarray(centres),
             beam=None if beam is None else (beam["intensity"], beam["attenuation"], beam["spot_radius"],
                                             beam["absorptance"], beam["speed"], tuple(map(tuple, beam["path"]))),
             convection=None if conv is None else (conv["environment_temperature"], conv["environment_conductivity"],
@@ -124,6 +124,50 @@ def build_model(scene, centres=None, radii=None) -> Model:
     chunk = run["output_every"]
     n_steps = int(np.ceil(n_steps / chunk) * chunk)
     return Model(centres, radii, table, capacity, fixed_mask, fixed_temperature, source, dt, n_steps)
+
+
+def _walls(scene):
+    walls = list(scene.get("walls", []))
+    if "floor_temperature" in scene.get("boundary", {}):
+        walls.append({"axis": 2, "side": "min", "mode": "held", "temperature": scene["boundary"]["floor_temperature"]})
+    return walls
+
+
+def _apply_walls(scene, centres, radii, table):
+    """Held walls become fixed particles, conducting walls per-particle couplings of the table."""
+    held = np.zeros(len(radii), bool)
+    held_t = np.zeros(len(radii))
+    k_wall = np.zeros(len(radii))
+    t_wall = np.zeros(len(radii))
+    c = scene["conduction"]
+    for k, wall in enumerate(_walls(scene)):
+        axis, mode = wall["axis"], wall["mode"]
+        if mode == "insulated":
+            continue
+        depth = wall.get("penetration", 0.02) * float(np.mean(radii))
+        if wall["side"] == "min":
+            position = float(np.min(centres[:, axis] - radii)) + depth
+            touching = centres[:, axis] - radii <= position
+        else:
+            position = float(np.max(centres[:, axis] + radii)) - depth
+            touching = centres[:, axis] + radii >= position
+        if mode == "held":
+            held |= touching
+            held_t = np.where(touching, wall["temperature"], held_t)
+        else:
+            try:
+                k_w = network.wall_conductance(centres, radii, scene["material"]["conductivity"], axis, position,
+                                               c["law"], c.get("params"), c.get("neck_model"))
+            except ValueError as err:
+                raise SceneError(f"walls[{k}]: {err}") from None
+            t_wall = np.where(k_w > 0, (k_wall * t_wall + k_w * wall["temperature"]) / np.maximum(k_wall + k_w, 1e-300),
+                              t_wall)
+            k_wall = k_wall + k_w
+    if k_wall.any():
+        table = table.with_walls(k_wall, t_wall)
+    if held.any():
+        return table, jnp.asarray(held), jnp.asarray(held_t)
+    return table, None, None
 
 
 def write_vtp(path, centres, radii, temperature, step, t):

@@ -18,7 +18,15 @@ for a complete example (the scene ``sintercond run`` uses without arguments).
 ``[initial]``
     ``temperature``.
 ``[boundary]`` (optional)
-    ``floor_temperature``: particles touching the floor are held at it.
+    ``floor_temperature``: shorthand for a held wall at the bottom (axis 2, min).
+``[[walls]]`` (optional, any number)
+    ``axis`` (0, 1, 2), ``side`` (``"min"`` or ``"max"``: the wall plane lies
+    at the packing's extreme along the axis, moved ``penetration`` mean
+    radii into it, default 0.02), ``mode``: ``"held"`` (touching particles
+    held at ``temperature``), ``"conducting"`` (touching particles exchange
+    heat with a wall at ``temperature`` through the conduction law, the wall
+    taken as a very large sphere) or ``"insulated"`` (no flux, the default of
+    any face).
 ``[beam]`` (optional; a laser, Lambert-Beer, moving along a polyline)
     ``intensity`` (W/m^2), ``attenuation`` (1/m), ``spot_radius``,
     ``absorptance``, ``speed`` (m/s), ``path`` ``[[x, y], ...]``.
@@ -98,6 +106,13 @@ _PACKING = {
         "radius": (float, _POSITIVE, True),
     },
 }
+_WALL = {
+    "axis": (int, ("one of 0, 1, 2", lambda v: v in (0, 1, 2)), True),
+    "side": (str, ('"min" or "max"', lambda v: v in ("min", "max")), True),
+    "mode": (str, ('"held", "conducting" or "insulated"', lambda v: v in ("held", "conducting", "insulated")), True),
+    "temperature": (float, _POSITIVE, False),
+    "penetration": (float, ("in [0, 0.2]", lambda v: 0 <= v <= 0.2), False),
+}
 _REQUIRED_SECTIONS = ("packing", "material", "conduction", "initial", "run")
 
 
@@ -135,9 +150,10 @@ def validate_scene(raw: dict) -> dict:
     """Check a parsed scene and return it with numbers normalised; raises :class:`SceneError`."""
     if not isinstance(raw, dict):
         raise SceneError("a scene must be a TOML table")
-    unknown = set(raw) - set(_SCHEMA) - {"packing"}
+    unknown = set(raw) - set(_SCHEMA) - {"packing", "walls"}
     if unknown:
-        raise SceneError(f"unknown section [{sorted(unknown)[0]}]; allowed: {sorted(set(_SCHEMA) | {'packing'})}")
+        raise SceneError(f"unknown section [{sorted(unknown)[0]}]; allowed: "
+                         f"{sorted(set(_SCHEMA) | {'packing', 'walls'})}")
     for name in _REQUIRED_SECTIONS:
         if name not in raw:
             raise SceneError(f"missing section [{name}]")
@@ -147,6 +163,13 @@ def validate_scene(raw: dict) -> dict:
     if kind not in _PACKING:
         raise SceneError(f"packing.kind must be one of {sorted(_PACKING)}; got {kind!r}")
     scene["packing"] = _check_section("packing", packing, _PACKING[kind])
+    walls = raw.get("walls", [])
+    if not isinstance(walls, list):
+        raise SceneError("walls must be an array of tables ([[walls]])")
+    scene["walls"] = [_check_section(f"walls[{k}]", w, _WALL) for k, w in enumerate(walls)]
+    for k, wall in enumerate(scene["walls"]):
+        if wall["mode"] != "insulated" and "temperature" not in wall:
+            raise SceneError(f"walls[{k}].temperature is required for a {wall['mode']} wall")
     _check_details(scene)
     return scene
 

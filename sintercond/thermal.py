@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.sparse.linalg import cg
 
-from sintercond.network import ContactTable, contact_table, heat_inflow
+from sintercond.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance, wall_inflow
 
 
 def stable_time_step(capacity, table: ContactTable):
@@ -38,7 +38,7 @@ def stable_time_step(capacity, table: ContactTable):
       capacity: ``[n]`` heat capacities ``C_i`` (J/K), or a scalar.
       table: the network.
     """
-    total = jnp.sum(table.conductance, axis=1)
+    total = total_conductance(table)
     capacity = jnp.broadcast_to(jnp.asarray(capacity, total.dtype), total.shape)
     return jnp.min(jnp.where(total > 0, capacity / jnp.where(total > 0, total, 1.0), jnp.inf))
 
@@ -79,11 +79,6 @@ def explicit_euler_step(temperature, table: ContactTable, capacity, dt, fixed_ma
     return _apply_fixed(new, fixed_mask, fixed_temperature)
 
 
-def _laplacian_matvec(table: ContactTable):
-    """``x -> L x`` with ``(L x)_i = sum_j K_ij (x_i - x_j)`` (symmetric positive semidefinite)."""
-    return lambda x: -heat_inflow(x, table)
-
-
 def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
                         tol=1e-13):
     """One backward Euler step: solve ``(C/dt + L) T' = C/dt T`` by conjugate gradients.
@@ -94,13 +89,13 @@ def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_ma
     capacity = jnp.broadcast_to(jnp.asarray(capacity, temperature.dtype), temperature.shape)
     free = jnp.ones_like(temperature, dtype=bool) if fixed_mask is None else ~fixed_mask
     held = jnp.zeros_like(temperature) if fixed_mask is None else jnp.where(fixed_mask, fixed_temperature, 0.0)
-    laplacian = _laplacian_matvec(table)
 
     def matvec(x):  # identity on held rows, (C/dt + L) restricted to free ones
         x_free = jnp.where(free, x, 0.0)
-        return jnp.where(free, capacity / dt * x_free + laplacian(x_free), x)
+        return jnp.where(free, capacity / dt * x_free + laplacian(x_free, table), x)
 
-    rhs = jnp.where(free, capacity / dt * temperature - laplacian(held), held)
+    rhs = jnp.where(free, capacity / dt * temperature + wall_inflow(table, temperature.dtype) - laplacian(held, table),
+                    held)
     solution, _ = cg(matvec, rhs, x0=jnp.where(free, temperature, held), tol=tol, maxiter=10 * temperature.shape[0])
     return jnp.where(free, solution, held)
 
@@ -135,18 +130,18 @@ def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every
 def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
     """Steady temperatures with the ``fixed_mask`` particles held at ``fixed_temperature``.
 
-    Solves ``(L T)_i = 0`` on free particles by conjugate gradients. Free
+    Solves ``(L T)_i = K_iw T_w`` on free particles by conjugate gradients
+    (conducting walls, if the table has them, act like held neighbours). Free
     particles not connected to any held one have no defined temperature; they
     come out at 0.
     """
     fixed_mask = jnp.asarray(fixed_mask)
     held = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, table.conductance.dtype), 0.0)
-    laplacian = _laplacian_matvec(table)
 
     def matvec(x):
-        return jnp.where(fixed_mask, 0.0, laplacian(jnp.where(fixed_mask, 0.0, x)))
+        return jnp.where(fixed_mask, 0.0, laplacian(jnp.where(fixed_mask, 0.0, x), table))
 
-    rhs = jnp.where(fixed_mask, 0.0, -laplacian(held))
+    rhs = jnp.where(fixed_mask, 0.0, wall_inflow(table, held.dtype) - laplacian(held, table))
     solution, _ = cg(matvec, rhs, tol=tol, maxiter=10 * fixed_mask.shape[0])
     return jnp.where(fixed_mask, held, solution)
 

@@ -106,3 +106,23 @@ def test_cli_run_and_errors(tmp_path):
     result = subprocess.run([sys.executable, "-m", "sintercond.cli", "run", str(tmp_path / "none.toml")],
                             capture_output=True, text=True)
     assert result.returncode == 2 and "does not exist" in result.stderr
+
+
+def test_walls_held_and_conducting(tmp_path):
+    scene = copy.deepcopy(SMALL)
+    scene.pop("beam"), scene.pop("radiation"), scene.pop("boundary")
+    scene["walls"] = [{"axis": 0, "side": "min", "mode": "held", "temperature": 900.0},
+                      {"axis": 0, "side": "max", "mode": "conducting", "temperature": 300.0},
+                      {"axis": 1, "side": "min", "mode": "insulated"}]
+    model = runner.build_model(validate_scene(scene))
+    assert int(np.sum(np.asarray(model.fixed_mask))) == 9  # the x = min face of the 6x3x3 lattice
+    k_w = np.asarray(model.table.wall_conductance)
+    assert np.sum(k_w > 0) == 9 and np.all(np.asarray(model.table.wall_temperature)[k_w > 0] == 300.0)
+    bad = copy.deepcopy(scene)
+    bad["walls"][1].pop("temperature")
+    with pytest.raises(SceneError, match=r"walls\[1\]\.temperature is required for a conducting wall"):
+        validate_scene(bad)
+    bad = copy.deepcopy(scene)
+    bad["walls"][0]["axis"] = 3
+    with pytest.raises(SceneError, match=r"walls\[0\]\.axis must be one of 0, 1, 2"):
+        validate_scene(bad)

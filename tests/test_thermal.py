@@ -169,3 +169,28 @@ def test_quintana_ruiz_5_3_setup_inside_hashin_shtrikman():
     lower, upper = hashin_shtrikman_bounds(0.0, 100.0, m.n)
     assert float(lower) <= k_star <= float(upper)
     assert k_star > 0
+
+
+def test_conducting_walls_in_series():
+    # two particles between walls at 1000 K (x < 0) and 300 K (x > A): a chain of
+    # three resistances, wall-1, 1-2, 2-wall, so the steady heat flow and the two
+    # temperatures follow from 1/K_total = sum 1/K.
+    centres, radii = sc_lattice(2)
+    penetration = 0.02 * R
+    k_w = network.wall_conductance(centres, radii, 20.0, axis=0, position=-R + penetration)
+    k_w2 = network.wall_conductance(centres, radii, 20.0, axis=0, position=A + R - penetration)
+    assert k_w[0] > 0 and k_w[1] == 0 and k_w2[1] == pytest.approx(k_w[0], rel=1e-12)
+    table = network.contact_table(centres, radii, 20.0).with_walls(k_w + k_w2, np.where(k_w > 0, 1000.0, 300.0))
+    k_12 = float(rojek_pair_conductance(R, R, 2 * R - A, 20.0))
+    q = 700.0 / (2 / k_w[0] + 1 / k_12)
+    steady = np.asarray(thermal.steady_state(table, jnp.zeros(2, bool), jnp.zeros(2)))
+    np.testing.assert_allclose(steady, [1000 - q / k_w[0], 300 + q / k_w[0]], rtol=1e-12)
+    # the wall counts in the stable step, and explicit and implicit runs reach the same field
+    capacity = 1e-3
+    dt = float(thermal.stable_time_step(capacity, table))
+    assert dt == pytest.approx(capacity / (k_w[0] + k_12), rel=1e-12)
+    explicit, _ = thermal.simulate(jnp.full(2, 300.0), table, capacity, dt, n_steps=20000, save_every=20000)
+    implicit, _ = thermal.simulate(jnp.full(2, 300.0), table, capacity, 50 * dt, n_steps=400, save_every=400,
+                                   method="implicit")
+    np.testing.assert_allclose(explicit, steady, rtol=1e-9)
+    np.testing.assert_allclose(implicit, steady, rtol=1e-9)
