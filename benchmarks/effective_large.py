@@ -1,0 +1,60 @@
+"""Time and peak memory of steady_state_conductivity for 1e5 and 1e6 particles.
+
+Usage: python benchmarks/effective_large.py [--sizes 100000 1000000]
+
+Each size runs in a fresh subprocess (so its peak RSS is its own): jittered
+sintered SC packing, Morton-ordered, Rojek law, k* along x from one CG solve.
+The exact answer for the unjittered lattice is K_pair / a; the jitter moves
+it by a few per cent. Prints the table and rewrites its section of
+benchmarks/RESULTS.md.
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+
+from _common import markdown_table, write_section
+
+CHILD = r"""
+import json, resource, sys, time
+sys.path.insert(0, "benchmarks")
+import numpy as np
+from thermal_step import jittered_packing
+from sintercond import network, thermal
+from sintercond.conductance import rojek_pair_conductance
+n = int(sys.argv[1])
+t0 = time.perf_counter()
+centres, radii = jittered_packing(n)
+order = network.morton_order(centres)
+k = thermal.steady_state_conductivity(centres[order], radii[order], 7.0, axis=0, tol=1e-10)
+elapsed = time.perf_counter() - t0
+k_lattice = float(rojek_pair_conductance(0.53e-4, 0.53e-4, 0.06e-4, 7.0)) / 1e-4
+print(json.dumps({"n": len(radii), "seconds": elapsed, "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
+                  "k_star": k, "k_lattice": k_lattice}))
+"""
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100_000, 1_000_000])
+    args = parser.parse_args()
+    rows = []
+    for n in args.sizes:
+        out = subprocess.run([sys.executable, "-c", CHILD, str(n)], capture_output=True, text=True, check=True)
+        r = json.loads(out.stdout.strip().splitlines()[-1])
+        rows.append((f"{r['n']:,}", f"{r['seconds']:.1f}", f"{r['peak_gb']:.1f}", f"{r['k_star']:.4g}",
+                     f"{r['k_lattice']:.4g}"))
+        print(*rows[-1], sep="\t", flush=True)
+    body = (
+        "## Effective conductivity of large packings: time and memory\n\n"
+        "`steady_state_conductivity` end to end (packing build, Morton order, jax-md contact search, conductances, "
+        "one CG solve to 1e-10), fresh process per size; targets: 1e5 particles under 10 s, 1e6 under 5 min "
+        "and 8 GB on this 2-core, 24 GB machine.\n\n"
+        + markdown_table(("particles", "time (s)", "peak RSS (GB)", "k* (W/(m K))", "K_pair/a, unjittered"), rows)
+    )
+    write_section("effective_large", "python benchmarks/effective_large.py", body)
+
+
+if __name__ == "__main__":
+    main()
