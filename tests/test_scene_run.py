@@ -126,3 +126,20 @@ def test_walls_held_and_conducting(tmp_path):
     bad["walls"][0]["axis"] = 3
     with pytest.raises(SceneError, match=r"walls\[0\]\.axis must be one of 0, 1, 2"):
         validate_scene(bad)
+
+
+def test_cli_effective(tmp_path):
+    scene = tmp_path / "sc.toml"
+    scene.write_text(
+        '[packing]\nkind = "simple_cubic"\ncounts = [4, 2, 2]\nspacing = 1e-4\nradius = 0.52e-4\n'
+        '[material]\ndensity = 4430.0\nspecific_heat = 560.0\nconductivity = 20.0\n'
+        '[conduction]\nlaw = "rojek"\n[initial]\ntemperature = 300.0\n'
+        '[run]\nduration = 1e-3\noutput_every = 5\ncheckpoint_every = 5\n'
+    )
+    result = subprocess.run([sys.executable, "-m", "sintercond.cli", "effective", str(scene), "--axis", "0"],
+                            capture_output=True, text=True, check=True)
+    from sintercond.conductance import rojek_pair_conductance
+
+    expected = float(rojek_pair_conductance(0.52e-4, 0.52e-4, 0.04e-4, 20.0)) / 1e-4  # K_pair / a
+    value = float(result.stdout.split(":")[1].split()[0])
+    assert value == pytest.approx(expected, rel=1e-5)
