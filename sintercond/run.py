@@ -25,21 +25,26 @@ from tqdm import tqdm
 
 from sintercond import heat_sources, network, packing, thermal
 from sintercond.scene import SceneError, validate_scene
+from sintercond.state import ParticleState, particle_state
 
 
 @dataclasses.dataclass(frozen=True)
 class Model:
     """Everything a run needs, built from a scene."""
 
-    centres: np.ndarray
-    radii: np.ndarray
+    state: ParticleState
     table: network.ContactTable
-    capacity: jax.Array
-    fixed_mask: jax.Array | None
-    fixed_temperature: jax.Array | None
     source: object
     dt: float
     n_steps: int
+
+    @property
+    def centres(self) -> np.ndarray:
+        return np.asarray(self.state.positions)
+
+    @property
+    def radii(self) -> np.ndarray:
+        return np.asarray(self.state.radii)
 
 
 def build_packing(scene):
@@ -94,8 +99,10 @@ def build_model(scene, centres=None, radii=None) -> Model:
         table = network.contact_table(centres, radii, m["conductivity"], c["law"], c.get("params"), c.get("neck_model"))
     except ValueError as err:
         raise SceneError(f"the packing does not fit the conduction model: {err}") from None
-    capacity = jnp.asarray(4.0 / 3.0 * np.pi * radii**3 * m["density"] * m["specific_heat"])
     table, fixed_mask, fixed_temperature = _apply_walls(scene, centres, radii, table)
+    state = particle_state(centres, radii, scene["initial"]["temperature"], m["density"], m["specific_heat"],
+                           fixed=fixed_mask, fixed_temperature=fixed_temperature)
+    capacity = state.capacity
     beam = scene.get("beam")
     conv = scene.get("convection")
     rad = scene.get("radiation")
@@ -123,7 +130,7 @@ def build_model(scene, centres=None, radii=None) -> Model:
     n_steps = max(1, int(np.ceil(run["duration"] / dt)))
     chunk = run["output_every"]
     n_steps = int(np.ceil(n_steps / chunk) * chunk)
-    return Model(centres, radii, table, capacity, fixed_mask, fixed_temperature, source, dt, n_steps)
+    return Model(state, table, source, dt, n_steps)
 
 
 def _walls(scene):
@@ -165,9 +172,7 @@ def _apply_walls(scene, centres, radii, table):
             k_wall = k_wall + k_w
     if k_wall.any():
         table = table.with_walls(k_wall, t_wall)
-    if held.any():
-        return table, jnp.asarray(held), jnp.asarray(held_t)
-    return table, None, None
+    return table, held, held_t
 
 
 def write_vtp(path, centres, radii, temperature, step, t):
@@ -226,9 +231,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         (out / "scene.json").write_text(json.dumps(scene, indent=1))
         model = build_model(scene)
         np.savez(out / "packing.npz", centres=model.centres, radii=model.radii)
-        temperature = jnp.full(len(model.radii), scene["initial"]["temperature"])
-        if model.fixed_mask is not None:
-            temperature = jnp.where(model.fixed_mask, model.fixed_temperature, temperature)
+        temperature = model.state.temperature
         step = 0
         if (out / "dump.lammpstrj").exists():
             (out / "dump.lammpstrj").unlink()
@@ -238,9 +241,11 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     run = scene["run"]
     chunk = run["output_every"]
 
+    state = model.state
+
     def advance(t, start_step):
-        return thermal.simulate(t, model.table, model.capacity, model.dt, n_steps=chunk, save_every=chunk,
-                                fixed_mask=model.fixed_mask, fixed_temperature=model.fixed_temperature,
+        return thermal.simulate(t, model.table, state.capacity, model.dt, n_steps=chunk, save_every=chunk,
+                                fixed_mask=state.fixed, fixed_temperature=state.fixed_temperature,
                                 source=model.source, start_step=start_step)[0]
 
     advance = jax.jit(advance)

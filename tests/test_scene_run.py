@@ -115,7 +115,7 @@ def test_walls_held_and_conducting(tmp_path):
                       {"axis": 0, "side": "max", "mode": "conducting", "temperature": 300.0},
                       {"axis": 1, "side": "min", "mode": "insulated"}]
     model = runner.build_model(validate_scene(scene))
-    assert int(np.sum(np.asarray(model.fixed_mask))) == 9  # the x = min face of the 6x3x3 lattice
+    assert int(np.sum(np.asarray(model.state.fixed))) == 9  # the x = min face of the 6x3x3 lattice
     k_w = np.asarray(model.table.wall_conductance)
     assert np.sum(k_w > 0) == 9 and np.all(np.asarray(model.table.wall_temperature)[k_w > 0] == 300.0)
     bad = copy.deepcopy(scene)
