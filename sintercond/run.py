@@ -77,10 +77,13 @@ class _Source:
         radii = self.radii
         power = jnp.zeros_like(temperature)
         if self.beam is not None:
-            intensity, attenuation, spot, absorptance, speed, path = self.beam
+            kind, intensity, reach, spot, absorptance, speed, path = self.beam
             spot_xy = heat_sources.beam_position(t, jnp.asarray(path), speed)
             depth = heat_sources.beam_depth(self.centres, radii, spot_xy, spot, self.surface_z)
-            power = power + heat_sources.laser_power(radii, depth, intensity, attenuation, absorptance)
+            if kind == "laser":
+                power = power + heat_sources.laser_power(radii, depth, intensity, reach, absorptance)
+            else:
+                power = power + heat_sources.nozzle_power(radii, depth, intensity, reach, absorptance)
         if self.convection is not None:
             t_env, k_env, nusselt = self.convection
             power = power + heat_sources.convection_power(radii, temperature, t_env, k_env, nusselt)
@@ -88,6 +91,12 @@ class _Source:
             t_env, emissivity = self.radiation
             power = power + heat_sources.radiation_power(radii, temperature, t_env, emissivity)
         return power
+
+
+def _nusselt(convection):
+    if "reynolds" in convection:
+        return float(heat_sources.whitaker_nusselt(convection["reynolds"], convection["prandtl"]))
+    return convection.get("nusselt", 2.0)
 
 
 def build_model(scene, centres=None, radii=None) -> Model:
@@ -110,10 +119,11 @@ def build_model(scene, centres=None, radii=None) -> Model:
     if beam or conv or rad:
         source = _Source(
             radii=jnp.asarray(radii), centres=jnp.asarray(centres),
-            beam=None if beam is None else (beam["intensity"], beam["attenuation"], beam["spot_radius"],
-                                            beam["absorptance"], beam["speed"], tuple(map(tuple, beam["path"]))),
+            beam=None if beam is None else (
+                beam["kind"], beam["intensity"], beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"],
+                beam["spot_radius"], beam["absorptance"], beam["speed"], tuple(map(tuple, beam["path"]))),
             convection=None if conv is None else (conv["environment_temperature"], conv["environment_conductivity"],
-                                                  conv.get("nusselt", 2.0)),
+                                                  _nusselt(conv)),
             radiation=None if rad is None else (rad["environment_temperature"], rad["emissivity"]),
             surface_z=float(np.max(centres[:, 2] + radii)),
         )

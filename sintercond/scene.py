@@ -27,12 +27,15 @@ for a complete example (the scene ``sintercond run`` uses without arguments).
     heat with a wall at ``temperature`` through the conduction law, the wall
     taken as a very large sphere) or ``"insulated"`` (no flux, the default of
     any face).
-``[beam]`` (optional; a laser, Lambert-Beer, moving along a polyline)
-    ``intensity`` (W/m^2), ``attenuation`` (1/m), ``spot_radius``,
-    ``absorptance``, ``speed`` (m/s), ``path`` ``[[x, y], ...]``.
+``[beam]`` (optional; a heat source moving along a polyline)
+    ``kind`` (``"laser"``, Lambert-Beer with ``attenuation`` in 1/m, the
+    default; or ``"nozzle"``, linear attenuation to ``max_depth`` in m),
+    ``intensity`` (W/m^2), ``spot_radius``, ``absorptance``, ``speed`` (m/s),
+    ``path`` ``[[x, y], ...]``.
 ``[convection]`` / ``[radiation]`` (optional)
-    ``environment_temperature`` and ``environment_conductivity``, ``nusselt``
-    / ``emissivity``.
+    ``environment_temperature`` and ``environment_conductivity``, and
+    ``nusselt`` (default 2) or ``reynolds`` and ``prandtl`` (Whitaker's
+    correlation) / ``emissivity``.
 ``[run]``
     ``duration`` (s), ``dt`` (s or ``"auto"`` = 0.9 x the stable step),
     ``output_every`` and ``checkpoint_every`` (steps; the second a multiple of
@@ -69,8 +72,10 @@ _SCHEMA = {
     "initial": {"temperature": (float, _POSITIVE, True)},
     "boundary": {"floor_temperature": (float, _POSITIVE, False)},
     "beam": {
+        "kind": (str, ('"laser" or "nozzle"', lambda v: v in ("laser", "nozzle")), False),
         "intensity": (float, _NON_NEGATIVE, True),
-        "attenuation": (float, _NON_NEGATIVE, True),
+        "attenuation": (float, _NON_NEGATIVE, False),
+        "max_depth": (float, _POSITIVE, False),
         "spot_radius": (float, _POSITIVE, True),
         "absorptance": (float, _FRACTION, True),
         "speed": (float, _NON_NEGATIVE, True),
@@ -80,6 +85,8 @@ _SCHEMA = {
         "environment_temperature": (float, _POSITIVE, True),
         "environment_conductivity": (float, _POSITIVE, True),
         "nusselt": (float, _POSITIVE, False),
+        "reynolds": (float, _NON_NEGATIVE, False),
+        "prandtl": (float, _POSITIVE, False),
     },
     "radiation": {"environment_temperature": (float, _POSITIVE, True), "emissivity": (float, _FRACTION, True)},
     "run": {
@@ -209,10 +216,20 @@ def _check_details(scene):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
             raise SceneError(f"conduction.params.{key} must be a finite number >= 0; got {value!r}")
     if "beam" in scene:
+        beam = scene["beam"]
+        beam.setdefault("kind", "laser")
+        needed = "attenuation" if beam["kind"] == "laser" else "max_depth"
+        if needed not in beam:
+            raise SceneError(f"beam.{needed} is required for a {beam['kind']} beam")
         path = scene["beam"]["path"]
         if not path or any(not isinstance(p, list) or len(p) != 2 for p in path):
             raise SceneError(f"beam.path must be a list of [x, y] points; got {path!r}")
         scene["beam"]["path"] = [_numbers("beam.path point", p, 2, rule=("finite", lambda v: True)) for p in path]
+    convection = scene.get("convection", {})
+    if ("reynolds" in convection) != ("prandtl" in convection):
+        raise SceneError("convection.reynolds and convection.prandtl go together (Whitaker's correlation)")
+    if "reynolds" in convection and "nusselt" in convection:
+        raise SceneError("give convection.nusselt or convection.reynolds and prandtl, not both")
     run = scene["run"]
     dt = run.get("dt", "auto")
     if dt != "auto" and (isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0):

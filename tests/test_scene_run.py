@@ -143,3 +143,23 @@ def test_cli_effective(tmp_path):
     expected = float(rojek_pair_conductance(0.52e-4, 0.52e-4, 0.04e-4, 20.0)) / 1e-4  # K_pair / a
     value = float(result.stdout.split(":")[1].split()[0])
     assert value == pytest.approx(expected, rel=1e-5)
+
+
+def test_nozzle_and_whitaker_convection():
+    scene = copy.deepcopy(SMALL)
+    scene["beam"] = {"kind": "nozzle", "intensity": 2e8, "max_depth": 1e-4, "spot_radius": 1e-4, "absorptance": 0.7,
+                     "speed": 0.05, "path": [[0.0, 1e-4], [6e-4, 1e-4]]}
+    scene["convection"] = {"environment_temperature": 300.0, "environment_conductivity": 0.026, "reynolds": 10.0,
+                           "prandtl": 0.7}
+    model = runner.build_model(validate_scene(scene))
+    assert model.source.beam[0] == "nozzle" and model.source.convection[2] > 2.0
+    t = np.asarray(model.source(model.state.temperature, 0.0))
+    assert t.max() > 0  # the nozzle heats the particles under the spot
+    bad = copy.deepcopy(scene)
+    bad["beam"].pop("max_depth")
+    with pytest.raises(SceneError, match=r"beam\.max_depth is required for a nozzle beam"):
+        validate_scene(bad)
+    bad = copy.deepcopy(scene)
+    bad["convection"].pop("prandtl")
+    with pytest.raises(SceneError, match="reynolds and convection.prandtl go together"):
+        validate_scene(bad)
