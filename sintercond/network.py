@@ -58,7 +58,13 @@ class ContactTable:
         return np.stack([rows[keep], nbr[keep]], axis=1)
 
 
-def _neighbor_candidates(centres, radii):
+def _minimum_image(delta, periodic_box):
+    if periodic_box is None:
+        return delta
+    return delta - periodic_box * np.round(delta / periodic_box)
+
+
+def _neighbor_candidates(centres, radii, periodic_box=None):
     """Candidate neighbours within ``2 r_max`` from a jax-md cell list, as a padded ``[n, m]`` table."""
     # jax-md 0.2.29 scatters int64 into its int32 index buffers under x64
     # (a FutureWarning of JAX) and relies on implicit promotion; both are its own.
@@ -66,11 +72,15 @@ def _neighbor_candidates(centres, radii):
         warnings.filterwarnings("ignore", message="scatter inputs have incompatible types", category=FutureWarning)
         from jax_md import partition, space
 
-        lo = centres.min(axis=0)
-        positions = centres - lo
         cutoff = 2.0 * float(radii.max()) * (1.0 + 1e-6)
-        box = positions.max(axis=0) + 2 * cutoff
-        displacement, _ = space.free()
+        if periodic_box is None:
+            positions = centres - centres.min(axis=0)
+            box = positions.max(axis=0) + 2 * cutoff
+            displacement, _ = space.free()
+        else:
+            box = np.asarray(periodic_box, dtype=np.float64)
+            positions = np.mod(centres, box)
+            displacement, _ = space.periodic(jnp.asarray(box))
         neighbor_fn = partition.neighbor_list(displacement, jnp.asarray(box), cutoff, capacity_multiplier=1.0,
                                               format=partition.NeighborListFormat.Dense)
         nbrs = neighbor_fn.allocate(jnp.asarray(positions))
@@ -81,19 +91,21 @@ def _neighbor_candidates(centres, radii):
         return np.asarray(nbrs.idx)
 
 
-def find_contacts(centres, radii, tolerance=1e-9):
+def find_contacts(centres, radii, tolerance=1e-9, periodic_box=None):
     """Contacts of every particle as a padded ``[n, m]`` index table (padding = own index).
 
     Spheres ``i, j`` are in contact when ``|c_i - c_j| <= (r_i + r_j)(1 + tolerance)``
-    (touching lattices have gaps of a few ulp).
+    (touching lattices have gaps of a few ulp). With ``periodic_box`` (``[3]``
+    side lengths, m) distances are minimum-image: a periodic packing.
     """
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     n = len(radii)
-    candidates = _neighbor_candidates(centres, radii)  # padding = n
+    candidates = _neighbor_candidates(centres, radii, periodic_box)  # padding = n
     valid = candidates < n
     j = np.where(valid, candidates, 0)
-    distance = np.linalg.norm(centres[:, None, :] - centres[j], axis=-1)
+    box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
+    distance = np.linalg.norm(_minimum_image(centres[:, None, :] - centres[j], box), axis=-1)
     touching = valid & (distance <= (radii[:, None] + radii[j]) * (1.0 + tolerance))
     width = max(int(touching.sum(axis=1).max()) if n else 0, 1)
     table = np.tile(np.arange(n)[:, None], (1, width))
@@ -103,7 +115,8 @@ def find_contacts(centres, radii, tolerance=1e-9):
     return table
 
 
-def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=None, tolerance=1e-9) -> ContactTable:
+def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=None, tolerance=1e-9,
+                  periodic_box=None) -> ContactTable:
     """Build the pipe network of a static packing.
 
     Args:
@@ -112,6 +125,7 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
       kappa: solid conductivity, scalar or ``[n]`` per particle (W/(m K)).
       law, params, neck_model: as :func:`sintercond.conductance.pair_conductance`.
       tolerance: relative gap still counted as contact.
+      periodic_box: ``[3]`` box side lengths (m) for a periodic packing, or None.
 
     Returns:
       :class:`ContactTable` with ``K_ij`` from the law; the input is validated
@@ -120,12 +134,13 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     kappa = np.broadcast_to(np.asarray(kappa, dtype=np.float64), radii.shape)
-    table = find_contacts(centres, radii, tolerance)
+    table = find_contacts(centres, radii, tolerance, periodic_box)
     rows = np.broadcast_to(np.arange(len(radii))[:, None], table.shape)
     upper = table > rows  # each pair once (padding points at the row itself)
     i, j = rows[upper], table[upper]
+    box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
     # contacts closed within the tolerance have h ~ -1e-16: they touch
-    h = np.maximum(radii[i] + radii[j] - np.linalg.norm(centres[i] - centres[j], axis=1), 0.0)
+    h = np.maximum(radii[i] + radii[j] - np.linalg.norm(_minimum_image(centres[i] - centres[j], box), axis=1), 0.0)
     validate_pair_conductance_inputs(law, radii[i], radii[j], h, kappa[i], kappa[j], params, neck_model)
     k_pairs = np.asarray(pair_conductance(law, radii[i], radii[j], h, kappa[i], kappa[j], params=params,
                                           neck_model=neck_model))

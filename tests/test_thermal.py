@@ -194,3 +194,22 @@ def test_conducting_walls_in_series():
                                    method="implicit")
     np.testing.assert_allclose(explicit, steady, rtol=1e-9)
     np.testing.assert_allclose(implicit, steady, rtol=1e-9)
+
+
+def test_periodic_packing_contacts_and_conservation():
+    # a ring: 5 particles along x in a periodic box of 5 spacings, so the ends touch across the boundary
+    centres, radii = sc_lattice(5)
+    box = np.array([5 * A, 10 * A, 10 * A])
+    free_table = network.find_contacts(centres, radii)
+    periodic_table = network.find_contacts(centres, radii, periodic_box=box)
+    degree = lambda t: np.sum(t != np.arange(len(radii))[:, None], axis=1)  # noqa: E731
+    assert list(degree(free_table)) == [1, 2, 2, 2, 1]
+    assert list(degree(periodic_table)) == [2, 2, 2, 2, 2]
+    t = network.contact_table(centres, radii, 20.0, periodic_box=box)
+    k = float(rojek_pair_conductance(R, R, 2 * R - A, 20.0))
+    np.testing.assert_allclose(np.sort(np.asarray(t.conductance), axis=1)[:, -2:], k, rtol=1e-14)
+    capacity = 1e-3
+    start = jnp.asarray([1000.0, 300, 300, 300, 300])
+    final, _ = thermal.simulate(start, t, capacity, float(thermal.stable_time_step(capacity, t)), n_steps=3000,
+                                save_every=3000)
+    np.testing.assert_allclose(final, 440.0, rtol=1e-9)  # a ring equilibrates to the mean
