@@ -38,7 +38,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, safe_divide
-from sintercond._validation import concrete_arrays, require_positive
+from sintercond._validation import concrete_arrays, require_finite, require_positive
 from sintercond.neck import NECK_MODELS, validate_neck_inputs
 
 ROJEK_SLOPE = 1.064
@@ -81,6 +81,32 @@ def _linear_neck_law(a, r_i, r_j, h, kappa_i, kappa_j, params):
     )
 
 
+def fitted_half_conductance_ratio(x, coefficients):
+    """``K_i / K_cyl = (4/pi) x (1 + c1 x ln x + c2 x + c3 x^2 + c4 x^3)`` at ``x = a/r`` (NaN-safe at 0)."""
+    c1, c2, c3, c4 = (coefficients[k] for k in range(4))
+    positive = x > 0
+    x_safe = jnp.where(positive, x, 1.0)
+    x_log_x = jnp.where(positive, x_safe * jnp.log(x_safe), 0.0)
+    return 4.0 / jnp.pi * x * (1.0 + c1 * x_log_x + c2 * x + c3 * x**2 + c4 * x**3)
+
+
+def fitted_neck_law_coefficients():
+    """Coefficients of the fitted smooth law, from sintercond/data/fitted_neck_law.json (made by fitting.neck_law)."""
+    import importlib.resources
+    import json
+
+    text = importlib.resources.files("sintercond.data").joinpath("fitted_neck_law.json").read_text()
+    return tuple(json.loads(text)["coefficients"])
+
+
+def _fitted_law(a, r_i, r_j, h, kappa_i, kappa_j, params):
+    """Halves ``K_k = kappa_k pi r_k f(a/r_k)`` from the fitted smooth law, in series."""
+    c = jnp.stack([params["c1"], params["c2"], params["c3"], params["c4"]])
+    k_i = kappa_i * jnp.pi * r_i * fitted_half_conductance_ratio(a / r_i, c)
+    k_j = kappa_j * jnp.pi * r_j * fitted_half_conductance_ratio(a / r_j, c)
+    return series_conductance(k_i, k_j, params["contact_resistance"])
+
+
 def _conductivity_law(a, r_i, r_j, h, kappa_i, kappa_j, params):
     """``k_ij A / d``, Quintana-Ruiz & Campello (2020), Eqs. 32, 34, 35."""
     d = r_i + r_j - h
@@ -119,7 +145,9 @@ class ConductanceLaw(NamedTuple):
         the differentiable (fittable) inputs.
       neck_model: default key of :data:`sintercond.neck.NECK_MODELS`.
       reference: paper and equations.
-      params_allowing_zero: parameters that may be 0; all others must be > 0.
+      params_allowing_zero: parameters that may be 0; all others must be > 0
+        (except ``params_any_sign``).
+      params_any_sign: parameters that may take any finite value (fit coefficients).
     """
 
     name: str
@@ -128,6 +156,7 @@ class ConductanceLaw(NamedTuple):
     neck_model: str
     reference: str
     params_allowing_zero: tuple[str, ...] = ()
+    params_any_sign: tuple[str, ...] = ()
 
 
 CONDUCTANCE_LAWS: dict[str, ConductanceLaw] = {
@@ -148,6 +177,12 @@ CONDUCTANCE_LAWS: dict[str, ConductanceLaw] = {
             {"slope": BATCHELOR_OBRIEN_SLOPE, "contact_resistance": 0.0},
             "volume_conserving", "Batchelor & O'Brien 1977 (2 kappa a), Dryden & Zok 2004, Eq. 37",
             ("contact_resistance",),
+        ),
+        ConductanceLaw(
+            "fitted", _fitted_law,
+            {**dict(zip(("c1", "c2", "c3", "c4"), fitted_neck_law_coefficients())), "contact_resistance": 0.0},
+            "volume_conserving", "smooth law fitted to FE half-geometry data (fitting.neck_law)",
+            ("contact_resistance",), ("c1", "c2", "c3", "c4"),
         ),
         ConductanceLaw(
             "conductivity", _conductivity_law, {},
@@ -210,7 +245,11 @@ def validate_pair_conductance_inputs(law, r_i, r_j, h, kappa_i, kappa_j=None, pa
     model = _resolve_neck_model(law, neck_model)
     for name, value in params.items():
         (value,) = concrete_arrays("validate_pair_conductance_inputs", value)
-        require_positive(f"params[{name!r}] of law {law.name!r}", value, allow_zero=name in law.params_allowing_zero)
+        label = f"params[{name!r}] of law {law.name!r}"
+        if name in law.params_any_sign:
+            require_finite(label, value)
+        else:
+            require_positive(label, value, allow_zero=name in law.params_allowing_zero)
     kappas = {"kappa_i": kappa_i} if kappa_j is None else {"kappa_i": kappa_i, "kappa_j": kappa_j}
     for name, value in kappas.items():
         (value,) = concrete_arrays("validate_pair_conductance_inputs", value)
@@ -243,6 +282,18 @@ def rojek_pair_conductance(r_i, r_j, h, kappa, slope=ROJEK_SLOPE, contact_conduc
         "rojek", r_i, r_j, h, kappa, kappa_j,
         params={"slope": slope, "contact_resistance": contact_resistance},
     )
+
+
+def fitted_pair_conductance(r_i, r_j, h, kappa, *, kappa_j=None):
+    """Pair conductance from the smooth law fitted to FE data, each half from its own ``a/r``.
+
+    ``K_k = kappa_k pi r_k f(a / r_k)`` with
+    ``f(x) = (4/pi) x (1 + c1 x ln x + c2 x + c3 x^2 + c4 x^3)`` (within 0.25 % of
+    the FE half-geometry data for 0.1 <= a/r <= 0.85, and the half-space limit
+    ``4 kappa a`` as ``a -> 0``), ``a`` the volume-conserving neck, halves in series.
+    Unlike Eq. 43, unequal spheres get unequal halves.
+    """
+    return pair_conductance("fitted", r_i, r_j, h, kappa, kappa_j)
 
 
 def argento_bouvard_pair_conductance(r_i, r_j, h, kappa, *, kappa_j=None):

@@ -213,8 +213,8 @@ def _check_details(scene):
     for key, value in conduction.get("params", {}).items():
         if key not in allowed:
             raise SceneError(f"unknown key conduction.params.{key}; law {conduction['law']!r} takes {sorted(allowed)}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-            raise SceneError(f"conduction.params.{key} must be a finite number >= 0; got {value!r}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise SceneError(f"conduction.params.{key} must be a finite number; got {value!r}")
     if "beam" in scene:
         beam = scene["beam"]
         beam.setdefault("kind", "laser")

@@ -217,3 +217,12 @@ def test_validate_pair_conductance_inputs():
         with pytest.raises(ValueError, match=message):
             validate_pair_conductance_inputs(*args)
     validate_pair_conductance_inputs("rojek", 1e-3, 1e-3, 1e-4, 394.0, params={"contact_resistance": 0.0})
+
+
+def test_fitted_law_validates_and_builds_networks():
+    from sintercond.conductance import fitted_neck_law_coefficients
+
+    assert min(fitted_neck_law_coefficients()) < 0  # coefficients may be negative
+    validate_pair_conductance_inputs("fitted", 1e-3, 3e-3, 0.06e-3, 394.0)
+    with pytest.raises(ValueError, match=r"params\['c1'\] of law 'fitted' must be finite"):
+        validate_pair_conductance_inputs("fitted", 1e-3, 3e-3, 0.06e-3, 394.0, params={"c1": np.nan})

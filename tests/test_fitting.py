@@ -54,3 +54,45 @@ def test_nonlinear_fit_and_stopping():
         assert result.params[k] == pytest.approx(v, rel=1e-4)
     assert result.steps < 20000 and np.all(np.isfinite(result.loss_history[: result.steps]))
     assert np.all(np.isnan(result.loss_history[result.steps:]))
+
+
+def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
+    import json
+    import pathlib
+
+    from fitting.neck_law import fit_smooth_law
+    from sintercond.conductance import fitted_half_conductance_ratio, fitted_neck_law_coefficients
+
+    result, x, y = fit_smooth_law()
+    stored = np.array(fitted_neck_law_coefficients())
+    np.testing.assert_allclose(stored, [result.params[n] for n in ("c1", "c2", "c3", "c4")], rtol=1e-6)
+    data = load_fe_neck_conductance()
+    keep = (data["a_over_r"] >= 0.1) & (data["a_over_r"] <= 0.85)
+    fit = np.asarray(fitted_half_conductance_ratio(jnp.asarray(data["a_over_r"][keep]), jnp.asarray(stored)))
+    assert np.max(np.abs(fit / data["K_over_Kcyl"][keep] - 1)) < 0.005  # the target: 0.5 %
+    linear = 1.064 * data["a_over_r"][keep]
+    assert np.max(np.abs(linear / data["K_over_Kcyl"][keep] - 1)) > 0.06  # Rojek's law: up to 6.6 % off
+    tiny = jnp.asarray([1e-8, 1e-6])
+    np.testing.assert_allclose(np.asarray(fitted_half_conductance_ratio(tiny, jnp.asarray(stored))) / (4 / np.pi * tiny),
+                               1.0, atol=1e-4)
+    record = json.loads((pathlib.Path(__file__).resolve().parents[1] / "sintercond" / "data"
+                         / "fitted_neck_law.json").read_text())
+    assert record["made_by"] == "python -m fitting.neck_law" and record["max_relative_error"] < 0.005
+
+
+def test_fitted_pair_conductance_unequal_halves():
+    from sintercond.conductance import fitted_pair_conductance, rojek_pair_conductance
+    from sintercond.neck import neck_radius
+
+    # equal spheres: two equal halves
+    k = float(fitted_pair_conductance(1.0, 1.0, 0.2, 1.0))
+    from sintercond.conductance import fitted_half_conductance_ratio, fitted_neck_law_coefficients
+
+    a = float(neck_radius(1.0, 1.0, 0.2))
+    half = np.pi * float(fitted_half_conductance_ratio(a, jnp.asarray(fitted_neck_law_coefficients())))
+    assert k == pytest.approx(half / 2, rel=1e-14)
+    # unequal spheres: the small sphere's half (larger a/r) differs from the big one's
+    k_unequal = float(fitted_pair_conductance(1e-3, 3e-3, 0.06e-3, 394.0))
+    k_rojek = float(rojek_pair_conductance(1e-3, 3e-3, 0.06e-3, 394.0))
+    assert k_unequal != pytest.approx(k_rojek, rel=1e-3)
+    assert abs(k_unequal / k_rojek - 1) < 0.15
