@@ -156,6 +156,8 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
 
 def heat_inflow(temperature, table: ContactTable):
     """``sum_j K_ij (T_j - T_i) + K_iw (T_w - T_i)`` for every particle (W), Rojek et al. Eqs. 3-4."""
+    if table.wall_conductance is None:  # the hot path: no zeros array to add
+        return -laplacian(temperature, table)
     return wall_inflow(table, temperature.dtype) - laplacian(temperature, table)
 
 
