@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fitting.core import least_squares
-from fitting.slope import load_fe_neck_conductance
+from fitting.reference import fe_neck_conductance
 
 NAMES = ("c1", "c2", "c3", "c4")
 OUTPUT = pathlib.Path(__file__).resolve().parents[1] / "sintercond" / "data" / "fitted_neck_law.json"
@@ -35,7 +35,7 @@ def smooth_law(params, x):
 
 
 def fit_smooth_law(max_a_over_r=0.85):
-    data = load_fe_neck_conductance()
+    data = fe_neck_conductance()
     keep = data["a_over_r"] <= max_a_over_r
     x, y = data["a_over_r"][keep], data["K_over_Kcyl"][keep]
     # relative residuals: the target is a relative accuracy over the range

@@ -2,19 +2,9 @@
 
 from __future__ import annotations
 
-import csv
-import importlib.resources
-
 import numpy as np
 
 from fitting.core import Positive, least_squares
-
-
-def load_fe_neck_conductance():
-    """The FE reference data (fitting/data/fe_neck_conductance.csv) as a dict of arrays."""
-    with importlib.resources.files("fitting.data").joinpath("fe_neck_conductance.csv").open() as f:
-        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
-    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
 
 
 def linear_law(params, a_over_r):

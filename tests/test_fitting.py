@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from fitting.core import Bounded, Free, Positive, least_squares
-from fitting.slope import fit_slope, linear_law, load_fe_neck_conductance
+from fitting.reference import fe_neck_conductance
+from fitting.slope import fit_slope, linear_law
 
 
 @pytest.mark.parametrize("transform,value", [(Free(), -3.2), (Positive(), 1e-3), (Positive(), 40.0),
@@ -15,7 +16,7 @@ def test_transforms_round_trip(transform, value):
 
 
 def test_slope_against_closed_form_least_squares():
-    data = load_fe_neck_conductance()
+    data = fe_neck_conductance()
     result = fit_slope(data["a_over_r"], data["K_over_Kcyl"])
     keep = data["a_over_r"] <= 0.7
     x, y = data["a_over_r"][keep], data["K_over_Kcyl"][keep]
@@ -66,7 +67,7 @@ def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
     result, x, y = fit_smooth_law()
     stored = np.array(fitted_neck_law_coefficients())
     np.testing.assert_allclose(stored, [result.params[n] for n in ("c1", "c2", "c3", "c4")], rtol=1e-6)
-    data = load_fe_neck_conductance()
+    data = fe_neck_conductance()
     keep = (data["a_over_r"] >= 0.1) & (data["a_over_r"] <= 0.85)
     fit = np.asarray(fitted_half_conductance_ratio(jnp.asarray(data["a_over_r"][keep]), jnp.asarray(stored)))
     assert np.max(np.abs(fit / data["K_over_Kcyl"][keep] - 1)) < 0.005  # the target: 0.5 %
@@ -96,3 +97,27 @@ def test_fitted_pair_conductance_unequal_halves():
     k_rojek = float(rojek_pair_conductance(1e-3, 3e-3, 0.06e-3, 394.0))
     assert k_unequal != pytest.approx(k_rojek, rel=1e-3)
     assert abs(k_unequal / k_rojek - 1) < 0.15
+
+
+def test_reference_data_files():
+    from fitting.reference import RIZZA_GALATI_TABLES, rizza_galati_table, rojek_reference
+    from sintercond import tortuosity as tt
+
+    for number in RIZZA_GALATI_TABLES:
+        table = rizza_galati_table(number)
+        assert all(len(v) == len(next(iter(table.values()))) for v in table.values())
+    t1 = rizza_galati_table(1)
+    t, temperature, lam = tt.ti6al4v_conductivity_table()
+    np.testing.assert_array_equal(t1["time_s"], t)
+    np.testing.assert_array_equal(t1["temperature_K"], temperature)
+    np.testing.assert_array_equal(t1["lambda0_W_per_mK"], lam)
+    assert rizza_galati_table(6)["lambda_fe"].tolist() == [4.13, 5.52, 6.50]
+    assert len(rizza_galati_table(7)["diameter_um"]) == 13
+    with pytest.raises(ValueError, match="number"):
+        rizza_galati_table(10)
+    ref = rojek_reference()
+    assert ref["relations"]["conductance_slope"]["value"] == 1.064
+    # the copper example is internally consistent: K_ij = K_i / 2 = 1.064 kappa pi a / 2
+    ex = ref["copper_pair_example"]
+    assert 1.064 * ex["kappa_W_per_mK"] * np.pi * ex["a_mm"] * 1e-3 / 2 == pytest.approx(ex["K_pair_linear_law_W_per_K"],
+                                                                                        abs=1e-6)

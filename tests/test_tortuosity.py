@@ -1,4 +1,4 @@
-"""Rizza & Galati (2024): Eqs. 1, 4, 5, 6 against their tables (tests/data/rizza_galati2024).
+"""Rizza & Galati (2024): Eqs. 1, 4, 5, 6 against their tables (fitting/data/rizza_galati2024).
 
 Table 9 must follow exactly (with gamma rounded to two decimals first, as the
 paper did); Tables 2, 4, 5 do not as printed (SPEC.md), so their deviations
@@ -12,9 +12,11 @@ import jax
 import numpy as np
 import pytest
 
+import fitting.data.rizza_galati2024
+
 from sintercond import tortuosity as tt
 
-DATA = pathlib.Path(__file__).parent / "data" / "rizza_galati2024"
+DATA = pathlib.Path(fitting.data.rizza_galati2024.__file__).parent
 U0_CELL, S0_CELL = 80.0**3, 6 * 80.0**2  # 512,000 um^3, 38,400 um^2
 U0_PB, S0_PB, SSS_PB, N_PB = 150.0**3, 6 * 150.0**2, 70714.0, 0.66
 
