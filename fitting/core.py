@@ -83,7 +83,8 @@ class FitResult:
 
 def least_squares(model: Callable, x, y, params0: Mapping[str, float], transforms: Mapping | None = None,
                   weights=None, relative=False, learning_rate=0.05, max_steps=5000, grad_tol=1e-10,
-                  loss_tol=1e-14, polish_steps=3) -> FitResult:
+                  loss_tol=1e-14, polish_steps=3, jacobian_model: Callable | None = None,
+                  report_every=0) -> FitResult:
     """Fit ``model(params, x) ~ y`` by weighted least squares with optax (Adam).
 
     Args:
@@ -96,6 +97,9 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
       learning_rate, max_steps, grad_tol, loss_tol: optimiser settings and stopping rule
         (gradient norm below ``grad_tol``, or relative loss change below ``loss_tol``).
       polish_steps: Gauss-Newton steps after Adam (accepted only if they lower the loss).
+      jacobian_model: the same model in a form JAX can differentiate in forward mode, used for the
+        Gauss-Newton Jacobian (default ``model``); for models whose reverse mode is a custom adjoint.
+      report_every: print step, loss and gradient norm every this many optimiser steps (0: silent).
 
     Returns:
       :class:`FitResult`.
@@ -135,6 +139,11 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
             u_new = optax.apply_updates(u, updates)
             previous = jnp.where(k > 0, history[jnp.maximum(k - 1, 0)], jnp.inf)
             change = jnp.abs(previous - value) / jnp.maximum(jnp.abs(value), 1e-300)
+            if report_every:
+                jax.lax.cond(k % report_every == 0,
+                             lambda: jax.debug.print("step {k}: loss {v:.6e}, |grad| {g:.3e}", k=k, v=value,
+                                                     g=jnp.linalg.norm(grad)),
+                             lambda: None)
             return u_new, state, k + 1, history.at[k].set(value), jnp.linalg.norm(grad), change
 
         init = (u0, state, 0, history, jnp.inf, jnp.inf)
@@ -146,8 +155,10 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
     # Gauss-Newton covariance in the constrained parameters
     theta = jnp.stack([constrained(u)[n] for n in names])
 
+    forward_model = model if jacobian_model is None else jacobian_model
+
     def residuals_theta(t):
-        return w * (model({n: t[k] for k, n in enumerate(names)}, x) - y) / scale
+        return jnp.ravel(w * (forward_model({n: t[k] for k, n in enumerate(names)}, x) - y) / scale)
 
     # Adam gets close; a few Gauss-Newton steps finish the job (exact for a
     # linear model), kept only if they lower the loss and respect the bounds

@@ -102,13 +102,15 @@ def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_ma
 
 @functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
 def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every=1, fixed_mask=None,
-             fixed_temperature=None, method="explicit", source=None, start_step=0):
+             fixed_temperature=None, method="explicit", source=None, start_step=0, probes=None):
     """Advance ``n_steps`` steps with ``lax.scan``; returns ``(final, saved [n_steps // save_every, n])``.
 
     ``method``: ``"explicit"`` (check ``dt <= stable_time_step`` first) or
     ``"implicit"`` (backward Euler, any ``dt``; conduction only). ``source``:
     see :func:`explicit_euler_step` (a hashable callable; explicit only),
-    called with the time ``(start_step + k) dt`` of step ``k``.
+    called with the time ``(start_step + k) dt`` of step ``k``. ``probes``:
+    indices of the particles to save (``saved`` is then ``[.., len(probes)]``);
+    None saves all.
     """
     if method == "implicit" and source is not None:
         raise ValueError("source terms need method='explicit'")
@@ -121,7 +123,7 @@ def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every
     def chunk(carry, _):
         t, k = carry
         t = jax.lax.fori_loop(0, save_every, lambda m, x: step(x, k + m), t)
-        return (t, k + save_every), t
+        return (t, k + save_every), (t if probes is None else t[probes])
 
     (final, _), saved = jax.lax.scan(chunk, (temperature, start_step), None, length=n_steps // save_every)
     return final, saved

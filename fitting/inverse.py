@@ -1,0 +1,318 @@
+"""Inverse problems through the thermal DEM: recover the solid conductivity from probe temperatures.
+
+The experiment is a flash measurement on a sintered packing (the DEM
+counterpart of laser-flash analysis): a prescribed power heats the particles
+on one face for a while, thermometers ("probes") on chosen particles record
+the temperature every ``save_every`` steps, and the model is the explicit
+pipe-network conduction of :mod:`sintercond.thermal` (Rojek et al. 2022,
+Eqs. 1-4):
+
+    T_{n+1} = T_n + dt / (c m) * (kappa H(T_n) + q_n),    H(T) = heat inflow at kappa = 1 W/(m K),
+
+on free particles; held particles stay held. Every conductance law in
+:mod:`sintercond.conductance` without a contact resistance is proportional to
+``kappa`` (and Rojek's to ``s kappa``), so one network built at ``kappa = 1``
+serves every ``kappa``; the fitted value is then ``kappa`` (or ``s kappa``:
+the two are not separable from temperatures, only their product is).
+
+Gradients of a loss on the probe histories with respect to ``kappa`` and the
+specific heat ``c`` come from the discrete adjoint of the scan (exactly the
+reverse-mode derivative of the explicit scheme, written out): the adjoint
+runs backwards with the same symmetric network, ``lambda_n = mu - kappa L (a mu)``
+with ``mu`` the adjoint masked on held particles and ``a = dt / (c m)``. States
+are checkpointed every ``~sqrt(n_steps)`` steps and each segment is recomputed
+once on the way back, so memory is ``O(sqrt(n_steps))`` particle-sized arrays
+and the gradient costs about three forward runs (forward, recompute, adjoint).
+:meth:`ProbeExperiment.temperatures` with ``gradient="autodiff"`` runs the
+same model through :func:`sintercond.thermal.simulate` for JAX's own
+differentiation (forward mode for Gauss-Newton Jacobians; reverse mode as
+the reference the adjoint is tested against).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fitting.core import Bounded, FitResult, least_squares
+from sintercond import thermal
+from sintercond.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ProbeExperiment:
+    """A transient conduction experiment on a static packing, observed at probe particles.
+
+    Attributes:
+      table: the network at ``kappa = 1 W/(m K)`` (conductances in W/K per W/(m K)).
+      mass: ``[n]`` particle masses (kg); the capacity is ``c * mass``.
+      initial: ``[n]`` initial temperatures (K).
+      power: ``[n]`` heat input (W) while ``t < pulse_duration``.
+      pulse_duration: length of the heat pulse (s).
+      dt: time step (s).
+      n_steps: steps simulated.
+      save_every: steps between probe readings (``n_steps // save_every`` readings, the first after
+        ``save_every`` steps).
+      probes: ``[p]`` indices of the observed particles.
+      fixed_mask, fixed_temperature: ``[n]`` held particles and their temperatures, or None.
+    """
+
+    table: ContactTable
+    mass: jax.Array
+    initial: jax.Array
+    power: jax.Array
+    pulse_duration: float
+    dt: float
+    n_steps: int
+    save_every: int
+    probes: jax.Array
+    fixed_mask: jax.Array | None = None
+    fixed_temperature: jax.Array | None = None
+
+    def __post_init__(self):
+        n = self.table.n_particles
+        for name in ("mass", "initial", "power"):
+            value = np.asarray(getattr(self, name))
+            if value.shape != (n,) or not np.all(np.isfinite(value)):
+                raise ValueError(f"{name} must be a finite [{n}] array; got shape {value.shape}")
+        if not np.all(np.asarray(self.mass) > 0):
+            raise ValueError("mass must be > 0 kg for every particle")
+        if not (self.dt > 0 and math.isfinite(self.dt)):
+            raise ValueError(f"dt must be finite and > 0 s; got {self.dt!r}")
+        if not (isinstance(self.n_steps, int) and isinstance(self.save_every, int)
+                and 1 <= self.save_every <= self.n_steps):
+            raise ValueError(f"n_steps and save_every must be integers with 1 <= save_every <= n_steps; got "
+                             f"{self.n_steps!r}, {self.save_every!r}")
+        probes = np.asarray(self.probes)
+        if probes.ndim != 1 or probes.size == 0 or probes.min() < 0 or probes.max() >= n:
+            raise ValueError(f"probes must be a non-empty 1-D array of particle indices in [0, {n}); got {probes}")
+        # the pulse as a source for thermal.simulate (hashable: one object per experiment)
+        object.__setattr__(self, "_source", functools.partial(_pulse, self.power, self.pulse_duration))
+        total = np.asarray(total_conductance(self.table))
+        limit = np.min(np.where(total > 0, np.asarray(self.mass) / (self.dt * np.where(total > 0, total, 1)), np.inf))
+        object.__setattr__(self, "_max_ratio", float(limit))
+
+    def max_diffusivity_ratio(self) -> float:
+        """Largest ``kappa / c`` (W/(m K) per J/(kg K)) for which ``dt`` is a stable explicit step."""
+        return self._max_ratio
+
+    def temperatures(self, kappa, specific_heat, gradient="adjoint"):
+        """Probe readings ``[n_steps // save_every, p]`` (K) for ``kappa`` (W/(m K)) and ``c`` (J/(kg K)).
+
+        ``gradient="adjoint"``: reverse-mode derivatives by the checkpointed
+        discrete adjoint (no forward mode). ``"autodiff"``: the same numbers
+        from :func:`sintercond.thermal.simulate`, differentiable by JAX in
+        both modes. Beyond the explicit stability limit
+        (:meth:`max_diffusivity_ratio`) the readings are NaN (flagged, never a
+        silently wrong history).
+        """
+        kappa, specific_heat = jnp.asarray(kappa, jnp.float64), jnp.asarray(specific_heat, jnp.float64)
+        if gradient == "adjoint":
+            readings = _adjoint_readings(self, kappa, specific_heat)
+        elif gradient == "autodiff":
+            readings = self._simulate(kappa, specific_heat)
+        else:
+            raise ValueError(f"gradient must be 'adjoint' or 'autodiff'; got {gradient!r}")
+        stable = kappa / specific_heat <= self.max_diffusivity_ratio() * (1 + 1e-12)
+        return jnp.where(stable, readings, jnp.nan)
+
+    def _simulate(self, kappa, specific_heat):
+        table = ContactTable(self.table.neighbors, kappa * self.table.conductance,
+                             None if self.table.wall_conductance is None else kappa * self.table.wall_conductance,
+                             self.table.wall_temperature)
+        _, saved = thermal.simulate(self.initial, table, specific_heat * self.mass, self.dt, self.n_steps,
+                                    self.save_every, self.fixed_mask, self.fixed_temperature, source=self._source,
+                                    probes=self.probes)
+        return saved
+
+
+def _pulse(power, duration, temperature, time):
+    return jnp.where(time < duration, power, 0.0)
+
+
+def _power(experiment, k):
+    """Heat input (W) during step ``k``, at the time ``k dt`` that :func:`sintercond.thermal.simulate` uses."""
+    return _pulse(experiment.power, experiment.pulse_duration, None, jnp.asarray(k, experiment.power.dtype) * experiment.dt)
+
+
+def _segment_length(n_steps):
+    return max(1, math.isqrt(n_steps - 1) + 1)  # ceil(sqrt(n_steps))
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0,))
+def _adjoint_readings(experiment: ProbeExperiment, kappa, specific_heat):
+    readings, _ = _adjoint_forward(experiment, kappa, specific_heat)
+    return readings
+
+
+def _step(experiment, kappa, specific_heat, temperature, k):
+    """One explicit step; returns the new temperatures and ``H`` (inflow at kappa = 1)."""
+    inflow = heat_inflow(temperature, experiment.table)
+    rate = experiment.dt / (specific_heat * experiment.mass)
+    new = temperature + rate * (kappa * inflow + _power(experiment, k))
+    if experiment.fixed_mask is not None:
+        new = jnp.where(experiment.fixed_mask, experiment.fixed_temperature, new)
+    return new, inflow
+
+
+def _run(experiment, kappa, specific_heat, temperature, k0, length):
+    """``length`` steps from step ``k0``; returns the end state and the probe temperature after every step."""
+
+    def body(carry, _):
+        t, k = carry
+        t, _ = _step(experiment, kappa, specific_heat, t, k)
+        return (t, k + 1), t[experiment.probes]
+
+    (t, _), probes = jax.lax.scan(body, (temperature, k0), None, length=length)
+    return t, probes
+
+
+def _layout(n_steps):
+    seg = _segment_length(n_steps)
+    return seg, n_steps // seg, n_steps % seg
+
+
+def _adjoint_forward(experiment, kappa, specific_heat):
+    seg, n_seg, tail = _layout(experiment.n_steps)
+
+    def segment(carry, _):
+        t, k = carry
+        t_end, probes = _run(experiment, kappa, specific_heat, t, k, seg)
+        return (t_end, k + seg), (t, probes)
+
+    (t, k), (starts, probes) = jax.lax.scan(segment, (experiment.initial, 0), None, length=n_seg)
+    probes = probes.reshape(n_seg * seg, -1)
+    if tail:
+        _, tail_probes = _run(experiment, kappa, specific_heat, t, k, tail)
+        probes = jnp.concatenate([probes, tail_probes])
+    readings = probes[experiment.save_every - 1::experiment.save_every]
+    return readings, (starts, t, kappa, specific_heat)
+
+
+def _adjoint_fwd(experiment, kappa, specific_heat):
+    return _adjoint_forward(experiment, kappa, specific_heat)
+
+
+def _adjoint_bwd(experiment, residuals, readings_bar):
+    starts, tail_start, kappa, specific_heat = residuals
+    seg, n_seg, tail = _layout(experiment.n_steps)
+    n, p = experiment.table.n_particles, readings_bar.shape[1]
+    every = experiment.save_every
+    # cotangent of the probe temperature after every step (zero between readings)
+    per_step = jnp.zeros((experiment.n_steps, p), readings_bar.dtype).at[every - 1::every].set(
+        readings_bar[: experiment.n_steps // every])
+    rate = experiment.dt / (specific_heat * experiment.mass)
+    held = None if experiment.fixed_mask is None else experiment.fixed_mask
+
+    def backward_segment(carry, xs):
+        adjoint, g_kappa, g_c = carry
+        start, k0, bar = xs
+        length = bar.shape[0]
+
+        def record(c, _):  # recompute the segment, keeping H per step
+            t, k = c
+            t_new, inflow = _step(experiment, kappa, specific_heat, t, k)
+            return (t_new, k + 1), inflow
+
+        _, inflows = jax.lax.scan(record, (start, k0), None, length=length)
+
+        def back(c, xs):
+            adjoint, g_kappa, g_c = c
+            inflow, bar_j, k = xs
+            adjoint = adjoint.at[experiment.probes].add(bar_j)
+            mu = adjoint if held is None else jnp.where(held, 0.0, adjoint)
+            q = _power(experiment, k)
+            g_kappa = g_kappa + jnp.sum(mu * rate * inflow)
+            g_c = g_c - jnp.sum(mu * rate * (kappa * inflow + q)) / specific_heat
+            adjoint = mu - kappa * laplacian(rate * mu, experiment.table)
+            return (adjoint, g_kappa, g_c), None
+
+        ks = k0 + jnp.arange(length)
+        carry, _ = jax.lax.scan(back, (adjoint, g_kappa, g_c), (inflows, bar, ks), reverse=True)
+        return carry, None
+
+    zero = jnp.zeros((), readings_bar.dtype)
+    carry = (jnp.zeros(n, readings_bar.dtype), zero, zero)
+    if tail:
+        carry, _ = backward_segment(carry, (tail_start, n_seg * seg, per_step[n_seg * seg:]))
+    if n_seg:
+        bars = per_step[: n_seg * seg].reshape(n_seg, seg, p)
+        carry, _ = jax.lax.scan(backward_segment, carry, (starts, jnp.arange(n_seg) * seg, bars), reverse=True)
+    _, g_kappa, g_c = carry
+    return g_kappa, g_c
+
+
+_adjoint_readings.defvjp(_adjoint_fwd, _adjoint_bwd)
+
+
+def flash_experiment(centres, radii, density, axis=0, temperature_rise=10.0, pulse_duration=None, initial_temperature=300.0,
+                     kappa_max=100.0, specific_heat_min=100.0, n_steps=2000, save_every=20, n_probes=4,
+                     law="rojek") -> ProbeExperiment:
+    """A flash experiment on a packing: heat the ``lo`` face, read probes on the ``hi`` face.
+
+    Args:
+      centres, radii: the packing (m); contacts and necks as in
+        :func:`sintercond.network.contact_table` with ``law``.
+      density: solid density (kg/m^3); masses ``density 4/3 pi r^3``.
+      axis: flash direction.
+      temperature_rise: the flash's energy as the mean rise of the packing (K) at ``c = specific_heat_min``;
+        the power is shared by the particles reaching the ``lo`` face in proportion to their cross-section.
+      pulse_duration: pulse length (s); default a tenth of the run.
+      initial_temperature: uniform start (K).
+      kappa_max, specific_heat_min: the step is the explicit stability limit at ``kappa_max / c_min``,
+        so any ``kappa <= kappa_max`` with ``c >= c_min`` is stable.
+      n_steps, save_every: run length and reading interval (steps).
+      n_probes: probes spread over the particles reaching the ``hi`` face.
+    """
+    centres = np.asarray(centres, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    for name, value in (("density", density), ("temperature_rise", temperature_rise), ("kappa_max", kappa_max),
+                        ("specific_heat_min", specific_heat_min)):
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be finite and > 0; got {value!r}")
+    table = contact_table(centres, radii, 1.0, law=law)
+    mass = density * 4.0 / 3.0 * np.pi * radii**3
+    total = np.asarray(total_conductance(table))
+    dt = float(np.min(np.where(total > 0, mass * specific_heat_min / (kappa_max * np.where(total > 0, total, 1)),
+                               np.inf)))
+    lo, hi = (centres[:, axis] - radii).min(), (centres[:, axis] + radii).max()
+    hot = centres[:, axis] - radii <= lo + 0.5 * radii.mean()
+    cold = np.flatnonzero(centres[:, axis] + radii >= hi - 0.5 * radii.mean())
+    weights = np.where(hot, radii**2, 0.0)
+    probes = cold[np.linspace(0, len(cold) - 1, min(n_probes, len(cold))).round().astype(int)]
+    pulse_duration = float(pulse_duration if pulse_duration is not None else 0.1 * n_steps * dt)
+    power = temperature_rise * specific_heat_min * mass.sum() / pulse_duration
+    return ProbeExperiment(
+        table=table, mass=jnp.asarray(mass), initial=jnp.full(len(radii), float(initial_temperature)),
+        power=jnp.asarray(power * weights / weights.sum()),
+        pulse_duration=pulse_duration, dt=dt,
+        n_steps=int(n_steps), save_every=int(save_every), probes=jnp.asarray(probes))
+
+
+def fit_conductivity(experiment: ProbeExperiment, readings, specific_heat, kappa0, noise=None, kappa_max=None,
+                     **options) -> FitResult:
+    """Recover ``kappa`` (W/(m K)) from probe readings with ``c`` known, by gradient descent through the scan.
+
+    The loss gradient is the checkpointed adjoint; the Gauss-Newton
+    covariance uses forward-mode derivatives of the same simulator. ``kappa``
+    is bounded to ``(0, kappa_max)`` (default: the stability limit at this
+    ``c``). ``noise``: the readings' standard deviation (K) if known.
+    ``options`` go to :func:`fitting.core.least_squares`.
+    """
+    readings = jnp.asarray(readings)
+    limit = experiment.max_diffusivity_ratio() * specific_heat
+    kappa_max = limit if kappa_max is None else min(float(kappa_max), limit)
+    if not 0 < kappa0 < kappa_max:
+        raise ValueError(f"kappa0 must lie in (0, {kappa_max:.6g}) W/(m K) (stability limit at c = {specific_heat})")
+    weights = None if noise is None else jnp.full(readings.shape, 1.0 / noise)
+
+    def model(params, _, gradient="adjoint"):
+        return experiment.temperatures(params["kappa"], specific_heat, gradient)
+
+    return least_squares(model, None, readings, {"kappa": kappa0}, {"kappa": Bounded(0.0, kappa_max)},
+                         weights=weights, jacobian_model=functools.partial(model, gradient="autodiff"), **options)
