@@ -210,7 +210,6 @@ def _adjoint_bwd(experiment, residuals, readings_bar):
     held = None if experiment.fixed_mask is None else experiment.fixed_mask
 
     def backward_segment(carry, xs):
-        adjoint, g_kappa, g_c = carry
         start, k0, bar = xs
         length = bar.shape[0]
 
@@ -222,28 +221,33 @@ def _adjoint_bwd(experiment, residuals, readings_bar):
         _, inflows = jax.lax.scan(record, (start, k0), None, length=length)
 
         def back(c, xs):
-            adjoint, g_kappa, g_c = c
+            # per-particle accumulators (reduced once at the end): one fused pass per step
+            adjoint, acc_inflow, acc_power = c
             inflow, bar_j, k = xs
             adjoint = adjoint.at[experiment.probes].add(bar_j)
             mu = adjoint if held is None else jnp.where(held, 0.0, adjoint)
-            q = _power(experiment, k)
-            g_kappa = g_kappa + jnp.sum(mu * rate * inflow)
-            g_c = g_c - jnp.sum(mu * rate * (kappa * inflow + q)) / specific_heat
-            adjoint = mu - kappa * laplacian(rate * mu, experiment.table)
-            return (adjoint, g_kappa, g_c), None
+            rate_mu = rate * mu
+            on = jnp.asarray(k, rate.dtype) * experiment.dt < experiment.pulse_duration
+            acc_inflow = acc_inflow + rate_mu * inflow
+            acc_power = acc_power + jnp.where(on, rate_mu, 0.0)
+            adjoint = mu - kappa * laplacian(rate_mu, experiment.table)
+            return (adjoint, acc_inflow, acc_power), None
 
         ks = k0 + jnp.arange(length)
-        carry, _ = jax.lax.scan(back, (adjoint, g_kappa, g_c), (inflows, bar, ks), reverse=True)
+        carry, _ = jax.lax.scan(back, carry, (inflows, bar, ks), reverse=True)
         return carry, None
 
-    zero = jnp.zeros((), readings_bar.dtype)
-    carry = (jnp.zeros(n, readings_bar.dtype), zero, zero)
+    zeros = jnp.zeros(n, readings_bar.dtype)
+    carry = (zeros, zeros, zeros)
     if tail:
         carry, _ = backward_segment(carry, (tail_start, n_seg * seg, per_step[n_seg * seg:]))
     if n_seg:
         bars = per_step[: n_seg * seg].reshape(n_seg, seg, p)
         carry, _ = jax.lax.scan(backward_segment, carry, (starts, jnp.arange(n_seg) * seg, bars), reverse=True)
-    _, g_kappa, g_c = carry
+    _, acc_inflow, acc_power = carry
+    # d/d kappa of T + a (kappa H + q) is a H; d/dc is -(a / c)(kappa H + q)
+    g_kappa = jnp.sum(acc_inflow)
+    g_c = -(kappa * g_kappa + jnp.sum(acc_power * experiment.power)) / specific_heat
     return g_kappa, g_c
 
 

@@ -1,0 +1,169 @@
+"""Gradient of a probe-history loss through the thermal scan: time and peak memory against the forward run.
+
+Usage: python benchmarks/inverse_gradient.py [--particles 100000] [--steps 1000 10000 100000]
+
+A flash experiment (fitting.inverse.flash_experiment) on a sintered simple-cubic
+lattice, float64, 8 probes read every 10 steps; loss = sum of squared readings.
+Variants, each in its own process so that its peak memory is its own:
+
+* forward: the readings alone (jit).
+* adjoint: value and d/d(kappa, c) by fitting.inverse's checkpointed discrete
+  adjoint (states every ~sqrt(steps) steps, each segment recomputed once).
+* autodiff plain: JAX reverse mode through sintercond.thermal.simulate.
+* autodiff checkpointed: the same with jax.checkpoint around segments of
+  ~sqrt(steps) steps (JAX's own nested rematerialisation).
+
+Memory: XLA's buffer assignment of the compiled program (temporaries plus
+arguments and outputs, what the program needs whatever else the process
+holds) and the process's peak RSS growth over its state before the run.
+Variants whose XLA estimate exceeds --max-gb are compiled but not run.
+Prints the table and rewrites its section of benchmarks/RESULTS.md.
+"""
+
+import argparse
+import json
+import math
+import pathlib
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+VARIANTS = ("forward", "adjoint", "autodiff plain", "autodiff checkpointed")
+
+
+def build(path, particles):
+    from fitting import inverse
+
+    side = round(particles ** (1 / 3))
+    d = 1e-4
+    grid = np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) * d * 0.97
+    radii = np.full(len(grid), d / 2)
+    ex = inverse.flash_experiment(grid, radii, 4430.0, n_steps=10, save_every=10, n_probes=8, kappa_max=20.0,
+                                  specific_heat_min=500.0)
+    np.savez(path, neighbors=np.asarray(ex.table.neighbors), conductance=np.asarray(ex.table.conductance),
+             mass=np.asarray(ex.mass), power=np.asarray(ex.power), dt=ex.dt, probes=np.asarray(ex.probes))
+    return len(radii)
+
+
+def run_one(path, variant, steps, max_gb):
+    import jax
+    import jax.numpy as jnp
+
+    from fitting import inverse
+    from sintercond import thermal
+    from sintercond.network import ContactTable
+
+    data = np.load(path)
+    table = ContactTable(jnp.asarray(data["neighbors"]), jnp.asarray(data["conductance"]))
+    dt = float(data["dt"])
+    ex = inverse.ProbeExperiment(table=table, mass=jnp.asarray(data["mass"]),
+                                 initial=jnp.full(len(data["mass"]), 300.0), power=jnp.asarray(data["power"]),
+                                 pulse_duration=0.1 * steps * dt, dt=dt, n_steps=steps, save_every=10,
+                                 probes=jnp.asarray(data["probes"]))
+
+    def checkpointed(kappa, c):
+        seg = math.isqrt(steps // 10 - 1) + 1  # readings per segment, ~sqrt(steps / 10)
+        n_seg = steps // 10 // seg
+        scaled = ContactTable(table.neighbors, kappa * table.conductance)
+
+        @jax.checkpoint
+        def segment(carry, _):
+            t, k = carry
+            t, saved = thermal.simulate(t, scaled, c * ex.mass, dt, seg * 10, 10, source=ex._source,
+                                        start_step=k, probes=ex.probes)
+            return (t, k + seg * 10), saved
+
+        (t, k), saved = jax.lax.scan(segment, (ex.initial, 0), None, length=n_seg)
+        rest = steps // 10 - n_seg * seg
+        if rest:
+            _, tail = thermal.simulate(t, scaled, c * ex.mass, dt, rest * 10, 10, source=ex._source, start_step=k,
+                                       probes=ex.probes)
+            saved = jnp.concatenate([saved.reshape(-1, len(ex.probes)), tail])
+        return saved.reshape(-1, len(ex.probes))
+
+    if variant == "forward":
+        fn = jax.jit(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2))
+    elif variant == "adjoint":
+        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2), argnums=(0, 1)))
+    elif variant == "autodiff plain":
+        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(ex._simulate(k, c) ** 2), argnums=(0, 1)))
+    else:
+        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(checkpointed(k, c) ** 2), argnums=(0, 1)))
+    args = (jnp.asarray(7.0), jnp.asarray(560.0))
+    compiled = fn.lower(*args).compile()
+    mem = compiled.memory_analysis()
+    xla_bytes = mem.temp_size_in_bytes + mem.argument_size_in_bytes + mem.output_size_in_bytes
+    out = {"xla_gb": xla_bytes / 1e9, "seconds": None, "rss_gb": None, "value": None}
+    if xla_bytes > max_gb * 1e9:
+        return out
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    result = jax.block_until_ready(compiled(*args))
+    first = time.perf_counter() - t0
+    best = first
+    if first < 5.0:  # short runs: best of a few
+        for _ in range(4):
+            t0 = time.perf_counter()
+            jax.block_until_ready(compiled(*args))
+            best = min(best, time.perf_counter() - t0)
+    out["seconds"] = best
+    out["rss_gb"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024 / 1e9
+    value = result if variant == "forward" else result[0]
+    out["value"] = float(value)
+    if variant != "forward":
+        out["grad"] = [float(g) for g in result[1]]
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--particles", type=int, default=100_000)
+    parser.add_argument("--steps", type=int, nargs="+", default=[1000, 10_000, 100_000])
+    parser.add_argument("--max-gb", type=float, default=40.0)
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    parser.add_argument("--one", nargs=3, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        print(json.dumps(run_one(args.one[0], args.one[1], int(args.one[2]), args.max_gb)))
+        return
+
+    from _common import markdown_table, write_section
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pathlib.Path(tmp) / "experiment.npz"
+        n = build(path, args.particles)
+        rows, results = [], {}
+        for steps in args.steps:
+            for variant in ["forward"] + [v for v in args.variants if v != "forward"]:
+                proc = subprocess.run([sys.executable, __file__, "--one", str(path), variant, str(steps),
+                                       "--max-gb", str(args.max_gb)], capture_output=True, text=True)
+                if proc.returncode:
+                    print(proc.stderr[-3000:], file=sys.stderr)
+                    raise SystemExit(f"{variant} at {steps} steps failed")
+                r = json.loads(proc.stdout.strip().splitlines()[-1])
+                results[(steps, variant)] = r
+                fwd = results[(steps, "forward")]["seconds"]
+                ratio = f"{r['seconds'] / fwd:.2f}x" if r["seconds"] and fwd else "-"
+                grad = results[(steps, "adjoint")].get("grad") if variant != "forward" else None
+                agree = "-"
+                if variant.startswith("autodiff") and r.get("grad") and grad:
+                    agree = f"{max(abs(a / b - 1) for a, b in zip(r['grad'], grad)):.1e}"
+                rows.append([f"{steps:,}", variant, f"{r['seconds']:.3f}" if r["seconds"] else "not run",
+                             ratio, f"{r['xla_gb']:.3f}", f"{r['rss_gb']:.2f}" if r["rss_gb"] is not None else "-",
+                             agree])
+                print(rows[-1], flush=True)
+    header = ["steps", "variant", "seconds", "/ forward", "XLA memory GB", "peak RSS growth GB",
+              "grad rel. diff to adjoint"]
+    body = (f"{n:,} particles (sintered SC lattice, 6 contacts each), float64, 8 probes read every 10 steps, "
+            f"loss = sum of squared readings, gradient d/d(kappa, c).\n\n" + markdown_table(header, rows) +
+            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.")
+    print(body)
+    write_section("inverse_gradient", "python benchmarks/inverse_gradient.py " + " ".join(sys.argv[1:]), body)
+
+
+if __name__ == "__main__":
+    main()
