@@ -121,3 +121,31 @@ def test_reference_data_files():
     ex = ref["copper_pair_example"]
     assert 1.064 * ex["kappa_W_per_mK"] * np.pi * ex["a_mm"] * 1e-3 / 2 == pytest.approx(ex["K_pair_linear_law_W_per_K"],
                                                                                         abs=1e-6)
+
+
+def test_phi_fit_recovers_a_known_phi_and_fits_table6():
+    import dataclasses
+
+    from fitting import phi as phi_fit
+
+    inputs = phi_fit.bcc_inputs()
+    # our BCC geometry: n just above the sphere packing fraction of this cell, faces as the SC cell's
+    assert np.all((inputs.n > 0.729) & (inputs.n < 0.735)) and np.all(np.diff(inputs.n) > 0)
+    synthetic = dataclasses.replace(inputs, lambda_fe=np.asarray(phi_fit.bcc_conductivity({"phi": 5.3}, inputs)))
+    assert phi_fit.fit_phi(synthetic).params["phi"] == pytest.approx(5.3, rel=1e-9)
+
+    fit = phi_fit.fit_phi(inputs)
+    value, err = fit.params["phi"], fit.stderr["phi"]
+    assert 4.0 < value < 8.0 and 0 < err < 0.5
+
+    def rms(p):
+        return float(np.sqrt(np.mean((np.asarray(phi_fit.bcc_conductivity({"phi": p}, inputs)) / inputs.lambda_fe - 1)
+                                     ** 2)))
+
+    assert rms(value) < rms(4.0) < rms(8.0)
+    assert rms(value) == pytest.approx(fit.residual_std * np.sqrt(2 / 3), rel=1e-6)  # 3 points, 1 parameter
+
+    joint = phi_fit.fit_phi(inputs, joint=True)
+    # n barely changes with time, so n^phi and a lambda_0 factor are the same function of the data
+    assert abs(phi_fit.correlation(joint)[0, 1]) > 0.999
+    assert joint.stderr["phi"] > 20 * err
