@@ -13,6 +13,8 @@ Variants, each in its own process so that its peak memory is its own:
 * autodiff checkpointed: the same with jax.checkpoint around segments of
   ~sqrt(steps) steps (JAX's own nested rematerialisation).
 
+Times: the best of alternating runs of the variant and the forward program in the same process
+(the VM's speed drifts by up to 2x over minutes, so ratios between processes are unreliable).
 Memory: XLA's buffer assignment of the compiled program (temporaries plus
 arguments and outputs, what the program needs whatever else the process
 holds) and the process's peak RSS growth over its state before the run.
@@ -85,8 +87,9 @@ def run_one(path, variant, steps, max_gb):
             saved = jnp.concatenate([saved.reshape(-1, len(ex.probes)), tail])
         return saved.reshape(-1, len(ex.probes))
 
+    loss = jax.jit(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2))
     if variant == "forward":
-        fn = jax.jit(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2))
+        fn = loss
     elif variant == "adjoint":
         fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2), argnums=(0, 1)))
     elif variant == "autodiff plain":
@@ -97,21 +100,28 @@ def run_one(path, variant, steps, max_gb):
     compiled = fn.lower(*args).compile()
     mem = compiled.memory_analysis()
     xla_bytes = mem.temp_size_in_bytes + mem.argument_size_in_bytes + mem.output_size_in_bytes
-    out = {"xla_gb": xla_bytes / 1e9, "seconds": None, "rss_gb": None, "value": None}
+    out = {"xla_gb": xla_bytes / 1e9, "seconds": None, "rss_gb": None, "value": None, "ratio": None}
     if xla_bytes > max_gb * 1e9:
         return out
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t0 = time.perf_counter()
     result = jax.block_until_ready(compiled(*args))
-    first = time.perf_counter() - t0
-    best = first
-    if first < 5.0:  # short runs: best of a few
-        for _ in range(4):
-            t0 = time.perf_counter()
-            jax.block_until_ready(compiled(*args))
-            best = min(best, time.perf_counter() - t0)
-    out["seconds"] = best
+    best = time.perf_counter() - t0
     out["rss_gb"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024 / 1e9
+    # the forward run timed in the same process, alternating with the variant (this VM's speed drifts)
+    forward = loss.lower(*args).compile()
+    jax.block_until_ready(forward(*args))
+    best_forward = np.inf
+    repeats = 5 if best < 5.0 else 2
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(forward(*args))
+        best_forward = min(best_forward, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        jax.block_until_ready(compiled(*args))
+        best = min(best, time.perf_counter() - t0)
+    out["seconds"], out["forward_seconds"] = best, best_forward
+    out["ratio"] = best / best_forward
     value = result if variant == "forward" else result[0]
     out["value"] = float(value)
     if variant != "forward":
@@ -124,6 +134,8 @@ def main():
     parser.add_argument("--particles", type=int, default=100_000)
     parser.add_argument("--steps", type=int, nargs="+", default=[1000, 10_000, 100_000])
     parser.add_argument("--max-gb", type=float, default=40.0)
+    parser.add_argument("--max-checkpointed-steps", type=int, default=10_000,
+                        help="skip 'autodiff checkpointed' beyond this (it runs ~20x the forward time)")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--one", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -139,6 +151,9 @@ def main():
         rows, results = [], {}
         for steps in args.steps:
             for variant in ["forward"] + [v for v in args.variants if v != "forward"]:
+                if variant == "autodiff checkpointed" and steps > args.max_checkpointed_steps:
+                    rows.append([f"{steps:,}", variant, "not run (time)", "-", "-", "-", "-"])
+                    continue
                 proc = subprocess.run([sys.executable, __file__, "--one", str(path), variant, str(steps),
                                        "--max-gb", str(args.max_gb)], capture_output=True, text=True)
                 if proc.returncode:
@@ -146,8 +161,7 @@ def main():
                     raise SystemExit(f"{variant} at {steps} steps failed")
                 r = json.loads(proc.stdout.strip().splitlines()[-1])
                 results[(steps, variant)] = r
-                fwd = results[(steps, "forward")]["seconds"]
-                ratio = f"{r['seconds'] / fwd:.2f}x" if r["seconds"] and fwd else "-"
+                ratio = f"{r['ratio']:.2f}x" if r["ratio"] else "-"
                 grad = results[(steps, "adjoint")].get("grad") if variant != "forward" else None
                 agree = "-"
                 if variant.startswith("autodiff") and r.get("grad") and grad:
@@ -156,7 +170,7 @@ def main():
                              ratio, f"{r['xla_gb']:.3f}", f"{r['rss_gb']:.2f}" if r["rss_gb"] is not None else "-",
                              agree])
                 print(rows[-1], flush=True)
-    header = ["steps", "variant", "seconds", "/ forward", "XLA memory GB", "peak RSS growth GB",
+    header = ["steps", "variant", "seconds", "/ forward (same process, best of alternating runs)", "XLA memory GB", "peak RSS growth GB",
               "grad rel. diff to adjoint"]
     body = (f"{n:,} particles (sintered SC lattice, 6 contacts each), float64, 8 probes read every 10 steps, "
             f"loss = sum of squared readings, gradient d/d(kappa, c).\n\n" + markdown_table(header, rows) +

@@ -1,0 +1,89 @@
+"""Time to fit each parameter: optimiser steps and seconds (compile included and excluded).
+
+Usage: python benchmarks/fit_times.py
+
+* slope s of Rojek Eq. 40 against the FE data (fitting.slope);
+* the smooth neck law's four coefficients (fitting.neck_law);
+* phi against Rizza & Galati's Table 6 (fitting.phi), and phi with a lambda_0 scale;
+* kappa from noisy probe histories of a flash experiment (fitting.inverse; 216-particle lattice,
+  2000 steps), against the same fit by SciPy least_squares with its finite-difference Jacobian
+  through the same (jitted) simulator.
+
+Each fit is run twice; the second run still retraces (least_squares builds its loop per call)
+but hits JAX's compilation cache for identical programs. Prints the table and rewrites its section of
+benchmarks/RESULTS.md.
+"""
+
+import time
+
+import jax
+import numpy as np
+import scipy.optimize
+from _common import markdown_table, write_section
+
+from fitting import inverse, neck_law
+from fitting import phi as phi_fit
+from fitting.reference import fe_neck_conductance
+from fitting.slope import fit_slope
+
+
+def timed(fn):
+    t0 = time.perf_counter()
+    result = fn()
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    result = fn()
+    return result, first, time.perf_counter() - t0
+
+
+def main():
+    data = fe_neck_conductance()
+    rows = []
+
+    fit, first, again = timed(lambda: fit_slope(data["a_over_r"], data["K_over_Kcyl"], max_a_over_r=0.7))
+    rows.append(["slope s (Eq. 40), 11 points", f"{fit.params['slope']:.4f} +- {fit.stderr['slope']:.4f}",
+                 fit.steps, f"{first:.2f}", f"{again:.2f}"])
+
+    (fit, x, y), first, again = timed(neck_law.fit_smooth_law)
+    err = np.max(np.abs(np.asarray(neck_law.smooth_law(fit.params, x)) / y - 1))
+    rows.append([f"smooth law c1..c4, {len(x)} points", f"max err {100 * err:.2f} %", fit.steps, f"{first:.2f}",
+                 f"{again:.2f}"])
+
+    fit, first, again = timed(lambda: phi_fit.fit_phi())
+    rows.append(["phi (Table 6, our BCC)", f"{fit.params['phi']:.3f} +- {fit.stderr['phi']:.3f}", fit.steps,
+                 f"{first:.2f}", f"{again:.2f}"])
+    fit, first, again = timed(lambda: phi_fit.fit_phi(joint=True))
+    rows.append(["phi + lambda_0 scale", f"phi {fit.params['phi']:.1f} +- {fit.stderr['phi']:.1f} (not identifiable)",
+                 fit.steps, f"{first:.2f}", f"{again:.2f}"])
+
+    side, d = 6, 1e-4
+    grid = np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) * d * 0.97
+    ex = inverse.flash_experiment(grid, np.full(len(grid), d / 2), 4430.0, n_steps=2000, save_every=20,
+                                  kappa_max=20.0, specific_heat_min=500.0)
+    clean = ex.temperatures(7.0, 560.0)
+    noisy = clean + 0.05 * jax.random.normal(jax.random.key(0), clean.shape)
+    fit, first, again = timed(lambda: inverse.fit_conductivity(ex, noisy, 560.0, kappa0=3.0, noise=0.05,
+                                                               learning_rate=0.1, max_steps=300))
+    rows.append([f"kappa, flash on {len(grid)} particles, 2000 steps",
+                 f"{fit.params['kappa']:.4f} +- {fit.stderr['kappa']:.4f} (true 7)", fit.steps, f"{first:.2f}",
+                 f"{again:.2f}"])
+
+    forward = jax.jit(lambda k: ex.temperatures(k, 560.0))
+
+    def scipy_fit():
+        res = scipy.optimize.least_squares(lambda k: (np.asarray(forward(k[0])) - np.asarray(noisy)).ravel() / 0.05,
+                                           x0=[3.0], bounds=([0.0], [ex.max_diffusivity_ratio() * 560.0]))
+        return res
+
+    res, first, again = timed(scipy_fit)
+    rows.append(["kappa, same, SciPy least_squares (FD Jacobian)", f"{res.x[0]:.4f}", f"{res.nfev} evaluations",
+                 f"{first:.2f}", f"{again:.2f}"])
+
+    header = ["fit", "result", "optimiser steps", "seconds (first call)", "seconds (second call)"]
+    body = markdown_table(header, rows)
+    print(body)
+    write_section("fit_times", "python benchmarks/fit_times.py", body)
+
+
+if __name__ == "__main__":
+    main()
