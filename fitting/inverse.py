@@ -318,5 +318,6 @@ def fit_conductivity(experiment: ProbeExperiment, readings, specific_heat, kappa
     def model(params, _, gradient="adjoint"):
         return experiment.temperatures(params["kappa"], specific_heat, gradient)
 
+    options = {"loss_tol": 1e-10, **options}  # each step is a whole simulation: stop on a flat loss
     return least_squares(model, None, readings, {"kappa": kappa0}, {"kappa": Bounded(0.0, kappa_max)},
                          weights=weights, jacobian_model=functools.partial(model, gradient="autodiff"), **options)
