@@ -84,8 +84,8 @@ class FitResult:
 def least_squares(model: Callable, x, y, params0: Mapping[str, float], transforms: Mapping | None = None,
                   weights=None, relative=False, learning_rate=0.05, max_steps=5000, grad_tol=1e-10,
                   loss_tol=1e-14, polish_steps=3, jacobian_model: Callable | None = None,
-                  report_every=0) -> FitResult:
-    """Fit ``model(params, x) ~ y`` by weighted least squares with optax (Adam).
+                  report_every=0, method="adam") -> FitResult:
+    """Fit ``model(params, x) ~ y`` by weighted least squares: optax Adam, or Levenberg-Marquardt.
 
     Args:
       model: ``(params dict, x) -> prediction``, traceable.
@@ -100,6 +100,10 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
       jacobian_model: the same model in a form JAX can differentiate in forward mode, used for the
         Gauss-Newton Jacobian (default ``model``); for models whose reverse mode is a custom adjoint.
       report_every: print step, loss and gradient norm every this many optimiser steps (0: silent).
+      method: ``"adam"`` (gradient descent with optax, reverse-mode gradients: any number of
+        parameters) or ``"levenberg_marquardt"`` (damped Gauss-Newton on the unconstrained variables
+        with forward-mode Jacobians of ``jacobian_model``: a handful of steps for a few parameters;
+        ``learning_rate`` is then unused). Both loops are one compiled ``lax.while_loop``.
 
     Returns:
       :class:`FitResult`.
@@ -113,52 +117,35 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
     def constrained(u):
         return {n: transforms[n].forward(u[k]) for k, n in enumerate(names)}
 
-    def residuals(u):
-        return w * (model(constrained(u), x) - y) / scale
+    forward_model = model if jacobian_model is None else jacobian_model
+
+    def weighted_residuals(fn, params):
+        return jnp.ravel(w * (fn(params, x) - y) / scale)
 
     def loss(u):
-        r = residuals(u)
-        return 0.5 * jnp.mean(r**2)
+        return 0.5 * jnp.mean(weighted_residuals(model, constrained(u)) ** 2)
 
-    optimizer = optax.adam(learning_rate)
     u0 = jnp.stack([jnp.asarray(transforms[n].inverse(jnp.asarray(params0[n], y.dtype)), y.dtype) for n in names])
 
-    @jax.jit
-    def run(u0):
-        state = optimizer.init(u0)
-        history = jnp.full(max_steps, jnp.nan, y.dtype)
+    def report(k, value, g_norm):
+        if report_every:
+            jax.lax.cond(k % report_every == 0,
+                         lambda: jax.debug.print("step {k}: loss {v:.6e}, |grad| {g:.3e}", k=k, v=value, g=g_norm),
+                         lambda: None)
 
-        def cond(carry):
-            _, _, k, _, g_norm, change = carry
-            return (k < max_steps) & (g_norm > grad_tol) & (change > loss_tol)
-
-        def body(carry):
-            u, state, k, history, _, _ = carry
-            value, grad = jax.value_and_grad(loss)(u)
-            updates, state = optimizer.update(grad, state, u)
-            u_new = optax.apply_updates(u, updates)
-            previous = jnp.where(k > 0, history[jnp.maximum(k - 1, 0)], jnp.inf)
-            change = jnp.abs(previous - value) / jnp.maximum(jnp.abs(value), 1e-300)
-            if report_every:
-                jax.lax.cond(k % report_every == 0,
-                             lambda: jax.debug.print("step {k}: loss {v:.6e}, |grad| {g:.3e}", k=k, v=value,
-                                                     g=jnp.linalg.norm(grad)),
-                             lambda: None)
-            return u_new, state, k + 1, history.at[k].set(value), jnp.linalg.norm(grad), change
-
-        init = (u0, state, 0, history, jnp.inf, jnp.inf)
-        u, _, k, history, _, _ = jax.lax.while_loop(cond, body, init)
-        return u, k, history
-
+    if method == "adam":
+        run = _adam_loop(loss, optax.adam(learning_rate), max_steps, grad_tol, loss_tol, report, y.dtype)
+    elif method == "levenberg_marquardt":
+        run = _levenberg_marquardt_loop(lambda u: weighted_residuals(forward_model, constrained(u)), max_steps, grad_tol, loss_tol, report, y.dtype)
+    else:
+        raise ValueError(f"method must be 'adam' or 'levenberg_marquardt'; got {method!r}")
     with jax.numpy_dtype_promotion("standard"):  # optax mixes its int32 step count with floats
         u, steps, history = run(u0)
     # Gauss-Newton covariance in the constrained parameters
     theta = jnp.stack([constrained(u)[n] for n in names])
 
-    forward_model = model if jacobian_model is None else jacobian_model
-
     def residuals_theta(t):
-        return jnp.ravel(w * (forward_model({n: t[k] for k, n in enumerate(names)}, x) - y) / scale)
+        return weighted_residuals(forward_model, {n: t[k] for k, n in enumerate(names)})
 
     # Adam gets close; a few Gauss-Newton steps finish the job (exact for a
     # linear model), kept only if they lower the loss and respect the bounds
@@ -179,3 +166,79 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
     params = {n: float(theta[k]) for k, n in enumerate(names)}
     stderr = {n: float(np.sqrt(covariance[k, k])) for k, n in enumerate(names)}
     return FitResult(params, stderr, covariance, names, np.asarray(history), int(steps), float(np.sqrt(s2)))
+
+
+def _adam_loop(loss, optimizer, max_steps, grad_tol, loss_tol, report, dtype):
+    """Compiled optax loop: ``u0 -> (u, steps, loss history)``."""
+
+    @jax.jit
+    def run(u0):
+        state = optimizer.init(u0)
+        history = jnp.full(max_steps, jnp.nan, dtype)
+
+        def cond(carry):
+            _, _, k, _, g_norm, change = carry
+            return (k < max_steps) & (g_norm > grad_tol) & (change > loss_tol)
+
+        def body(carry):
+            u, state, k, history, _, _ = carry
+            value, grad = jax.value_and_grad(loss)(u)
+            updates, state = optimizer.update(grad, state, u)
+            u_new = optax.apply_updates(u, updates)
+            previous = jnp.where(k > 0, history[jnp.maximum(k - 1, 0)], jnp.inf)
+            change = jnp.abs(previous - value) / jnp.maximum(jnp.abs(value), 1e-300)
+            report(k, value, jnp.linalg.norm(grad))
+            return u_new, state, k + 1, history.at[k].set(value), jnp.linalg.norm(grad), change
+
+        init = (u0, state, 0, history, jnp.inf, jnp.inf)
+        u, _, k, history, _, _ = jax.lax.while_loop(cond, body, init)
+        return u, k, history
+
+    return run
+
+
+def _levenberg_marquardt_loop(residuals, max_steps, grad_tol, loss_tol, report, dtype):
+    """Compiled Levenberg-Marquardt (Marquardt's diagonal scaling, damping x1/3 on success, x2 on failure).
+
+    The loss history records the loss after every iteration (accepted or not)."""
+
+    def loss_and_jacobian(u):
+        r = residuals(u)
+        return r, jax.jacfwd(residuals)(u)
+
+    @jax.jit
+    def run(u0):
+        history = jnp.full(max_steps, jnp.nan, dtype)
+        r, jac = loss_and_jacobian(u0)
+
+        def cond(carry):
+            *_, k, _, g_norm, change = carry
+            return (k < max_steps) & (g_norm > grad_tol) & (change > loss_tol)
+
+        def body(carry):
+            u, r, jac, damping, k, history, _, _ = carry
+            value = 0.5 * jnp.mean(r**2)
+            grad = jac.T @ r / r.shape[0]
+            a = jac.T @ jac
+            diag = jnp.maximum(jnp.diag(a), 1e-12 * jnp.max(jnp.diag(a)))
+            step = -jnp.linalg.solve(a + damping * jnp.diag(diag), jac.T @ r)
+            r_new, jac_new = loss_and_jacobian(u + step)
+            new_value = 0.5 * jnp.mean(r_new**2)
+            better = jnp.isfinite(new_value) & (new_value < value)
+            u, r, jac = (jnp.where(better, u + step, u), jnp.where(better, r_new, r),
+                         jnp.where(better, jac_new, jac))
+            damping = jnp.where(better, damping / 3.0, damping * 2.0)
+            # converged when a step, taken or not, changes the loss by less than loss_tol (relative)
+            change = jnp.where(jnp.isfinite(new_value), jnp.abs(value - new_value) / jnp.maximum(value, 1e-300),
+                               jnp.inf)
+            change = jnp.where(damping > 1e12, 0.0, change)  # no step lowers the loss any more
+            report(k, jnp.minimum(value, new_value), jnp.linalg.norm(grad))
+            return (u, r, jac, damping, k + 1, history.at[k].set(jnp.minimum(value, new_value)),
+                    jnp.linalg.norm(grad), change)
+
+        init = (u0, r, jac, jnp.asarray(1e-3, dtype), 0, history, jnp.asarray(jnp.inf, dtype),
+                jnp.asarray(jnp.inf, dtype))
+        u, _, _, _, k, history, _, _ = jax.lax.while_loop(cond, body, init)
+        return u, k, history
+
+    return run

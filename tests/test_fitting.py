@@ -56,6 +56,15 @@ def test_nonlinear_fit_and_stopping():
     assert result.steps < 20000 and np.all(np.isfinite(result.loss_history[: result.steps]))
     assert np.all(np.isnan(result.loss_history[result.steps:]))
 
+    lm = least_squares(model, x, y, {"amplitude": 1.0, "rate": 1.0, "offset": 0.0},
+                       {"amplitude": Positive(), "rate": Bounded(0.1, 10.0)}, method="levenberg_marquardt",
+                       max_steps=200, polish_steps=0)
+    for k, v in truth.items():
+        assert lm.params[k] == pytest.approx(v, rel=1e-9)
+    assert lm.steps < 40  # against thousands of Adam steps
+    with pytest.raises(ValueError, match="method"):
+        least_squares(model, x, y, {"rate": 1.0}, method="bfgs")
+
 
 def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
     import json
@@ -149,3 +158,25 @@ def test_phi_fit_recovers_a_known_phi_and_fits_table6():
     # n barely changes with time, so n^phi and a lambda_0 factor are the same function of the data
     assert abs(phi_fit.correlation(joint)[0, 1]) > 0.999
     assert joint.stderr["phi"] > 20 * err
+
+
+def test_progress_report_from_inside_the_compiled_loop(capfd):
+    x = np.linspace(0.0, 1.0, 20)
+    least_squares(lambda p, x: p["a"] * x, x, 2.0 * x, {"a": 1.0}, max_steps=25, report_every=10)
+    out = capfd.readouterr().out
+    assert [line.split(":")[0] for line in out.strip().splitlines()] == ["step 0", "step 10", "step 20"]
+
+
+def test_fitted_law_changes_a_lattice_k_star_by_the_laws_ratio():
+    """Equal spheres on a simple-cubic lattice: every pair has the same a/r, so k* scales exactly with the
+    half conductance, K_fitted / K_rojek = f(a/r) / (1.064 a/r) -- the smooth law's change to a packing."""
+    from sintercond import conductance, neck_radius, thermal
+
+    spacing, r = 1e-4, 0.53e-4
+    grid = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), -1).reshape(-1, 3) * spacing
+    radii = np.full(len(grid), r)
+    k = {law: thermal.steady_state_conductivity(grid, radii, 10.0, axis=0, law=law) for law in ("rojek", "fitted")}
+    x = float(neck_radius(r, r, 2 * r - spacing)) / r
+    f = float(conductance.fitted_half_conductance_ratio(x, conductance.fitted_neck_law_coefficients()))
+    assert k["fitted"] / k["rojek"] == pytest.approx(f / (1.064 * x), rel=1e-10)
+    assert k["fitted"] != pytest.approx(k["rojek"], rel=1e-3)  # the change is real at this neck (a/r ~ 0.4)

@@ -112,3 +112,14 @@ def test_kappa_recovered_from_noisy_probe_histories(experiment):
         assert fit.stderr["kappa"] < 0.05 * KAPPA_TRUE
     assert covered >= 5  # about 99 % coverage at 2.5 sigma
     assert abs(np.mean(estimates) - KAPPA_TRUE) < 3 * np.std(estimates) + 1e-3
+
+
+def test_levenberg_marquardt_agrees_with_gradient_descent(experiment):
+    noisy = experiment.temperatures(KAPPA_TRUE, C_TRUE) + 0.05 * jax.random.normal(jax.random.key(7), (40, 4))
+    adam = inverse.fit_conductivity(experiment, noisy, C_TRUE, kappa0=3.0, noise=0.05, learning_rate=0.1,
+                                    max_steps=300)
+    lm = inverse.fit_conductivity(experiment, noisy, C_TRUE, kappa0=3.0, noise=0.05, method="levenberg_marquardt",
+                                  max_steps=50)
+    assert lm.params["kappa"] == pytest.approx(adam.params["kappa"], rel=1e-8)
+    assert lm.stderr["kappa"] == pytest.approx(adam.stderr["kappa"], rel=1e-6)
+    assert lm.steps < 15 < adam.steps
