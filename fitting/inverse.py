@@ -22,7 +22,8 @@ runs backwards with the same symmetric network, ``lambda_n = mu - kappa L (a mu)
 with ``mu`` the adjoint masked on held particles and ``a = dt / (c m)``. States
 are checkpointed every ``~sqrt(n_steps)`` steps and each segment is recomputed
 once on the way back, so memory is ``O(sqrt(n_steps))`` particle-sized arrays
-and the gradient costs about three forward runs (forward, recompute, adjoint).
+and the gradient sweeps the network three times per step (forward, recompute,
+adjoint): about 4x the forward time on a CPU (benchmarks/RESULTS.md).
 :meth:`ProbeExperiment.temperatures` with ``gradient="autodiff"`` runs the
 same model through :func:`sintercond.thermal.simulate` for JAX's own
 differentiation (forward mode for Gauss-Newton Jacobians; reverse mode as
