@@ -123,3 +123,31 @@ def test_levenberg_marquardt_agrees_with_gradient_descent(experiment):
     assert lm.params["kappa"] == pytest.approx(adam.params["kappa"], rel=1e-8)
     assert lm.stderr["kappa"] == pytest.approx(adam.stderr["kappa"], rel=1e-6)
     assert lm.steps < 15 < adam.steps
+
+
+def test_float32_readings_and_gradient_against_float64(experiment):
+    """The same experiment built with x64 off (a subprocess): readings within 1e-3 K, gradient within 1e-4."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "import json, numpy as np, jax, jax.numpy as jnp\n"
+        "from fitting import inverse\n"
+        "D = 1e-4\n"
+        "g = np.stack(np.meshgrid(*[np.arange(5)] * 3, indexing='ij'), -1).reshape(-1, 3) * D * 0.97\n"
+        "ex = inverse.flash_experiment(g, np.full(len(g), D / 2), 4430.0, n_steps=403, save_every=10,"
+        " kappa_max=20.0, specific_heat_min=500.0)\n"
+        "y = ex.temperatures(7.0, 560.0)\n"
+        "gr = jax.grad(lambda k: jnp.sum(ex.temperatures(k, 560.0)))(7.0)\n"
+        "print(json.dumps({'dtype': str(y.dtype), 'y': np.asarray(y, float).tolist(), 'grad': float(gr)}))\n"
+    )
+    env = dict(os.environ, SINTERCOND_ENABLE_X64="0")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["dtype"] == "float32"
+    np.testing.assert_allclose(out["y"], experiment.temperatures(7.0, 560.0), rtol=0, atol=1e-3)
+    grad64 = float(jax.grad(lambda k: jnp.sum(experiment.temperatures(k, 560.0)))(7.0))
+    assert out["grad"] == pytest.approx(grad64, rel=1e-4)
