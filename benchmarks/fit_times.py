@@ -9,9 +9,10 @@ Usage: python benchmarks/fit_times.py
   2000 steps): Adam with adjoint gradients, Levenberg-Marquardt with forward-mode Jacobians, and
   SciPy least_squares (trust region, finite-difference Jacobian) through the same jitted simulator.
 
-Each fit is run twice. least_squares builds and compiles its loop on every call (the model is
-a closure over the data), so both columns include compilation; SciPy's loop is plain Python
-around one jitted forward, compiled on the first call only. Prints the table and rewrites its section of
+Each fit is run twice: the first call compiles, the second reuses the compiled fit (least_squares
+caches it per model and settings; the data are arguments). The phi rows' second call is mostly
+the BCC geometry, recomputed on every fit_phi call. SciPy's loop is plain Python around one
+jitted forward. Prints the table and rewrites its section of
 benchmarks/RESULTS.md.
 """
 

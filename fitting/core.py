@@ -13,6 +13,7 @@ gives standard errors.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Mapping
 
 import jax
@@ -88,8 +89,10 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
     """Fit ``model(params, x) ~ y`` by weighted least squares: optax Adam, or Levenberg-Marquardt.
 
     Args:
-      model: ``(params dict, x) -> prediction``, traceable.
-      x, y: data (``y`` an array of observations).
+      model: ``(params dict, x) -> prediction``, traceable and hashable (a function). The compiled
+        loop is cached per model, transforms and settings, so repeated fits of the same kind on data of
+        the same shapes (bootstrap, synthetic-recovery loops) compile once.
+      x, y: data (``x`` any PyTree of arrays, or None; ``y`` an array of observations).
       params0: starting values (constrained space).
       transforms: name -> ``Free()`` / ``Positive()`` / ``Bounded(lo, hi)`` (default Free).
       weights: per-observation weights ``1 / sigma`` (default 1).
@@ -109,57 +112,33 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
       :class:`FitResult`.
     """
     names = tuple(params0)
-    transforms = {n: (transforms or {}).get(n, Free()) for n in names}
-    y = jnp.asarray(y)
-    w = jnp.ones_like(y) if weights is None else jnp.asarray(weights)
-    scale = jnp.where(relative, jnp.abs(y), 1.0) if relative else 1.0
-
-    def constrained(u):
-        return {n: transforms[n].forward(u[k]) for k, n in enumerate(names)}
-
-    forward_model = model if jacobian_model is None else jacobian_model
-
-    def weighted_residuals(fn, params):
-        return jnp.ravel(w * (fn(params, x) - y) / scale)
-
-    def loss(u):
-        return 0.5 * jnp.mean(weighted_residuals(model, constrained(u)) ** 2)
-
-    u0 = jnp.stack([jnp.asarray(transforms[n].inverse(jnp.asarray(params0[n], y.dtype)), y.dtype) for n in names])
-
-    def report(k, value, g_norm):
-        if report_every:
-            jax.lax.cond(k % report_every == 0,
-                         lambda: jax.debug.print("step {k}: loss {v:.6e}, |grad| {g:.3e}", k=k, v=value, g=g_norm),
-                         lambda: None)
-
-    if method == "adam":
-        run = _adam_loop(loss, optax.adam(learning_rate), max_steps, grad_tol, loss_tol, report, y.dtype)
-    elif method == "levenberg_marquardt":
-        run = _levenberg_marquardt_loop(lambda u: weighted_residuals(forward_model, constrained(u)), max_steps, grad_tol, loss_tol, report, y.dtype)
-    else:
+    transforms = tuple((n, (transforms or {}).get(n, Free())) for n in names)
+    if method not in ("adam", "levenberg_marquardt"):
         raise ValueError(f"method must be 'adam' or 'levenberg_marquardt'; got {method!r}")
+    y = jnp.asarray(y)
+    w = jnp.ones_like(y) if weights is None else jnp.asarray(weights, y.dtype)
+    program = _fit_program(model, model if jacobian_model is None else jacobian_model, transforms, bool(relative),
+                           method, float(learning_rate), int(max_steps), float(grad_tol), float(loss_tol),
+                           int(report_every))
+    u0 = jnp.stack([jnp.asarray(t.inverse(jnp.asarray(params0[n], y.dtype)), y.dtype) for n, t in transforms])
     with jax.numpy_dtype_promotion("standard"):  # optax mixes its int32 step count with floats
-        u, steps, history = run(u0)
+        u, steps, history = program.run(u0, x, y, w)
+    transforms = dict(transforms)
     # Gauss-Newton covariance in the constrained parameters
-    theta = jnp.stack([constrained(u)[n] for n in names])
-
-    def residuals_theta(t):
-        return weighted_residuals(forward_model, {n: t[k] for k, n in enumerate(names)})
+    theta = program.constrained(u)
 
     # Adam gets close; a few Gauss-Newton steps finish the job (exact for a
     # linear model), kept only if they lower the loss and respect the bounds
     for _ in range(polish_steps):
-        jac = jax.jacfwd(residuals_theta)(theta)
-        r = residuals_theta(theta)
+        r, jac = program.residuals_and_jacobian(theta, x, y, w)
         candidate = theta - jnp.linalg.solve(jac.T @ jac, jac.T @ r)
         inside = all(bool(jnp.isfinite(transforms[n].inverse(candidate[k]))) for k, n in enumerate(names))
-        if inside and float(jnp.sum(residuals_theta(candidate) ** 2)) < float(jnp.sum(r**2)):
+        r_candidate, _ = program.residuals_and_jacobian(candidate, x, y, w)
+        if inside and float(jnp.sum(r_candidate**2)) < float(jnp.sum(r**2)):
             theta = candidate
         else:
             break
-    jac = jax.jacfwd(residuals_theta)(theta)
-    r = residuals_theta(theta)
+    r, jac = program.residuals_and_jacobian(theta, x, y, w)
     dof = max(int(r.shape[0]) - len(names), 1)
     s2 = float(jnp.sum(r**2)) / dof
     covariance = np.asarray(s2 * jnp.linalg.inv(jac.T @ jac))
@@ -168,10 +147,58 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
     return FitResult(params, stderr, covariance, names, np.asarray(history), int(steps), float(np.sqrt(s2)))
 
 
-def _adam_loop(loss, optimizer, max_steps, grad_tol, loss_tol, report, dtype):
-    """Compiled optax loop: ``u0 -> (u, steps, loss history)``."""
+@dataclasses.dataclass(frozen=True)
+class _FitProgram:
+    """The compiled pieces of one kind of fit (cached: calling least_squares again on data of the same
+    shapes reuses them instead of compiling anew)."""
+
+    run: Callable  # (u0, x, y, w) -> (u, steps, loss history)
+    constrained: Callable  # u -> theta
+    residuals_and_jacobian: Callable  # (theta, x, y, w) -> (weighted residuals, d/dtheta), forward mode
+
+
+@functools.lru_cache(maxsize=16)
+def _fit_program(model, forward_model, transforms, relative, method, learning_rate, max_steps, grad_tol, loss_tol,
+                 report_every) -> _FitProgram:
+    names = tuple(n for n, _ in transforms)
+
+    def constrained(u):
+        return jnp.stack([t.forward(u[k]) for k, (_, t) in enumerate(transforms)])
+
+    def weighted_residuals(fn, theta, x, y, w):
+        scale = jnp.abs(y) if relative else 1.0
+        return jnp.ravel(w * (fn(dict(zip(names, theta)), x) - y) / scale)
+
+    def report(k, value, g_norm):
+        if report_every:
+            jax.lax.cond(k % report_every == 0,
+                         lambda: jax.debug.print("step {k}: loss {v:.6e}, |grad| {g:.3e}", k=k, v=value, g=g_norm),
+                         lambda: None)
+
+    def run(u0, x, y, w):
+        if method == "adam":
+            def loss(u):
+                return 0.5 * jnp.mean(weighted_residuals(model, constrained(u), x, y, w) ** 2)
+
+            loop = _adam_loop(loss, optax.adam(learning_rate), max_steps, grad_tol, loss_tol, report, y.dtype)
+        else:
+            loop = _levenberg_marquardt_loop(lambda u: weighted_residuals(forward_model, constrained(u), x, y, w),
+                                             max_steps, grad_tol, loss_tol, report, y.dtype)
+        return loop(u0)
 
     @jax.jit
+    def residuals_and_jacobian(theta, x, y, w):
+        def r(t):
+            return weighted_residuals(forward_model, t, x, y, w)
+
+        return r(theta), jax.jacfwd(r)(theta)
+
+    return _FitProgram(jax.jit(run), jax.jit(constrained), residuals_and_jacobian)
+
+
+def _adam_loop(loss, optimizer, max_steps, grad_tol, loss_tol, report, dtype):
+    """Optax loop: ``u0 -> (u, steps, loss history)`` (traced inside the compiled fit program)."""
+
     def run(u0):
         state = optimizer.init(u0)
         history = jnp.full(max_steps, jnp.nan, dtype)
@@ -206,7 +233,6 @@ def _levenberg_marquardt_loop(residuals, max_steps, grad_tol, loss_tol, report, 
         r = residuals(u)
         return r, jax.jacfwd(residuals)(u)
 
-    @jax.jit
     def run(u0):
         history = jnp.full(max_steps, jnp.nan, dtype)
         r, jac = loss_and_jacobian(u0)

@@ -200,10 +200,6 @@ def _adjoint_forward(experiment, kappa, specific_heat):
     return readings, (starts, t, kappa, specific_heat)
 
 
-def _adjoint_fwd(experiment, kappa, specific_heat):
-    return _adjoint_forward(experiment, kappa, specific_heat)
-
-
 def _adjoint_bwd(experiment, residuals, readings_bar):
     starts, tail_start, kappa, specific_heat = residuals
     seg, n_seg, tail = _layout(experiment.n_steps)
@@ -257,7 +253,7 @@ def _adjoint_bwd(experiment, residuals, readings_bar):
     return g_kappa, g_c
 
 
-_adjoint_readings.defvjp(_adjoint_fwd, _adjoint_bwd)
+_adjoint_readings.defvjp(_adjoint_forward, _adjoint_bwd)
 
 
 def flash_experiment(centres, radii, density, axis=0, temperature_rise=10.0, pulse_duration=None, initial_temperature=300.0,
@@ -320,10 +316,21 @@ def fit_conductivity(experiment: ProbeExperiment, readings, specific_heat, kappa
     if not 0 < kappa0 < kappa_max:
         raise ValueError(f"kappa0 must lie in (0, {kappa_max:.6g}) W/(m K) (stability limit at c = {specific_heat})")
     weights = None if noise is None else jnp.full(readings.shape, 1.0 / noise)
-
-    def model(params, _, gradient="adjoint"):
-        return experiment.temperatures(params["kappa"], specific_heat, gradient)
-
+    model, forward_model = _conductivity_models(experiment, float(specific_heat))
     options = {"loss_tol": 1e-10, **options}  # each step is a whole simulation: stop on a flat loss
     return least_squares(model, None, readings, {"kappa": kappa0}, {"kappa": Bounded(0.0, kappa_max)},
-                         weights=weights, jacobian_model=functools.partial(model, gradient="autodiff"), **options)
+                         weights=weights, jacobian_model=forward_model, **options)
+
+
+@functools.lru_cache(maxsize=16)
+def _conductivity_models(experiment, specific_heat):
+    """The readings as functions of ``{"kappa"}`` (adjoint and autodiff), one pair per experiment and ``c``,
+    so that repeated fits to new readings reuse the compiled fit."""
+
+    def model(params, _):
+        return experiment.temperatures(params["kappa"], specific_heat)
+
+    def forward_model(params, _):
+        return experiment.temperatures(params["kappa"], specific_heat, "autodiff")
+
+    return model, forward_model

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import numpy as np
 
 from fitting.core import Bounded, FitResult, Positive, least_squares
@@ -26,6 +27,7 @@ from sintercond import tortuosity as tt
 CORNER_DIAMETER_UM = 80.0
 
 
+@jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class BCCInputs:
     """Per time of Table 6: geometry from our BCC cell and the paper's lambda_0 and FE value.
