@@ -216,11 +216,23 @@ def pair_conductance(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_
       ``K_ij`` (W/K), broadcast shape of the geometry and materials.
     """
     law = _resolve_law(law)
-    params = _merge_params(law, params)
     kappa_j = kappa_i if kappa_j is None else kappa_j
     r_i, r_j, h, kappa_i, kappa_j = as_float_arrays(r_i, r_j, h, kappa_i, kappa_j)
-    neck_fn = NECK_MODELS[_resolve_neck_model(law, neck_model)]
-    a = neck_fn(r_i, r_j, h)
+    a = NECK_MODELS[_resolve_neck_model(law, neck_model)](r_i, r_j, h)
+    return conductance_from_neck(law, a, r_i, r_j, h, kappa_i, kappa_j, params)
+
+
+def conductance_from_neck(law, a, r_i, r_j, h, kappa_i, kappa_j, params=None):
+    """``K_ij`` (W/K) of a law from a neck radius ``a`` already computed by its neck model.
+
+    The second half of :func:`pair_conductance`: the thermal DEM computes the
+    necks of a static packing once (they depend on the geometry only) and
+    applies the law to them with the current ``params`` and conductivities,
+    so that law parameters stay differentiable through a simulation.
+    ``h <= 0`` or ``a <= 0`` gives 0 (zero gradient), NaN necks give NaN.
+    """
+    law = _resolve_law(law)
+    params = _merge_params(law, params)
     # Double where: laws may hold log(a) or 1/a, so out-of-contact pairs are
     # evaluated at a harmless in-contact point and then masked.
     contact = (h > 0) & (a > 0)

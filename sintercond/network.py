@@ -58,7 +58,8 @@ class ContactTable:
         return np.stack([rows[keep], nbr[keep]], axis=1)
 
 
-def _minimum_image(delta, periodic_box):
+def minimum_image(delta, periodic_box):
+    """``delta`` (m) reduced to the nearest periodic image in a box of sides ``periodic_box`` (None: free space)."""
     if periodic_box is None:
         return delta
     return delta - periodic_box * np.round(delta / periodic_box)
@@ -105,7 +106,7 @@ def find_contacts(centres, radii, tolerance=1e-9, periodic_box=None):
     valid = candidates < n
     j = np.where(valid, candidates, 0)
     box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
-    distance = np.linalg.norm(_minimum_image(centres[:, None, :] - centres[j], box), axis=-1)
+    distance = np.linalg.norm(minimum_image(centres[:, None, :] - centres[j], box), axis=-1)
     touching = valid & (distance <= (radii[:, None] + radii[j]) * (1.0 + tolerance))
     width = max(int(touching.sum(axis=1).max()) if n else 0, 1)
     table = np.tile(np.arange(n)[:, None], (1, width))
@@ -140,7 +141,7 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
     i, j = rows[upper], table[upper]
     box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
     # contacts closed within the tolerance have h ~ -1e-16: they touch
-    h = np.maximum(radii[i] + radii[j] - np.linalg.norm(_minimum_image(centres[i] - centres[j], box), axis=1), 0.0)
+    h = np.maximum(radii[i] + radii[j] - np.linalg.norm(minimum_image(centres[i] - centres[j], box), axis=1), 0.0)
     validate_pair_conductance_inputs(law, radii[i], radii[j], h, kappa[i], kappa[j], params, neck_model)
     k_pairs = np.asarray(pair_conductance(law, radii[i], radii[j], h, kappa[i], kappa[j], params=params,
                                           neck_model=neck_model))
@@ -163,10 +164,47 @@ def heat_inflow(temperature, table: ContactTable):
 
 def laplacian(x, table: ContactTable):
     """The linear part ``(L x)_i = sum_j K_ij (x_i - x_j) + K_iw x_i`` (symmetric, positive semidefinite)."""
-    lx = jnp.sum(table.conductance * (x[:, None] - x[table.neighbors]), axis=1)
+    lx = network_laplacian(table.conductance, table.neighbors, x)
     if table.wall_conductance is not None:
         lx = lx + table.wall_conductance * x
     return lx
+
+
+@jax.custom_vjp
+def network_laplacian(conductance, neighbors, x):
+    """``(L x)_i = sum_k K[i, k] (x_i - x[neighbors[i, k]])`` on a symmetric padded table (W per K of x).
+
+    Differentiated by hand: the table stores every pair on both rows with the
+    same ``K``, so ``L`` is symmetric and its transpose is the same gather,
+    ``L^T c = L c``. JAX would transpose the gather ``x[neighbors]`` into a
+    scatter-add, which on a CPU costs several times the forward pass; with
+    this rule reverse mode through a conduction step costs about one forward
+    step. The cotangent of ``conductance`` is ``c_i (x_i - x_j)`` per slot
+    (each slot a separate input; the lift that writes one value on both rows
+    sums them back). Requires ``neighbors`` to list ``j`` in row ``i`` iff it
+    lists ``i`` in row ``j``, with equal ``K`` (what :func:`contact_table`
+    builds); padding slots hold the row's own index (any ``K``: ``x_i - x_i = 0``).
+
+    Args:
+      conductance: ``[n, m]`` ``K_ij`` (W/K).
+      neighbors: ``[n, m]`` int neighbour indices.
+      x: ``[n]`` temperatures (K) or any per-particle field.
+    """
+    return jnp.sum(conductance * (x[:, None] - x[neighbors]), axis=1)
+
+
+def _network_laplacian_fwd(conductance, neighbors, x):
+    return network_laplacian(conductance, neighbors, x), (conductance, neighbors, x)
+
+
+def _network_laplacian_bwd(residuals, cotangent):
+    conductance, neighbors, x = residuals
+    cotangent_x = jnp.sum(conductance * (cotangent[:, None] - cotangent[neighbors]), axis=1)
+    cotangent_k = cotangent[:, None] * (x[:, None] - x[neighbors])
+    return cotangent_k, None, cotangent_x
+
+
+network_laplacian.defvjp(_network_laplacian_fwd, _network_laplacian_bwd)
 
 
 def wall_inflow(table: ContactTable, dtype):

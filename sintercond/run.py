@@ -23,28 +23,36 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import heat_sources, network, packing, thermal
+from sintercond import heat_sources, network, packing, simulate
 from sintercond.scene import SceneError, validate_scene
-from sintercond.state import ParticleState, particle_state
+from sintercond.state import particle_state
 
 
 @dataclasses.dataclass(frozen=True)
 class Model:
-    """Everything a run needs, built from a scene."""
+    """Everything a run needs, built from a scene: the simulator, its parameters and initial state."""
 
-    state: ParticleState
-    table: network.ContactTable
-    source: object
-    dt: float
+    sim: simulate.Simulator
+    params: simulate.Params
+    state: simulate.SimState
     n_steps: int
+    contacts: int
+
+    @property
+    def physics(self) -> simulate.Physics:
+        return self.sim.physics
+
+    @property
+    def dt(self) -> float:
+        return float(self.state.dt)
 
     @property
     def centres(self) -> np.ndarray:
-        return np.asarray(self.state.positions)
+        return np.asarray(self.state.particles.positions)
 
     @property
     def radii(self) -> np.ndarray:
-        return np.asarray(self.state.radii)
+        return np.asarray(self.state.particles.radii)
 
 
 def build_packing(scene):
@@ -58,89 +66,81 @@ def build_packing(scene):
     return bed.centres, bed.radii * (1.0 + p.get("sinter_swelling", 0.0))
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class _Source:
-    """Heat-source term (a static argument under jit, hashed by identity): beam, convection, radiation.
-
-    ``eq=False`` keeps hashing O(1): one compiled chunk per run, not a hash of
-    every particle's coordinates at every call.
-    """
-
-    radii: jax.Array
-    centres: jax.Array
-    beam: tuple | None
-    convection: tuple | None
-    radiation: tuple | None
-    surface_z: float
-
-    def __call__(self, temperature, t):
-        radii = self.radii
-        power = jnp.zeros_like(temperature)
-        if self.beam is not None:
-            kind, intensity, reach, spot, absorptance, speed, path = self.beam
-            spot_xy = heat_sources.beam_position(t, jnp.asarray(path), speed)
-            depth = heat_sources.beam_depth(self.centres, radii, spot_xy, spot, self.surface_z)
-            if kind == "laser":
-                power = power + heat_sources.laser_power(radii, depth, intensity, reach, absorptance)
-            else:
-                power = power + heat_sources.nozzle_power(radii, depth, intensity, reach, absorptance)
-        if self.convection is not None:
-            t_env, k_env, nusselt = self.convection
-            power = power + heat_sources.convection_power(radii, temperature, t_env, k_env, nusselt)
-        if self.radiation is not None:
-            t_env, emissivity = self.radiation
-            power = power + heat_sources.radiation_power(radii, temperature, t_env, emissivity)
-        return power
-
-
 def _nusselt(convection):
     if "reynolds" in convection:
         return float(heat_sources.whitaker_nusselt(convection["reynolds"], convection["prandtl"]))
     return convection.get("nusselt", 2.0)
 
 
+def scene_physics(scene, walls=0) -> simulate.Physics:
+    """The static physics spec of a validated scene."""
+    c = scene["conduction"]
+    beam = scene.get("beam")
+    return simulate.Physics(
+        law=c["law"], neck_model=c.get("neck_model"),
+        # a contact resistance makes the law nonlinear in the conductivity: lift it from the necks
+        conductance="lifted" if c.get("params", {}).get("contact_resistance", 0.0) else "table",
+        held=any(w["mode"] == "held" for w in _walls(scene)), conducting_walls=walls,
+        beam=None if beam is None else beam["kind"], convection="convection" in scene,
+        radiation="radiation" in scene)
+
+
+def scene_params(scene) -> simulate.Params:
+    """The differentiable parameters of a validated scene."""
+    m, beam, conv, rad = scene["material"], scene.get("beam"), scene.get("convection"), scene.get("radiation")
+    f = jnp.asarray
+    return simulate.Params(
+        conductivity=f([m["conductivity"]]), specific_heat=f([m["specific_heat"]]),
+        law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
+        beam=None if beam is None else simulate.BeamParams(
+            intensity=f(beam["intensity"]), reach=f(beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"]),
+            spot_radius=f(beam["spot_radius"]), absorptance=f(beam["absorptance"]), speed=f(beam["speed"]),
+            path=f(beam["path"], dtype=float)),
+        convection=None if conv is None else simulate.ConvectionParams(
+            f(conv["environment_temperature"]), f(conv["environment_conductivity"]), f(_nusselt(conv))),
+        radiation=None if rad is None else simulate.RadiationParams(f(rad["environment_temperature"]),
+                                                                    f(rad["emissivity"])))
+
+
 def build_model(scene, centres=None, radii=None) -> Model:
-    """Packing, network, capacities, held particles, sources and time step of a validated scene."""
+    """Packing, network, held particles, sources, time step and simulator of a validated scene."""
     if centres is None:
         centres, radii = build_packing(scene)
     m, c = scene["material"], scene["conduction"]
+    physics = scene_physics(scene)
     try:
-        table = network.contact_table(centres, radii, m["conductivity"], c["law"], c.get("params"), c.get("neck_model"))
+        table = network.contact_table(centres, radii, 1.0 if physics.conductance == "table" else m["conductivity"],
+                                      c["law"], c.get("params"), c.get("neck_model"))
     except ValueError as err:
         raise SceneError(f"the packing does not fit the conduction model: {err}") from None
-    table, fixed_mask, fixed_temperature = _apply_walls(scene, centres, radii, table)
-    state = particle_state(centres, radii, scene["initial"]["temperature"], m["density"], m["specific_heat"],
-                           fixed=fixed_mask, fixed_temperature=fixed_temperature)
-    capacity = state.capacity
-    beam = scene.get("beam")
-    conv = scene.get("convection")
-    rad = scene.get("radiation")
-    source = None
-    if beam or conv or rad:
-        source = _Source(
-            radii=jnp.asarray(radii), centres=jnp.asarray(centres),
-            beam=None if beam is None else (
-                beam["kind"], beam["intensity"], beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"],
-                beam["spot_radius"], beam["absorptance"], beam["speed"], tuple(map(tuple, beam["path"]))),
-            convection=None if conv is None else (conv["environment_temperature"], conv["environment_conductivity"],
-                                                  _nusselt(conv)),
-            radiation=None if rad is None else (rad["environment_temperature"], rad["emissivity"]),
-            surface_z=float(np.max(centres[:, 2] + radii)),
-        )
+    fixed_mask, fixed_temperature, conducting = _apply_walls(scene, centres, radii)
+    physics = dataclasses.replace(physics, conducting_walls=len(conducting) if physics.conductance == "lifted"
+                                  else int(bool(conducting)))
+    particles = particle_state(centres, radii, scene["initial"]["temperature"], m["density"], m["specific_heat"],
+                               fixed=fixed_mask, fixed_temperature=fixed_temperature)
+    if physics.conductance == "table":
+        k_wall, t_wall = _merged_wall_conductance(scene, centres, radii, conducting)
+        contacts = simulate.table_contacts(table, k_wall, t_wall)
+    else:
+        contacts = simulate.lifted_contacts(physics, centres, radii, table.neighbors,
+                                            [(_wall_penetration(centres, radii, axis, position), wall["temperature"])
+                                             for _, axis, position, wall in conducting])
+    params = scene_params(scene)
+    sim = simulate.simulator(physics)
+    state = simulate.init_state(particles, contacts, 1.0)
     run = scene["run"]
-    limit = float(thermal.stable_time_step(capacity, table))
+    limit = float(simulate.stable_time_step(sim, state, params))
     if run["dt"] == "auto":
         dt = 0.9 * limit if np.isfinite(limit) else run["duration"] / 1000
     else:
-        try:
-            dt = run["dt"]
-            thermal.check_time_step(dt, capacity, table)
-        except ValueError as err:
-            raise SceneError(f"run.dt: {err}") from None
+        dt = run["dt"]
+        if dt > limit:
+            raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds the explicit stability limit min(C_i / sum_j K_ij) = "
+                             f"{limit:.6g} s; use dt <= {limit:.6g} s or the implicit integrator")
     n_steps = max(1, int(np.ceil(run["duration"] / dt)))
     chunk = run["output_every"]
     n_steps = int(np.ceil(n_steps / chunk) * chunk)
-    return Model(state, table, source, dt, n_steps)
+    return Model(sim, params, simulate.init_state(particles, contacts, dt), n_steps, len(table.pairs()))
 
 
 def _walls(scene):
@@ -150,14 +150,16 @@ def _walls(scene):
     return walls
 
 
-def _apply_walls(scene, centres, radii, table):
-    """Held walls become fixed particles, conducting walls per-particle couplings of the table."""
+def _apply_walls(scene, centres, radii):
+    """Held walls become fixed particles; returns them and the conducting walls as ``(index, axis, position, wall)``.
+
+    A wall plane lies at the packing's extreme along its axis, moved
+    ``penetration`` mean radii into it; the particles it cuts touch it.
+    """
     held = np.zeros(len(radii), bool)
     held_t = np.zeros(len(radii))
-    k_wall = np.zeros(len(radii))
-    t_wall = np.zeros(len(radii))
-    c = scene["conduction"]
-    for k, wall in enumerate(_walls(scene)):
+    conducting = []
+    for index, wall in enumerate(_walls(scene)):
         axis, mode = wall["axis"], wall["mode"]
         if mode == "insulated":
             continue
@@ -172,17 +174,32 @@ def _apply_walls(scene, centres, radii, table):
             held |= touching
             held_t = np.where(touching, wall["temperature"], held_t)
         else:
-            try:
-                k_w = network.wall_conductance(centres, radii, scene["material"]["conductivity"], axis, position,
-                                               c["law"], c.get("params"), c.get("neck_model"))
-            except ValueError as err:
-                raise SceneError(f"walls[{k}]: {err}") from None
-            t_wall = np.where(k_w > 0, (k_wall * t_wall + k_w * wall["temperature"]) / np.maximum(k_wall + k_w, 1e-300),
-                              t_wall)
-            k_wall = k_wall + k_w
-    if k_wall.any():
-        table = table.with_walls(k_wall, t_wall)
-    return table, held, held_t
+            conducting.append((index, axis, position, wall))
+    return held, held_t, conducting
+
+
+def _wall_penetration(centres, radii, axis, position):
+    """How far each sphere cuts the plane ``p[axis] = position`` (m; <= 0: not touching)."""
+    return radii - np.abs(centres[:, axis] - position)
+
+
+def _merged_wall_conductance(scene, centres, radii, conducting):
+    """Per-particle wall conductance at unit conductivity and the conductance-weighted wall temperature."""
+    if not conducting:
+        return None, None
+    c = scene["conduction"]
+    k_wall = np.zeros(len(radii))
+    t_wall = np.zeros(len(radii))
+    for index, axis, position, wall in conducting:
+        try:
+            k_w = network.wall_conductance(centres, radii, 1.0, axis, position, c["law"], c.get("params"),
+                                           c.get("neck_model"))
+        except ValueError as err:
+            raise SceneError(f"walls[{index}]: {err}") from None
+        t_wall = np.where(k_w > 0, (k_wall * t_wall + k_w * wall["temperature"]) / np.maximum(k_wall + k_w, 1e-300),
+                          t_wall)
+        k_wall = k_wall + k_w
+    return k_wall, t_wall
 
 
 def write_vtp(path, centres, radii, temperature, step, t):
@@ -223,10 +240,54 @@ def _atomic_write_text(path, text):
     os.replace(tmp, path)
 
 
-def _save_checkpoint(directory, temperature, step):
-    tmp = directory / "checkpoint.tmp.npz"
-    np.savez(tmp, temperature=np.asarray(temperature), step=step)
-    os.replace(tmp, directory / "checkpoint.npz")
+def advance(sim, state, params, n_steps, chunk, on_chunk=None, reallocate=None, progress=None):
+    """The one host loop: advance ``n_steps`` in compiled chunks of ``chunk`` steps.
+
+    After every chunk the host checks the state: a neighbour list that
+    overflowed (``state.overflow``) is reallocated by ``reallocate(start,
+    end) -> start`` and the chunk redone from its saved start, so no contact
+    is lost; non-finite temperatures stop the run with the step. Then
+    ``on_chunk(state)`` (outputs, checkpoints) runs; returning True stops
+    early. The same compiled chunk runs on the same inputs whatever the
+    history, so a run resumed from a checkpoint is bitwise identical to an
+    uninterrupted one.
+
+    Returns:
+      ``(state, report)`` with the number of chunks and reallocations.
+    """
+    run_chunk = _compiled_chunk(sim, chunk)
+    reallocations = chunks = 0
+    target = int(state.step) + n_steps
+    while int(state.step) < target:
+        new = run_chunk(state, params)
+        if bool(new.overflow):
+            if reallocate is None:
+                raise RuntimeError("the neighbour list overflowed and no reallocation was given")
+            state = reallocate(state, new)
+            reallocations += 1
+            if reallocations > 100:
+                raise RuntimeError("the neighbour list keeps overflowing; raise its capacity")
+            continue
+        if not bool(jnp.all(jnp.isfinite(new.particles.temperature))):
+            raise FloatingPointError(f"non-finite temperature at step {int(new.step)}; reduce run.dt")
+        state = new
+        chunks += 1
+        if progress is not None:
+            progress(chunk)
+        if on_chunk is not None and on_chunk(state):
+            break
+    return state, {"chunks": chunks, "reallocations": reallocations}
+
+
+def _compiled_chunk(sim, chunk):
+    def run_chunk(state, params):
+        return simulate.rollout(sim, state, params, chunk, simulate.SaveAt(chunk, _nothing), checkpoint=False)[0]
+
+    return jax.jit(run_chunk)
+
+
+def _nothing(state):
+    return ()
 
 
 def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None):
@@ -241,54 +302,49 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         (out / "scene.json").write_text(json.dumps(scene, indent=1))
         model = build_model(scene)
         np.savez(out / "packing.npz", centres=model.centres, radii=model.radii)
-        temperature = model.state.temperature
-        step = 0
         if (out / "dump.lammpstrj").exists():
             (out / "dump.lammpstrj").unlink()
-        _write_outputs(scene, out, model, temperature, step)
+        _write_outputs(scene, out, model, model.state)
+        state = model.state
     else:
-        model, temperature, step = _start
+        model, state = _start
     run = scene["run"]
     chunk = run["output_every"]
-
-    state = model.state
-
-    def advance(t, start_step):
-        return thermal.simulate(t, model.table, state.capacity, model.dt, n_steps=chunk, save_every=chunk,
-                                fixed_mask=state.fixed, fixed_temperature=state.fixed_temperature,
-                                source=model.source, start_step=start_step)[0]
-
-    advance = jax.jit(advance)
-    wall = time.perf_counter()
     chunks_done = 0
-    bar = tqdm(total=model.n_steps, initial=step, unit="step", disable=not progress, desc="sintercond run")
-    while step < model.n_steps:
-        temperature = advance(temperature, step)
-        step += chunk
-        bar.update(chunk)
-        if not bool(jnp.all(jnp.isfinite(temperature))):
-            bar.close()
-            raise FloatingPointError(f"non-finite temperature at step {step}; reduce run.dt")
-        _write_outputs(scene, out, model, temperature, step)
+
+    def on_chunk(s):
+        nonlocal chunks_done
+        step = int(s.step)
+        _write_outputs(scene, out, model, s)
         if step % run["checkpoint_every"] == 0 or step >= model.n_steps:
-            _save_checkpoint(out, temperature, step)
+            save_checkpoint(out, s)
         chunks_done += 1
-        if stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps:
-            bar.close()
-            return temperature, None
-    bar.close()
+        return stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps
+
+    wall = time.perf_counter()
+    bar = tqdm(total=model.n_steps, initial=int(state.step), unit="step", disable=not progress, desc="sintercond run")
+    try:
+        state, _ = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
+                           progress=bar.update)
+    finally:
+        bar.close()
+    temperature = state.particles.temperature
+    if int(state.step) < model.n_steps:
+        return temperature, None
     elapsed = time.perf_counter() - wall
     summary = {
-        "particles": len(model.radii), "contacts": int(len(model.table.pairs())), "steps": step,
-        "dt_s": model.dt, "simulated_s": step * model.dt, "wall_s": elapsed,
+        "particles": len(model.radii), "contacts": model.contacts, "steps": int(state.step),
+        "dt_s": model.dt, "simulated_s": int(state.step) * model.dt, "wall_s": elapsed,
         "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()), "T_max_K": float(temperature.max()),
     }
     return temperature, summary
 
 
-def _write_outputs(scene, out, model, temperature, step):
+def _write_outputs(scene, out, model, state):
     formats = scene["run"]["formats"]
+    step = int(state.step)
     t = step * model.dt
+    temperature = state.particles.temperature
     if "vtp" in formats:
         (out / "vtp").mkdir(exist_ok=True)
         write_vtp(out / "vtp" / f"step_{step:08d}.vtp", model.centres, model.radii, temperature, step, t)
@@ -296,23 +352,50 @@ def _write_outputs(scene, out, model, temperature, step):
         append_lammps(out / "dump.lammpstrj", model.centres, model.radii, temperature, step)
 
 
+def save_checkpoint(directory, state):
+    """Write the whole :class:`~sintercond.simulate.SimState` to ``directory/checkpoint.npz`` atomically.
+
+    Every leaf is stored under its path in the state (plus ``temperature`` and
+    ``step`` for a quick look), written to a temporary file and renamed, so
+    a killed run leaves the last complete checkpoint.
+    """
+    leaves = {jax.tree_util.keystr(path): np.asarray(leaf)
+              for path, leaf in jax.tree_util.tree_flatten_with_path(state)[0]}
+    tmp = Path(directory) / "checkpoint.tmp.npz"
+    np.savez(tmp, temperature=np.asarray(state.particles.temperature), step=int(state.step), **leaves)
+    os.replace(tmp, Path(directory) / "checkpoint.npz")
+
+
+def load_checkpoint(path, like):
+    """The state saved by :func:`save_checkpoint`, with the structure (and neighbour-list capacity) of ``like``."""
+    saved = np.load(path)
+    paths, treedef = jax.tree_util.tree_flatten_with_path(like)
+    leaves = []
+    for key, leaf in paths:
+        name = jax.tree_util.keystr(key)
+        if name not in saved:
+            raise SceneError(f"{path} does not hold {name}: written by another version or scene")
+        leaves.append(jnp.asarray(saved[name], dtype=jnp.asarray(leaf).dtype))
+    return jax.tree_util.tree_unflatten(treedef, leaves)
+
+
 def resume(out_dir, progress=True, stop_after_chunks=None):
-    """Continue the run in ``out_dir`` from its last checkpoint."""
+    """Continue the run in ``out_dir`` from its last checkpoint (the whole state)."""
     out = Path(out_dir)
     if not (out / "checkpoint.npz").exists():
         raise SceneError(f"{str(out)!r} has no checkpoint.npz to resume from")
     scene = validate_scene(json.loads((out / "scene.json").read_text()))
     packed = np.load(out / "packing.npz")
     model = build_model(scene, packed["centres"], packed["radii"])
-    state = np.load(out / "checkpoint.npz")
-    step = int(state["step"])
+    state = load_checkpoint(out / "checkpoint.npz", model.state)
+    step = int(state.step)
     # outputs written after the checkpoint by the interrupted run are redone
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         if int(f.stem.split("_")[1]) > step:
             f.unlink()
     if (out / "dump.lammpstrj").exists():
         _truncate_lammps(out / "dump.lammpstrj", step)
-    return run_scene(scene, out, progress, stop_after_chunks, _start=(model, jnp.asarray(state["temperature"]), step))
+    return run_scene(scene, out, progress, stop_after_chunks, _start=(model, state))
 
 
 def _truncate_lammps(path, last_step):

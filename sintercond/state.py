@@ -3,7 +3,9 @@
 One container for everything per particle, so that a step function can take
 and return it under ``jit``/``scan`` and the thermo-mechanical model can add
 velocities, rotations and per-pair history next to it without changing the
-thermal code.
+thermal code. Heat capacities are not stored: ``C_i = m_i c`` with the
+specific heat ``c`` a (differentiable) parameter of the simulation
+(:class:`sintercond.simulate.Params`); :func:`heat_capacity` forms them.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ class ParticleState:
       positions: ``[n, 3]`` centres (m).
       radii: ``[n]`` (m).
       temperature: ``[n]`` (K).
-      capacity: ``[n]`` heat capacities ``C_i = m_i c_i`` (J/K), Rojek et al. Eq. 1.
+      mass: ``[n]`` particle masses ``m_i`` (kg).
       material: ``[n]`` int32 index into the scene's material table.
       fixed: ``[n]`` bool, particles held at ``fixed_temperature``.
       fixed_temperature: ``[n]`` (K), used where ``fixed``.
@@ -35,7 +37,7 @@ class ParticleState:
     positions: jax.Array
     radii: jax.Array
     temperature: jax.Array
-    capacity: jax.Array
+    mass: jax.Array
     material: jax.Array
     fixed: jax.Array
     fixed_temperature: jax.Array
@@ -45,15 +47,22 @@ class ParticleState:
         return self.radii.shape[0]
 
 
-def particle_state(positions, radii, temperature, density, specific_heat, material=None, fixed=None,
+def heat_capacity(particles: ParticleState, specific_heat):
+    """``C_i = m_i c[material_i]`` (J/K), Rojek et al. (2022) Eq. 1; ``specific_heat`` ``[n_materials]`` or scalar."""
+    c = jnp.atleast_1d(jnp.asarray(specific_heat))
+    return particles.mass * c[particles.material]
+
+
+def particle_state(positions, radii, temperature, density, specific_heat=None, material=None, fixed=None,
                    fixed_temperature=None) -> ParticleState:
-    """Build and validate a :class:`ParticleState`; densities and heats per material or scalar.
+    """Build and validate a :class:`ParticleState`; densities (and heats, only validated) per material or scalar.
 
     Args:
       positions: ``[n, 3]`` (m). radii: ``[n]`` (m), > 0.
       temperature: scalar or ``[n]`` (K), > 0.
-      density, specific_heat: scalar, or ``[n_materials]`` indexed by ``material``
-        (kg/m^3, J/(kg K)), > 0.
+      density: scalar, or ``[n_materials]`` indexed by ``material`` (kg/m^3), > 0.
+      specific_heat: optional, validated the same way (J/(kg K)), > 0; it is a
+        simulation parameter, not part of the state (see :func:`heat_capacity`).
       material: ``[n]`` ints (default all 0).
       fixed, fixed_temperature: held particles and their temperatures.
 
@@ -72,20 +81,22 @@ def particle_state(positions, radii, temperature, density, specific_heat, materi
     temperature = np.broadcast_to(temperature, (n,))
     require_positive("temperature (K)", temperature)
     material = np.zeros(n, np.int32) if material is None else np.asarray(material, np.int32)
-    density, specific_heat = (np.atleast_1d(np.asarray(v, np.float64)) for v in (density, specific_heat))
+    density = np.atleast_1d(np.asarray(density, np.float64))
     require_positive("density (kg/m^3)", density)
-    require_positive("specific_heat (J/(kg K))", specific_heat)
-    n_materials = max(len(density), len(specific_heat))
+    n_materials = len(density)
+    if specific_heat is not None:
+        specific_heat = np.atleast_1d(np.asarray(specific_heat, np.float64))
+        require_positive("specific_heat (J/(kg K))", specific_heat)
+        n_materials = max(n_materials, len(specific_heat))
     fail_where((material < 0) | (material >= n_materials),
                lambda i: f"material must be in [0, {n_materials - 1}]; got {int(material[i])} at index {i}")
     rho = np.broadcast_to(density, (n_materials,))[material]
-    c = np.broadcast_to(specific_heat, (n_materials,))[material]
-    capacity = 4.0 / 3.0 * np.pi * radii**3 * rho * c
+    mass = 4.0 / 3.0 * np.pi * radii**3 * rho
     fixed = np.zeros(n, bool) if fixed is None else np.broadcast_to(np.asarray(fixed, bool), (n,))
     held = temperature if fixed_temperature is None else np.broadcast_to(np.asarray(fixed_temperature, np.float64), (n,))
     require_positive("fixed_temperature (K)", np.where(fixed, held, 1.0))
     return ParticleState(
         positions=jnp.asarray(positions), radii=jnp.asarray(radii), temperature=jnp.asarray(np.where(fixed, held, temperature)),
-        capacity=jnp.asarray(capacity), material=jnp.asarray(material), fixed=jnp.asarray(fixed),
+        mass=jnp.asarray(mass), material=jnp.asarray(material), fixed=jnp.asarray(fixed),
         fixed_temperature=jnp.asarray(held),
     )

@@ -21,6 +21,7 @@ one gather-and-sum over the padded contact table.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import jax
@@ -28,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.sparse.linalg import cg
 
+from sintercond import heat_sources
 from sintercond.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance, wall_inflow
 
 
@@ -58,75 +60,155 @@ def check_time_step(dt, capacity, table: ContactTable) -> float:
     return limit
 
 
-def _apply_fixed(temperature, fixed_mask, fixed_temperature):
-    if fixed_mask is None:
-        return temperature
-    return jnp.where(fixed_mask, fixed_temperature, temperature)
+def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_temperature=None):
+    """The explicit Euler update ``T + dt P / C``, held particles reset to their values.
 
-
-def explicit_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
-                        source=None, time=0.0):
-    """One explicit Euler step, ``T + dt / C * (sum_j K_ij (T_j - T_i) + Q(T, t))``; held particles stay held.
-
-    ``source(temperature, time) -> [n]`` adds heat powers in W (external
-    devices, convection, radiation: :mod:`sintercond.heat_sources`); None
-    traces nothing. Nonlinear sources (radiation) can tighten the stable step.
+    The one explicit step of the package: every caller (the simulator of
+    :mod:`sintercond.simulate`, hence ``sintercond run``, the inverse
+    experiments and the benchmarks) goes through it. ``power`` ``[n]`` (W) is
+    the heat into each particle (:func:`heat_power` and conduction),
+    ``capacity`` ``C_i = m_i c`` (J/K), Rojek et al. (2022) Eq. 1.
     """
-    inflow = heat_inflow(temperature, table)
-    if source is not None:
-        inflow = inflow + source(temperature, time)
-    new = temperature + dt * inflow / capacity
-    return _apply_fixed(new, fixed_mask, fixed_temperature)
+    new = temperature + dt * power / capacity
+    if fixed_mask is None:
+        return new
+    return jnp.where(fixed_mask, fixed_temperature, new)
 
 
-def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
-                        tol=1e-13):
-    """One backward Euler step: solve ``(C/dt + L) T' = C/dt T`` by conjugate gradients.
+def backward_euler_solve(temperature, laplacian_fn, wall_diagonal, wall_source, capacity, dt, fixed_mask=None,
+                         fixed_temperature=None, tol=1e-13):
+    """One backward Euler step: solve ``(C/dt + L + K_w) T' = C/dt T + K_w T_w`` by conjugate gradients.
 
     Unconditionally stable (the matrix is symmetric positive definite); held
-    particles enter as Dirichlet values. ``tol`` is CG's relative residual.
+    particles enter as Dirichlet values. ``laplacian_fn(x)`` applies the
+    network Laplacian, ``wall_diagonal`` ``[n]`` is ``sum_w K_iw`` and
+    ``wall_source`` ``[n]`` is ``sum_w K_iw T_w`` (None: no walls). ``tol``
+    is CG's relative residual.
     """
     capacity = jnp.broadcast_to(jnp.asarray(capacity, temperature.dtype), temperature.shape)
     free = jnp.ones_like(temperature, dtype=bool) if fixed_mask is None else ~fixed_mask
     held = jnp.zeros_like(temperature) if fixed_mask is None else jnp.where(fixed_mask, fixed_temperature, 0.0)
+    diagonal = capacity / dt if wall_diagonal is None else capacity / dt + wall_diagonal
 
-    def matvec(x):  # identity on held rows, (C/dt + L) restricted to free ones
+    def matvec(x):  # identity on held rows, (C/dt + L + K_w) restricted to free ones
         x_free = jnp.where(free, x, 0.0)
-        return jnp.where(free, capacity / dt * x_free + laplacian(x_free, table), x)
+        return jnp.where(free, diagonal * x_free + laplacian_fn(x_free), x)
 
-    rhs = jnp.where(free, capacity / dt * temperature + wall_inflow(table, temperature.dtype) - laplacian(held, table),
-                    held)
+    rhs = capacity / dt * temperature - laplacian_fn(held)
+    if wall_source is not None:
+        rhs = rhs + wall_source
+    rhs = jnp.where(free, rhs, held)
     solution, _ = cg(matvec, rhs, x0=jnp.where(free, temperature, held), tol=tol, maxiter=10 * temperature.shape[0])
     return jnp.where(free, solution, held)
+
+
+def source_power(physics, state, params):
+    """External heat powers ``[n]`` (W) of the sources ``physics`` declares, at the state's time and positions.
+
+    Beam (nozzle Eq. 30 or laser Eq. 31 of Quintana-Ruiz & Campello 2020,
+    at the beam's position along its path at time ``t``, depths from the
+    current top surface), convection (Eqs. 37-39), radiation (Eq. 41), a
+    prescribed pulse, and a user term. Zero (and nothing traced) when the
+    physics has none.
+    """
+    particles = state.particles
+    positions, radii, temperature = particles.positions, particles.radii, particles.temperature
+    t = state.time
+    power = jnp.zeros_like(temperature)
+    if physics.beam is not None:
+        b = params.beam
+        spot = heat_sources.beam_position(t, b.path, b.speed)
+        surface = jnp.max(positions[:, 2] + radii)
+        depth = heat_sources.beam_depth(positions, radii, spot, b.spot_radius, surface)
+        law = heat_sources.laser_power if physics.beam == "laser" else heat_sources.nozzle_power
+        power = power + law(radii, depth, b.intensity, b.reach, b.absorptance)
+    if physics.convection:
+        c = params.convection
+        power = power + heat_sources.convection_power(radii, temperature, c.environment_temperature,
+                                                      c.environment_conductivity, c.nusselt)
+    if physics.radiation:
+        r = params.radiation
+        power = power + heat_sources.radiation_power(radii, temperature, r.environment_temperature, r.emissivity)
+    if physics.pulse:
+        power = power + jnp.where(t < params.pulse.duration, params.pulse.power, 0.0)
+    if physics.source is not None:
+        power = power + physics.source(state, t, params)
+    return power
+
+
+def explicit_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
+                        source=None, time=0.0):
+    """One explicit Euler step on a table, ``T + dt / C * (sum_j K_ij (T_j - T_i) + Q(T, t))``; held particles stay.
+
+    ``source(temperature, time) -> [n]`` adds heat powers in W; None traces
+    nothing. The update is :func:`explicit_update`.
+    """
+    inflow = heat_inflow(temperature, table)
+    if source is not None:
+        inflow = inflow + source(temperature, time)
+    return explicit_update(temperature, inflow, capacity, dt, fixed_mask, fixed_temperature)
+
+
+def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
+                        tol=1e-13):
+    """One backward Euler step on a table (:func:`backward_euler_solve`)."""
+    walls = table.wall_conductance is not None
+    return backward_euler_solve(temperature, lambda x: laplacian(x, dataclasses.replace(table, wall_conductance=None)),
+                                table.wall_conductance if walls else None,
+                                wall_inflow(table, temperature.dtype) if walls else None,
+                                capacity, dt, fixed_mask, fixed_temperature, tol)
+
+
+@dataclasses.dataclass(frozen=True)
+class _TemperatureSource:
+    """Adapts a ``source(temperature, t)`` callable to the simulator's ``fn(state, t, params)``."""
+
+    source: object
+
+    def __call__(self, state, t, params):
+        return self.source(state.particles.temperature, t)
 
 
 @functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
 def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every=1, fixed_mask=None,
              fixed_temperature=None, method="explicit", source=None, start_step=0, probes=None):
-    """Advance ``n_steps`` steps with ``lax.scan``; returns ``(final, saved [n_steps // save_every, n])``.
+    """Advance a table network ``n_steps`` steps; returns ``(final, saved [n_steps // save_every, n])``.
 
-    ``method``: ``"explicit"`` (check ``dt <= stable_time_step`` first) or
-    ``"implicit"`` (backward Euler, any ``dt``; conduction only). ``source``:
-    see :func:`explicit_euler_step` (a hashable callable; explicit only),
-    called with the time ``(start_step + k) dt`` of step ``k``. ``probes``:
-    indices of the particles to save (``saved`` is then ``[.., len(probes)]``);
-    None saves all.
+    A convenience over :func:`sintercond.simulate.rollout` for a network
+    already built at its conductivity: ``method`` ``"explicit"`` (check
+    ``dt <= stable_time_step`` first) or ``"implicit"`` (backward Euler, any
+    ``dt``; conduction only). ``source(temperature, t)``: heat powers (W), a
+    hashable callable (explicit only), called with the time
+    ``(start_step + k) dt`` of step ``k``. ``probes``: indices of the
+    particles to save (``saved`` is then ``[.., len(probes)]``); None saves
+    all. ``n_steps`` must be a multiple of ``save_every``.
     """
+    from sintercond import simulate as sim_module
+    from sintercond.state import ParticleState
+
+    if method not in ("explicit", "implicit"):
+        raise ValueError(f"method must be 'explicit' or 'implicit'; got {method!r}")
     if method == "implicit" and source is not None:
         raise ValueError("source terms need method='explicit'")
-
-    def step(x, k):
-        if method == "explicit":
-            return explicit_euler_step(x, table, capacity, dt, fixed_mask, fixed_temperature, source, k * dt)
-        return backward_euler_step(x, table, capacity, dt, fixed_mask, fixed_temperature)
-
-    def chunk(carry, _):
-        t, k = carry
-        t = jax.lax.fori_loop(0, save_every, lambda m, x: step(x, k + m), t)
-        return (t, k + save_every), (t if probes is None else t[probes])
-
-    (final, _), saved = jax.lax.scan(chunk, (temperature, start_step), None, length=n_steps // save_every)
-    return final, saved
+    walls = table.wall_conductance is not None
+    physics = sim_module.Physics(conductance="table", integrator=method, held=fixed_mask is not None,
+                                 conducting_walls=int(walls),
+                                 source=None if source is None else _TemperatureSource(source))
+    n = temperature.shape[0]
+    capacity = jnp.broadcast_to(jnp.asarray(capacity, temperature.dtype), (n,))
+    fixed = jnp.zeros(n, bool) if fixed_mask is None else jnp.broadcast_to(fixed_mask, (n,))
+    held = temperature if fixed_temperature is None else jnp.broadcast_to(
+        jnp.asarray(fixed_temperature, temperature.dtype), (n,))
+    particles = ParticleState(positions=jnp.zeros((n, 3), temperature.dtype), radii=jnp.ones(n, temperature.dtype),
+                              temperature=temperature, mass=capacity, material=jnp.zeros(n, jnp.int32), fixed=fixed,
+                              fixed_temperature=held)
+    contacts = sim_module.table_contacts(table, table.wall_conductance, table.wall_temperature)
+    state = sim_module.init_state(particles, contacts, dt, start_step)
+    params = sim_module.Params(conductivity=jnp.ones(1, temperature.dtype), specific_heat=jnp.ones(1, temperature.dtype))
+    saveat = sim_module.SaveAt(save_every, None if probes is None else sim_module.probe_temperatures(probes))
+    sim = sim_module.simulator(physics)
+    final, saved = sim_module.rollout(sim, state, params, n_steps, saveat)
+    return final.particles.temperature, saved
 
 
 def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):

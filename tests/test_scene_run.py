@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from sintercond import run as runner
+from sintercond import thermal
 from sintercond.scene import SceneError, load_scene, validate_scene
 
 SMALL = {
@@ -115,9 +116,9 @@ def test_walls_held_and_conducting(tmp_path):
                       {"axis": 0, "side": "max", "mode": "conducting", "temperature": 300.0},
                       {"axis": 1, "side": "min", "mode": "insulated"}]
     model = runner.build_model(validate_scene(scene))
-    assert int(np.sum(np.asarray(model.state.fixed))) == 9  # the x = min face of the 6x3x3 lattice
-    k_w = np.asarray(model.table.wall_conductance)
-    assert np.sum(k_w > 0) == 9 and np.all(np.asarray(model.table.wall_temperature)[k_w > 0] == 300.0)
+    assert int(np.sum(np.asarray(model.state.particles.fixed))) == 9  # the x = min face of the 6x3x3 lattice
+    k_w = np.asarray(model.state.contacts.wall_conductance)
+    assert np.sum(k_w > 0) == 9 and np.all(np.asarray(model.state.contacts.wall_temperature)[k_w > 0] == 300.0)
     bad = copy.deepcopy(scene)
     bad["walls"][1].pop("temperature")
     with pytest.raises(SceneError, match=r"walls\[1\]\.temperature is required for a conducting wall"):
@@ -152,8 +153,8 @@ def test_nozzle_and_whitaker_convection():
     scene["convection"] = {"environment_temperature": 300.0, "environment_conductivity": 0.026, "reynolds": 10.0,
                            "prandtl": 0.7}
     model = runner.build_model(validate_scene(scene))
-    assert model.source.beam[0] == "nozzle" and model.source.convection[2] > 2.0
-    t = np.asarray(model.source(model.state.temperature, 0.0))
+    assert model.physics.beam == "nozzle" and float(model.params.convection.nusselt) > 2.0
+    t = np.asarray(thermal.source_power(model.physics, model.state, model.params))
     assert t.max() > 0  # the nozzle heats the particles under the spot
     bad = copy.deepcopy(scene)
     bad["beam"].pop("max_depth")

@@ -1,0 +1,611 @@
+"""One simulator: a static physics spec, differentiable ``Params``, one step, one rollout.
+
+Every stepping path of the package (``sintercond run``, the flash experiment
+and inverse fits, prescribed motion, the benchmarks) goes through here:
+
+* :class:`Physics` is a frozen, hashable description of *what* is simulated
+  (conduction law and neck model, static or dynamic contacts, integrator,
+  heat sources, held particles and conducting walls, and room for mechanics).
+  :func:`simulator` branches on it in Python, so what a scene does not use is
+  not traced, and each distinct spec compiles one step (jax-md
+  ``simulate.nve``'s ``(init_fn, apply_fn)`` pattern).
+* :class:`Params` is the one differentiable input: conductivities and
+  specific heats per material, the conductance law's parameters, and the
+  source parameters. ``step_fn(state, params)`` takes it as an argument, so
+  one compiled step serves every optimiser iteration, and gradients of any
+  observable reach any of its leaves by JAX's own reverse or forward mode.
+* :class:`SimState` is the whole state (particles, contacts, step counter and
+  time step) as registered frozen dataclasses; a checkpoint holds all of it.
+* :func:`rollout` scans the step over ``jax.checkpoint``-ed segments of about
+  ``sqrt(n_steps)`` steps and saves observables chosen by :class:`SaveAt`
+  (probe temperatures, means, heat flows), not whole states: reverse mode
+  then keeps ``O(sqrt(n_steps))`` particle arrays.
+
+The conduction step itself (Rojek et al. 2022, Eqs. 1-4; sources of
+Quintana-Ruiz & Campello 2020, Eqs. 28-31, 37-41) is
+:func:`sintercond.thermal.explicit_update` (or the backward-Euler solve),
+with the heat powers of :func:`sintercond.thermal.heat_power`.
+
+Conductances of contacts
+------------------------
+``conductance="table"``: a table of ``K_ij`` at unit conductivity, built once
+on the host (:func:`sintercond.network.contact_table`), times the
+conductivity of the single material. Every law is linear in the
+conductivity when there is one material and no contact resistance, so this
+is exact; it is the fast path (the gradient with respect to the conductivity
+is a scalar reduction per step).
+
+``conductance="lifted"``: the necks of every pair are computed once from the
+geometry; the law turns them into conductances from ``params`` at the start
+of every rollout (:func:`conductance_lift`), so law parameters (Rojek's
+slope, a contact resistance, the fitted law's coefficients) and per-material
+conductivities are differentiable. Both give the same numbers and gradients
+where both apply (tests/test_simulate.py).
+
+``contacts="dynamic"``: positions move (a prescribed ``motion(t)`` today; the
+thermo-mechanical model next); a jax-md neighbour list with a skin is
+updated inside the step and the same lift gives conductances from the
+current overlaps at every step. Overflow of the list is a flag in the state,
+recovered by the host driver (:func:`sintercond.run.advance`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sintercond import thermal
+from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
+from sintercond.neck import NECK_MODELS
+from sintercond.network import network_laplacian
+from sintercond.state import ParticleState, heat_capacity
+
+_INTEGRATORS = ("explicit", "implicit")
+_CONDUCTANCE_MODES = ("table", "lifted")
+_CONTACT_MODES = ("static", "dynamic")
+_BEAMS = (None, "laser", "nozzle")
+
+
+@dataclasses.dataclass(frozen=True)
+class Physics:
+    """What is simulated: a static, hashable spec (nothing here is an array).
+
+    Attributes:
+      law: conductance law, a key of :data:`sintercond.CONDUCTANCE_LAWS`.
+      neck_model: neck model key, or None for the law's default.
+      conductance: ``"table"`` (precomputed at unit conductivity; one
+        material, no contact resistance) or ``"lifted"`` (necks stored, law
+        applied to ``params`` at each rollout; any materials and law
+        parameters).
+      contacts: ``"static"`` (the packing does not move) or ``"dynamic"``.
+      integrator: ``"explicit"`` (Euler; check the stable step) or
+        ``"implicit"`` (backward Euler by conjugate gradients; conduction
+        and held particles only).
+      held: some particles are held at fixed temperatures.
+      conducting_walls: number of conducting plane walls (0: none traced).
+      beam: ``None``, ``"laser"`` (Lambert-Beer) or ``"nozzle"`` (linear attenuation).
+      convection, radiation: convective / radiative exchange with the environment.
+      pulse: a prescribed power per particle while ``t < params.pulse.duration``.
+      source: extra heat power ``fn(state, t, params) -> [n]`` W (hashable
+        callable), or None.
+      motion: prescribed positions ``fn(t) -> [n, 3]`` (m) for dynamic
+        contacts, or None (positions stay).
+      implicit_tol: relative residual of the implicit CG solve.
+      wall_radius_factor: a conducting wall enters the pair law as a sphere
+        this many times the largest particle radius (the plane limit).
+      mechanics: reserved for the thermo-mechanical model (not yet built).
+    """
+
+    law: str = "rojek"
+    neck_model: str | None = None
+    conductance: str = "table"
+    contacts: str = "static"
+    integrator: str = "explicit"
+    held: bool = False
+    conducting_walls: int = 0
+    beam: str | None = None
+    convection: bool = False
+    radiation: bool = False
+    pulse: bool = False
+    source: Callable | None = None
+    motion: Callable | None = None
+    implicit_tol: float = 1e-13
+    wall_radius_factor: float = 1e3
+    mechanics: bool = False
+
+    def __post_init__(self):
+        checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
+                  ("contacts", self.contacts, _CONTACT_MODES), ("integrator", self.integrator, _INTEGRATORS),
+                  ("beam", self.beam, _BEAMS))
+        for name, value, allowed in checks:
+            if value not in allowed:
+                raise ValueError(f"Physics.{name} must be one of {list(allowed)}; got {value!r}")
+        if self.neck_model is not None and self.neck_model not in NECK_MODELS:
+            raise ValueError(f"Physics.neck_model must be one of {sorted(NECK_MODELS)} or None; got {self.neck_model!r}")
+        if self.mechanics:
+            raise NotImplementedError("Physics.mechanics: the thermo-mechanical model is not built yet")
+        if self.contacts == "dynamic" and self.conductance != "lifted":
+            raise ValueError("Physics.contacts='dynamic' needs conductance='lifted' (conductances follow the motion)")
+        if self.integrator == "implicit" and (self.beam or self.convection or self.radiation or self.pulse
+                                              or self.source or self.contacts == "dynamic"):
+            raise ValueError("Physics.integrator='implicit' supports conduction on static contacts and held particles "
+                             "only; use 'explicit' with sources or motion")
+        if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
+            raise ValueError(f"Physics.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
+
+    @property
+    def neck(self) -> str:
+        """The neck model in use."""
+        return CONDUCTANCE_LAWS[self.law].neck_model if self.neck_model is None else self.neck_model
+
+
+def _dataclass(cls):
+    return jax.tree_util.register_dataclass(dataclasses.dataclass(frozen=True)(cls))
+
+
+@_dataclass
+class BeamParams:
+    """A vertical beam moving along a polyline (Quintana-Ruiz & Campello 2020, Eqs. 29-31).
+
+    Attributes:
+      intensity: ``I0`` (W/m^2).
+      reach: Lambert-Beer attenuation ``mu`` (1/m) for a laser, ``d_max`` (m) for a nozzle.
+      spot_radius: beam radius (m).
+      absorptance: ``a`` in [0, 1].
+      speed: speed along the path (m/s).
+      path: ``[k, 2]`` waypoints (x, y) (m), absolute coordinates.
+    """
+
+    intensity: Any
+    reach: Any
+    spot_radius: Any
+    absorptance: Any
+    speed: Any
+    path: Any
+
+
+@_dataclass
+class ConvectionParams:
+    """Newton cooling (Eqs. 37-39): environment temperature (K), conductivity (W/(m K)), Nusselt number."""
+
+    environment_temperature: Any
+    environment_conductivity: Any
+    nusselt: Any
+
+
+@_dataclass
+class RadiationParams:
+    """Stefan-Boltzmann exchange (Eq. 41): environment temperature (K) and emissivity."""
+
+    environment_temperature: Any
+    emissivity: Any
+
+
+@_dataclass
+class PulseParams:
+    """A prescribed heat input: ``power`` ``[n]`` (W) while ``t < duration`` (s)."""
+
+    power: Any
+    duration: Any
+
+
+@_dataclass
+class Params:
+    """The differentiable inputs of a simulation (SI units).
+
+    Attributes:
+      conductivity: ``[n_materials]`` solid conductivities (W/(m K)).
+      specific_heat: ``[n_materials]`` (J/(kg K)); capacities are ``m_i c``.
+      law: the conductance law's parameters in use (e.g. ``{"slope": 1.064}``),
+        merged over the law's defaults; ``{}`` for the defaults.
+      beam, convection, radiation, pulse: source parameters, or None where
+        the physics has no such source.
+    """
+
+    conductivity: Any
+    specific_heat: Any
+    law: dict = dataclasses.field(default_factory=dict)
+    beam: BeamParams | None = None
+    convection: ConvectionParams | None = None
+    radiation: RadiationParams | None = None
+    pulse: PulseParams | None = None
+
+
+@_dataclass
+class Contacts:
+    """The contact network of a state.
+
+    Attributes:
+      neighbors: ``[n, m]`` int32 neighbour indices (static: padding is the
+        row's own index; dynamic: jax-md's, padding ``n``).
+      conductance: ``[n, m]`` conductances at unit conductivity (W/K per
+        W/(m K)) for ``conductance="table"``, else None.
+      neck: ``[n, m]`` neck radii (m) for static lifted contacts, else None.
+      overlap: ``[n, m]`` overlaps ``h = r_i + r_j - d`` (m), same.
+      wall_conductance: ``[n]`` conductance to the conducting walls at unit
+        conductivity (table), else None.
+      wall_temperature: ``[n]`` (table) or ``[n_walls]`` (lifted) wall temperatures (K).
+      wall_neck, wall_overlap: ``[n_walls, n]`` neck radius and penetration (m)
+        of each particle on each conducting wall (lifted), else None.
+      neighbor_list: the jax-md neighbour list of dynamic contacts, else None.
+    """
+
+    neighbors: Any
+    conductance: Any = None
+    neck: Any = None
+    overlap: Any = None
+    wall_conductance: Any = None
+    wall_temperature: Any = None
+    wall_neck: Any = None
+    wall_overlap: Any = None
+    neighbor_list: Any = None
+
+
+@_dataclass
+class SimState:
+    """The whole state of a simulation.
+
+    Attributes:
+      particles: positions, radii, temperatures, masses, materials, held flags.
+      contacts: the network.
+      step: int scalar, steps taken (time ``step * dt``).
+      dt: the time step (s), scalar.
+      overflow: bool scalar, set when a dynamic neighbour list overflowed
+        since the last host check (the results after it are invalid).
+    """
+
+    particles: ParticleState
+    contacts: Contacts
+    step: Any
+    dt: Any
+    overflow: Any
+
+    @property
+    def temperature(self):
+        return self.particles.temperature
+
+    @property
+    def time(self):
+        """``step * dt`` (s)."""
+        return self.step.astype(self.dt.dtype) * self.dt
+
+
+class Prepared(NamedTuple):
+    """What one rollout computes once from ``(state, params)`` and every step reuses."""
+
+    params: Params
+    capacity: jax.Array
+    conductance: jax.Array | None  # [n, m] static conductances (W/K), or None for dynamic contacts
+    scale: jax.Array  # multiplies the table (the conductivity, table mode) or 1
+    wall_conductance: jax.Array | None  # [n_walls or 1, n] (W/K)
+    wall_temperature: jax.Array | None  # [n_walls or 1, n] broadcastable (K)
+
+
+class Simulator(NamedTuple):
+    """``step_fn(state, params) -> state``; ``prepare_fn``/``advance_fn`` split it for :func:`rollout`."""
+
+    physics: Physics
+    step_fn: Callable
+    prepare_fn: Callable
+    advance_fn: Callable
+    heat_power_fn: Callable
+
+
+# --------------------------------------------------------------------------
+# conductances
+
+
+def merged_law_params(physics: Physics, params: Params) -> dict:
+    """The law's default parameters overridden by ``params.law``; unknown names raise."""
+    defaults = CONDUCTANCE_LAWS[physics.law].default_params
+    unknown = set(params.law) - set(defaults)
+    if unknown:
+        raise ValueError(f"Params.law of law {physics.law!r} must be among {sorted(defaults)}; got {sorted(unknown)}")
+    return {**defaults, **params.law}
+
+
+def conductance_lift(physics: Physics, radii, material, neighbors, neck, overlap, conductivity, law_params):
+    """Conductances ``[n, m]`` (W/K) of a padded table from its necks: the one law -> table lift.
+
+    Each slot ``(i, j)`` evaluates the law with the pair in index order
+    (``min(i, j)`` first), so both rows of a pair get bitwise the same ``K``
+    and the network stays exactly symmetric (heat conserved to round-off).
+    Padding slots (``j == i`` or ``j >= n``) have ``h = 0`` and give 0.
+    """
+    n = radii.shape[0]
+    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
+    valid = (neighbors != rows) & (neighbors < n)
+    j = jnp.where(valid, neighbors, rows)
+    lo, hi = jnp.minimum(rows, j), jnp.maximum(rows, j)
+    kappa = jnp.asarray(conductivity)
+    k = conductance_from_neck(physics.law, neck, radii[lo], radii[hi], overlap, kappa[material[lo]],
+                              kappa[material[hi]], law_params)
+    return jnp.where(valid, k, 0.0)
+
+
+def _wall_lift(physics, particles, contacts, conductivity, law_params):
+    r = particles.radii
+    r_wall = physics.wall_radius_factor * jnp.max(r)
+    kappa = jnp.asarray(conductivity)[particles.material]
+    return conductance_from_neck(physics.law, contacts.wall_neck, r, r_wall, contacts.wall_overlap, kappa, kappa,
+                                 law_params)
+
+
+def _dynamic_geometry(physics, positions, radii, neighbors):
+    """Overlaps and necks ``[n, m]`` of a jax-md table (padding ``n``) at the current positions."""
+    n = radii.shape[0]
+    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
+    valid = (neighbors < n) & (neighbors != rows)
+    j = jnp.where(valid, neighbors, rows)
+    lo, hi = jnp.minimum(rows, j), jnp.maximum(rows, j)
+    # the distance from the pair in index order: bitwise the same on both rows
+    delta = positions[hi] - positions[lo]
+    distance_sq = jnp.sum(delta * delta, axis=-1)
+    contact_range = (radii[lo] + radii[hi]) ** 2
+    touching = valid & (distance_sq < contact_range)
+    distance = jnp.sqrt(jnp.where(touching, distance_sq, contact_range))
+    overlap = jnp.where(touching, radii[lo] + radii[hi] - distance, 0.0)
+    neck = jnp.where(touching, NECK_MODELS[physics.neck](radii[lo], radii[hi], overlap), 0.0)
+    return j, neck, overlap
+
+
+# --------------------------------------------------------------------------
+# the simulator
+
+
+def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
+    """The step of ``physics``: ``step_fn(state, params) -> state``.
+
+    Args:
+      physics: the spec.
+      neighbor_fn: for ``contacts="dynamic"``, the jax-md neighbour-list
+        function (``update(positions, nbrs)``) the state's list came from
+        (:func:`dynamic_contacts` builds both).
+    """
+    if physics.contacts == "dynamic" and neighbor_fn is None:
+        raise ValueError("contacts='dynamic' needs the neighbour-list function (see dynamic_contacts)")
+
+    def prepare_fn(state: SimState, params: Params) -> Prepared:
+        particles, contacts = state.particles, state.contacts
+        capacity = heat_capacity(particles, params.specific_heat)
+        kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
+        wall_k = wall_t = None
+        if physics.conductance == "table":
+            conductance, scale = contacts.conductance, kappa[0]
+            if physics.conducting_walls:
+                wall_k, wall_t = contacts.wall_conductance[None], contacts.wall_temperature[None]
+        else:
+            law_params = merged_law_params(physics, params)
+            scale = jnp.ones((), capacity.dtype)
+            conductance = None
+            if physics.contacts == "static":
+                conductance = conductance_lift(physics, particles.radii, particles.material, contacts.neighbors,
+                                               contacts.neck, contacts.overlap, kappa, law_params)
+            if physics.conducting_walls:
+                wall_k = _wall_lift(physics, particles, contacts, kappa, law_params)
+                wall_t = contacts.wall_temperature[:, None]
+        return Prepared(params, capacity, conductance, scale, wall_k, wall_t)
+
+    def conduction_power(state: SimState, prep: Prepared, temperature, conductance, neighbors):
+        power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
+        if physics.conducting_walls:
+            power = power + prep.scale * jnp.sum(prep.wall_conductance * (prep.wall_temperature - temperature), axis=0)
+        return power
+
+    def current_network(state: SimState, prep: Prepared):
+        """``(state, conductance, neighbors)`` at this step: static tables, or the dynamic list updated."""
+        if physics.contacts == "static":
+            return state, prep.conductance, state.contacts.neighbors
+        particles, contacts = state.particles, state.contacts
+        if physics.motion is not None:
+            positions = physics.motion(state.time).astype(particles.positions.dtype)
+            particles = dataclasses.replace(particles, positions=positions)
+        with jax.numpy_dtype_promotion("standard"):
+            nbrs = neighbor_fn.update(particles.positions, contacts.neighbor_list)
+        j, neck, overlap = _dynamic_geometry(physics, particles.positions, particles.radii, nbrs.idx)
+        kappa = jnp.atleast_1d(jnp.asarray(prep.params.conductivity))
+        conductance = conductance_lift(physics, particles.radii, particles.material, j, neck, overlap, kappa,
+                                       merged_law_params(physics, prep.params))
+        state = dataclasses.replace(state, particles=particles, overflow=state.overflow | nbrs.did_buffer_overflow,
+                                    contacts=dataclasses.replace(contacts, neighbor_list=nbrs, neighbors=nbrs.idx))
+        return state, conductance, j
+
+    def heat_power_fn(state: SimState, prep: Prepared, conductance=None, neighbors=None):
+        """Heat power into every particle (W): conduction, walls and sources at the state's time."""
+        if conductance is None:
+            state, conductance, neighbors = current_network(state, prep)
+        temperature = state.particles.temperature
+        power = conduction_power(state, prep, temperature, conductance, neighbors)
+        return power + thermal.source_power(physics, state, prep.params)
+
+    def advance_fn(state: SimState, prep: Prepared) -> SimState:
+        state, conductance, neighbors = current_network(state, prep)
+        particles = state.particles
+        fixed = particles.fixed if physics.held else None
+        if physics.integrator == "explicit":
+            power = heat_power_fn(state, prep, conductance, neighbors)
+            temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
+                                                  particles.fixed_temperature)
+        else:
+            temperature = thermal.backward_euler_solve(
+                particles.temperature, lambda x: prep.scale * network_laplacian(conductance, neighbors, x),
+                None if prep.wall_conductance is None else prep.scale * jnp.sum(prep.wall_conductance, axis=0),
+                None if prep.wall_conductance is None else prep.scale * jnp.sum(
+                    prep.wall_conductance * prep.wall_temperature, axis=0),
+                prep.capacity, state.dt, fixed, particles.fixed_temperature, physics.implicit_tol)
+        return dataclasses.replace(state, particles=dataclasses.replace(particles, temperature=temperature),
+                                   step=state.step + 1)
+
+    def step_fn(state: SimState, params: Params) -> SimState:
+        return advance_fn(state, prepare_fn(state, params))
+
+    return Simulator(physics, step_fn, prepare_fn, advance_fn, heat_power_fn)
+
+
+def stable_time_step(sim: Simulator, state: SimState, params: Params):
+    """Largest explicit-Euler step with the maximum principle, ``min_i C_i / (sum_j K_ij + sum_w K_iw)`` (s).
+
+    Conduction only (static contacts at the state's geometry); inf for a
+    particle with no conductance. At or below it every new temperature is a
+    convex combination of old ones (conduction alone).
+    """
+    prep = sim.prepare_fn(state, params)
+    if prep.conductance is None:
+        raise ValueError("stable_time_step needs static contacts")
+    total = prep.scale * jnp.sum(prep.conductance, axis=1)
+    if prep.wall_conductance is not None:
+        total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
+    return jnp.min(jnp.where(total > 0, prep.capacity / jnp.where(total > 0, total, 1.0), jnp.inf))
+
+
+# --------------------------------------------------------------------------
+# building states
+
+
+def init_state(particles: ParticleState, contacts: Contacts, dt, step=0) -> SimState:
+    """A :class:`SimState` at ``step`` (default 0) with time step ``dt`` (s)."""
+    dtype = particles.temperature.dtype
+    return SimState(particles=particles, contacts=contacts, step=jnp.asarray(step, jnp.int64 if jax.config.jax_enable_x64
+                                                                            else jnp.int32),
+                    dt=jnp.asarray(dt, dtype), overflow=jnp.zeros((), bool))
+
+
+def table_contacts(table, wall_conductance=None, wall_temperature=None) -> Contacts:
+    """Contacts of ``conductance="table"`` from a :class:`sintercond.network.ContactTable` at unit conductivity."""
+    return Contacts(neighbors=table.neighbors, conductance=table.conductance,
+                    wall_conductance=None if wall_conductance is None else jnp.asarray(wall_conductance),
+                    wall_temperature=None if wall_temperature is None else jnp.asarray(wall_temperature))
+
+
+def static_necks(physics: Physics, centres, radii, table_neighbors, periodic_box=None):
+    """Necks and overlaps ``[n, m]`` of a static padded table (host, once), pairs in index order."""
+    from sintercond.network import minimum_image
+
+    centres = np.asarray(centres, np.float64)
+    radii = np.asarray(radii, np.float64)
+    nbr = np.asarray(table_neighbors)
+    rows = np.broadcast_to(np.arange(len(radii))[:, None], nbr.shape)
+    lo, hi = np.minimum(rows, nbr), np.maximum(rows, nbr)
+    distance = np.linalg.norm(minimum_image(centres[hi] - centres[lo], periodic_box), axis=-1)
+    overlap = np.where(nbr != rows, np.maximum(radii[lo] + radii[hi] - distance, 0.0), 0.0)
+    neck = np.asarray(NECK_MODELS[physics.neck](radii[lo], radii[hi], overlap))
+    return jnp.asarray(np.where(overlap > 0, neck, 0.0)), jnp.asarray(overlap)
+
+
+def lifted_contacts(physics: Physics, centres, radii, neighbors, walls=(), periodic_box=None) -> Contacts:
+    """Contacts of ``conductance="lifted"``: necks of every pair and of every conducting wall.
+
+    ``walls``: ``(penetration [n], temperature)`` per conducting wall (m, K),
+    penetration <= 0 where a particle does not touch it.
+    """
+    neck, overlap = static_necks(physics, centres, radii, neighbors, periodic_box)
+    contacts = Contacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=neck, overlap=overlap)
+    if walls:
+        radii = np.asarray(radii, np.float64)
+        r_wall = physics.wall_radius_factor * float(radii.max())
+        h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
+        a = np.where(h > 0, np.asarray(NECK_MODELS[physics.neck](radii, r_wall, h)), 0.0)
+        contacts = dataclasses.replace(contacts, wall_neck=jnp.asarray(a), wall_overlap=jnp.asarray(h),
+                                       wall_temperature=jnp.asarray([float(t) for _, t in walls]))
+    return contacts
+
+
+# --------------------------------------------------------------------------
+# rollout
+
+
+@dataclasses.dataclass(frozen=True)
+class SaveAt:
+    """What :func:`rollout` saves: ``fn(state)`` every ``every`` steps (diffrax ``SaveAt(steps=, fn=)``).
+
+    ``fn=None`` saves the temperatures; see :func:`probe_temperatures`,
+    :func:`mean_temperature`. ``fn`` must be hashable (a function or a
+    :class:`Observable`).
+    """
+
+    every: int = 1
+    fn: Callable | None = None
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Observable:
+    """An observable built from data (e.g. probe indices); hashed by identity."""
+
+    fn: Callable
+    data: Any = None
+
+    def __call__(self, state):
+        return self.fn(state, self.data)
+
+
+def probe_temperatures(indices) -> Observable:
+    """Temperatures ``[p]`` (K) of the particles ``indices``."""
+    return Observable(lambda state, idx: state.particles.temperature[idx], jnp.asarray(indices))
+
+
+def mean_temperature(state: SimState):
+    """Mass-weighted mean temperature (K) of the free particles (all if none is held)."""
+    p = state.particles
+    weight = jnp.where(p.fixed, 0.0, p.mass)
+    weight = jnp.where(jnp.sum(weight) > 0, weight, p.mass)
+    return jnp.sum(weight * p.temperature) / jnp.sum(weight)
+
+
+def segment_length(n_steps: int) -> int:
+    """``ceil(sqrt(n_steps))``: steps between the states reverse mode keeps."""
+    return max(1, math.isqrt(max(n_steps, 1) - 1) + 1)
+
+
+def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, saveat: SaveAt = SaveAt(),
+            checkpoint: bool = True):
+    """Advance ``n_steps`` steps; returns ``(final state, saved)`` with ``saved[k] = fn(state after (k+1) every steps)``.
+
+    ``lax.scan`` over ``jax.checkpoint``-ed segments of about ``sqrt(n_steps)``
+    steps (``checkpoint=False``: one plain scan), so reverse mode through the
+    rollout keeps ``O(sqrt(n_steps))`` states and recomputes each segment
+    once. ``n_steps`` must be a multiple of ``saveat.every``. Pure and
+    traceable: wrap it in ``jax.jit`` (with ``sim``, ``n_steps`` and
+    ``saveat`` static) or call it inside a jitted loss.
+    """
+    every = saveat.every
+    if not (isinstance(n_steps, int) and isinstance(every, int) and n_steps >= 1 and every >= 1):
+        raise ValueError(f"n_steps and saveat.every must be integers >= 1; got {n_steps!r}, {every!r}")
+    if n_steps % every:
+        raise ValueError(f"n_steps ({n_steps}) must be a multiple of saveat.every ({every}); "
+                         f"{n_steps // every * every} or {(n_steps // every + 1) * every} would do")
+    observe = (lambda s: s.particles.temperature) if saveat.fn is None else saveat.fn
+    prep = sim.prepare_fn(state, params)
+    seg = segment_length(n_steps) if checkpoint else n_steps
+
+    def advance(s, _):
+        return sim.advance_fn(s, prep), None
+
+    def run_steps(s, length):
+        if length <= seg:
+            return jax.lax.scan(advance, s, None, length=length)[0] if length else s
+        q, r = divmod(length, seg)
+        s = jax.lax.scan(jax.checkpoint(lambda c, _: (run_steps(c, seg), None)), s, None, length=q)[0]
+        return run_steps(s, r)
+
+    def one_save(s, _):
+        s = run_steps(s, every)
+        return s, observe(s)
+
+    n_saves = n_steps // every
+    group = max(1, seg // every)
+    if group <= 1 or group >= n_saves:
+        return jax.lax.scan(one_save, state, None, length=n_saves)
+    q, r = divmod(n_saves, group)
+    state, saved = jax.lax.scan(jax.checkpoint(lambda s, _: jax.lax.scan(one_save, s, None, length=group)),
+                                state, None, length=q)
+    saved = jax.tree.map(lambda x: x.reshape((q * group,) + x.shape[2:]), saved)
+    if r:
+        state, tail = jax.lax.scan(one_save, state, None, length=r)
+        saved = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), saved, tail)
+    return state, saved
