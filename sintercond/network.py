@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sintercond._symmetric import self_adjoint
 from sintercond.conductance import pair_conductance, validate_pair_conductance_inputs
 
 
@@ -170,41 +171,49 @@ def laplacian(x, table: ContactTable):
     return lx
 
 
-@jax.custom_vjp
+@jax.custom_jvp
 def network_laplacian(conductance, neighbors, x):
     """``(L x)_i = sum_k K[i, k] (x_i - x[neighbors[i, k]])`` on a symmetric padded table (W per K of x).
 
-    Differentiated by hand: the table stores every pair on both rows with the
-    same ``K``, so ``L`` is symmetric and its transpose is the same gather,
-    ``L^T c = L c``. JAX would transpose the gather ``x[neighbors]`` into a
-    scatter-add, which on a CPU costs several times the forward pass; with
-    this rule reverse mode through a conduction step costs about one forward
-    step. The cotangent of ``conductance`` is ``c_i (x_i - x_j)`` per slot
-    (each slot a separate input; the lift that writes one value on both rows
-    sums them back). Requires ``neighbors`` to list ``j`` in row ``i`` iff it
-    lists ``i`` in row ``j``, with equal ``K`` (what :func:`contact_table`
-    builds); padding slots hold the row's own index (any ``K``: ``x_i - x_i = 0``).
+    Differentiated by hand so that reverse mode costs about one forward
+    pass: the table stores every pair on both rows with the same ``K``, so
+    ``L`` is symmetric and its transpose is the same gather, ``L^T c = L c``
+    (:func:`sintercond._symmetric.self_adjoint`); JAX alone would transpose
+    the gather ``x[neighbors]`` into a scatter-add, several times slower on a
+    CPU. Forward mode, ``vmap`` and higher orders work as usual. The
+    derivative in ``conductance`` is ``dK_ik (x_i - x_j)`` per slot (each slot
+    a separate input; a lift that writes one value on both rows sums them
+    back). Requires ``neighbors`` to list ``j`` in row ``i`` iff it lists
+    ``i`` in row ``j``, with equal ``K`` (what :func:`contact_table` builds);
+    padding slots hold the row's own index (any ``K``: ``x_i - x_i = 0``).
 
     Args:
       conductance: ``[n, m]`` ``K_ij`` (W/K).
       neighbors: ``[n, m]`` int neighbour indices.
       x: ``[n]`` temperatures (K) or any per-particle field.
     """
+    return _gather_laplacian((conductance, neighbors), x)
+
+
+def _gather_laplacian(table, x):
+    conductance, neighbors = table
     return jnp.sum(conductance * (x[:, None] - x[neighbors]), axis=1)
 
 
-def _network_laplacian_fwd(conductance, neighbors, x):
-    return network_laplacian(conductance, neighbors, x), (conductance, neighbors, x)
+def _network_laplacian_jvp(primals, tangents):
+    conductance, neighbors, x = primals
+    d_conductance, _, dx = tangents
+    value = _gather_laplacian((conductance, neighbors), x)
+    # symbolic zeros: a constant table (or field) adds no work to the tangent
+    tangent = jnp.zeros_like(value)
+    if not isinstance(dx, jax.custom_derivatives.SymbolicZero):
+        tangent = self_adjoint(_gather_laplacian, (conductance, neighbors), dx)
+    if not isinstance(d_conductance, jax.custom_derivatives.SymbolicZero):
+        tangent = tangent + _gather_laplacian((d_conductance, neighbors), x)
+    return value, tangent
 
 
-def _network_laplacian_bwd(residuals, cotangent):
-    conductance, neighbors, x = residuals
-    cotangent_x = jnp.sum(conductance * (cotangent[:, None] - cotangent[neighbors]), axis=1)
-    cotangent_k = cotangent[:, None] * (x[:, None] - x[neighbors])
-    return cotangent_k, None, cotangent_x
-
-
-network_laplacian.defvjp(_network_laplacian_fwd, _network_laplacian_bwd)
+network_laplacian.defjvp(_network_laplacian_jvp, symbolic_zeros=True)
 
 
 def wall_inflow(table: ContactTable, dtype):

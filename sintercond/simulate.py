@@ -590,7 +590,7 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
         if length <= seg:
             return jax.lax.scan(advance, s, None, length=length)[0] if length else s
         q, r = divmod(length, seg)
-        s = jax.lax.scan(jax.checkpoint(lambda c, _: (run_steps(c, seg), None)), s, None, length=q)[0]
+        s = jax.lax.scan(jax.checkpoint(lambda c, _: (run_steps(c, seg), None), prevent_cse=False), s, None, length=q)[0]
         return run_steps(s, r)
 
     def one_save(s, _):
@@ -602,7 +602,7 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     if group <= 1 or group >= n_saves:
         return jax.lax.scan(one_save, state, None, length=n_saves)
     q, r = divmod(n_saves, group)
-    state, saved = jax.lax.scan(jax.checkpoint(lambda s, _: jax.lax.scan(one_save, s, None, length=group)),
+    state, saved = jax.lax.scan(jax.checkpoint(lambda s, _: jax.lax.scan(one_save, s, None, length=group), prevent_cse=False),
                                 state, None, length=q)
     saved = jax.tree.map(lambda x: x.reshape((q * group,) + x.shape[2:]), saved)
     if r:
