@@ -47,6 +47,9 @@ import numpy as np
 from fitting.core import Bounded, FitResult, least_squares
 from sintercond import thermal
 from sintercond.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance
+from sintercond.simulate import (Params, Physics, PulseParams, SaveAt, SimState, init_state, probe_temperatures,
+                                 rollout, simulator, table_contacts)
+from sintercond.state import ParticleState
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -96,8 +99,9 @@ class ProbeExperiment:
         probes = np.asarray(self.probes)
         if probes.ndim != 1 or probes.size == 0 or probes.min() < 0 or probes.max() >= n:
             raise ValueError(f"probes must be a non-empty 1-D array of particle indices in [0, {n}); got {probes}")
-        # the pulse as a source for thermal.simulate (hashable: one object per experiment)
-        object.__setattr__(self, "_source", functools.partial(_pulse, self.power, self.pulse_duration))
+        physics = Physics(conductance="table", pulse=True, held=self.fixed_mask is not None,
+                          conducting_walls=int(self.table.wall_conductance is not None))
+        object.__setattr__(self, "_sim", simulator(physics))
         total = np.asarray(total_conductance(self.table))
         limit = np.min(np.where(total > 0, np.asarray(self.mass) / (self.dt * np.where(total > 0, total, 1)), np.inf))
         object.__setattr__(self, "_max_ratio", float(limit))
@@ -127,23 +131,37 @@ class ProbeExperiment:
         stable = kappa / specific_heat <= self.max_diffusivity_ratio() * (1 + 1e-12)
         return jnp.where(stable, readings, jnp.nan)
 
+    def initial_state(self) -> SimState:
+        """The experiment's initial :class:`~sintercond.simulate.SimState` (table at unit conductivity)."""
+        n = self.table.n_particles
+        initial = jnp.asarray(self.initial)
+        fixed = jnp.zeros(n, bool) if self.fixed_mask is None else jnp.asarray(self.fixed_mask)
+        held = initial if self.fixed_temperature is None else jnp.broadcast_to(
+            jnp.asarray(self.fixed_temperature, initial.dtype), (n,))
+        particles = ParticleState(positions=jnp.zeros((n, 3), initial.dtype), radii=jnp.ones(n, initial.dtype),
+                                  temperature=initial, mass=jnp.asarray(self.mass),
+                                  material=jnp.zeros(n, jnp.int32), fixed=fixed, fixed_temperature=held)
+        contacts = table_contacts(self.table, self.table.wall_conductance, self.table.wall_temperature)
+        return init_state(particles, contacts, self.dt)
+
+    def params(self, kappa, specific_heat) -> Params:
+        """:class:`~sintercond.simulate.Params` of the experiment at ``kappa`` (W/(m K)) and ``c`` (J/(kg K))."""
+        dtype = jnp.asarray(self.initial).dtype
+        return Params(conductivity=jnp.reshape(jnp.asarray(kappa, dtype), (1,)),
+                      specific_heat=jnp.reshape(jnp.asarray(specific_heat, dtype), (1,)),
+                      pulse=PulseParams(jnp.asarray(self.power), jnp.asarray(self.pulse_duration, dtype)))
+
     def _simulate(self, kappa, specific_heat):
-        table = ContactTable(self.table.neighbors, kappa * self.table.conductance,
-                             None if self.table.wall_conductance is None else kappa * self.table.wall_conductance,
-                             self.table.wall_temperature)
-        _, saved = thermal.simulate(self.initial, table, specific_heat * self.mass, self.dt, self.n_steps,
-                                    self.save_every, self.fixed_mask, self.fixed_temperature, source=self._source,
-                                    probes=self.probes)
+        n_readings = self.n_steps // self.save_every
+        _, saved = rollout(self._sim, self.initial_state(), self.params(kappa, specific_heat),
+                           n_readings * self.save_every, SaveAt(self.save_every, probe_temperatures(self.probes)))
         return saved
 
 
-def _pulse(power, duration, temperature, time):
-    return jnp.where(time < duration, power, 0.0)
-
-
 def _power(experiment, k):
-    """Heat input (W) during step ``k``, at the time ``k dt`` that :func:`sintercond.thermal.simulate` uses."""
-    return _pulse(experiment.power, experiment.pulse_duration, None, jnp.asarray(k, experiment.power.dtype) * experiment.dt)
+    """Heat input (W) during step ``k``, at the time ``k dt`` the simulator uses."""
+    t = jnp.asarray(k, experiment.power.dtype) * experiment.dt
+    return jnp.where(t < experiment.pulse_duration, experiment.power, 0.0)
 
 
 def _segment_length(n_steps):
@@ -157,12 +175,11 @@ def _adjoint_readings(experiment: ProbeExperiment, kappa, specific_heat):
 
 
 def _step(experiment, kappa, specific_heat, temperature, k):
-    """One explicit step; returns the new temperatures and ``H`` (inflow at kappa = 1)."""
+    """The simulator's explicit update (:func:`sintercond.thermal.explicit_update`) keeping ``H``, the inflow at
+    kappa = 1, which the adjoint needs."""
     inflow = heat_inflow(temperature, experiment.table)
-    rate = experiment.dt / (specific_heat * experiment.mass)
-    new = temperature + rate * (kappa * inflow + _power(experiment, k))
-    if experiment.fixed_mask is not None:
-        new = jnp.where(experiment.fixed_mask, experiment.fixed_temperature, new)
+    new = thermal.explicit_update(temperature, kappa * inflow + _power(experiment, k), specific_heat * experiment.mass,
+                                  experiment.dt, experiment.fixed_mask, experiment.fixed_temperature)
     return new, inflow
 
 
