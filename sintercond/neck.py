@@ -183,6 +183,9 @@ def max_overlap(r_i, r_j):
     return jnp.where(_valid_radii(r_i, r_j), h_max, jnp.nan)
 
 
+_max_overlap_compiled = jax.jit(max_overlap)
+
+
 def neck_residual(a, r_i, r_j, h):
     """Rojek's volume-conservation residual ``Z(a)`` (Eq. 27, caps by Eqs. 28-29).
 
@@ -267,7 +270,8 @@ def validate_neck_inputs(r_i, r_j, h, *, model="volume_conserving", names=("r_i"
     require_positive(name_j, r_j)
     require_finite(name_h, h)
     if model == "volume_conserving":
-        h_max = np.asarray(max_overlap(r_i, r_j), dtype=np.float64)
+        # compiled once per shape: eager dispatch would compile each op (~0.5 s per new length)
+        h_max = np.asarray(_max_overlap_compiled(r_i, r_j), dtype=np.float64)
         fail_where(
             h > h_max * (1.0 + _MAX_OVERLAP_SLACK_ULPS * np.finfo(np.float64).eps),
             lambda i: (

@@ -7,15 +7,17 @@ conductance 0 (the layout of jax-md's Dense neighbour format). The heat flow
 is then a gather and a row sum, with no scatter, which XLA fuses into one
 loop.
 
-Contacts are found with a jax-md cell-list neighbour list (cutoff twice the
-largest radius) and confirmed in float64 from the centre distances; the
-table is built once for a static packing.
+Contacts are found on the host with a vectorised NumPy cell list (cells of
+twice the largest radius, :func:`sintercond.neighbors.cell_list_pairs`) and
+confirmed in float64 from the centre distances; :func:`contact_pairs` gives
+them as per-pair arrays, :func:`ell_table` lifts per-pair values to the
+table. The table is built once for a static packing (no JAX compile).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import warnings
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -23,6 +25,7 @@ import numpy as np
 
 from sintercond._symmetric import self_adjoint
 from sintercond.conductance import pair_conductance, validate_pair_conductance_inputs
+from sintercond.neighbors import cell_list_pairs, minimum_image
 
 
 @jax.tree_util.register_dataclass
@@ -59,38 +62,115 @@ class ContactTable:
         return np.stack([rows[keep], nbr[keep]], axis=1)
 
 
-def minimum_image(delta, periodic_box):
-    """``delta`` (m) reduced to the nearest periodic image in a box of sides ``periodic_box`` (None: free space)."""
-    if periodic_box is None:
-        return delta
-    return delta - periodic_box * np.round(delta / periodic_box)
+@dataclasses.dataclass(frozen=True)
+class ContactPairs:
+    """The contacting pairs of a packing, each once (host-side NumPy, float64).
+
+    Attributes:
+      i, j: ``[n_pairs]`` int64 particle indices, ``i < j``, sorted by ``(i, j)``.
+      overlap: ``[n_pairs]`` ``h = r_i + r_j - |c_i - c_j|`` (m, minimum-image
+        in a periodic box), clipped at 0: pairs closed within the tolerance touch.
+      r_i, r_j: ``[n_pairs]`` radii of the two particles (m).
+      n_particles: number of particles of the packing.
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    overlap: np.ndarray
+    r_i: np.ndarray
+    r_j: np.ndarray
+    n_particles: int
 
 
-def _neighbor_candidates(centres, radii, periodic_box=None):
-    """Candidate neighbours within ``2 r_max`` from a jax-md cell list, as a padded ``[n, m]`` table."""
-    # jax-md 0.2.29 scatters int64 into its int32 index buffers under x64
-    # (a FutureWarning of JAX) and relies on implicit promotion; both are its own.
-    with jax.numpy_dtype_promotion("standard"), warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="scatter inputs have incompatible types", category=FutureWarning)
-        from jax_md import partition, space
+def contact_pairs(centres, radii, tolerance=1e-9, periodic_box=None) -> ContactPairs:
+    """Every contacting pair of a static packing with its overlap and radii (vectorised cell list).
 
-        cutoff = 2.0 * float(radii.max()) * (1.0 + 1e-6)
-        if periodic_box is None:
-            positions = centres - centres.min(axis=0)
-            box = positions.max(axis=0) + 2 * cutoff
-            displacement, _ = space.free()
-        else:
-            box = np.asarray(periodic_box, dtype=np.float64)
-            positions = np.mod(centres, box)
-            displacement, _ = space.periodic(jnp.asarray(box))
-        neighbor_fn = partition.neighbor_list(displacement, jnp.asarray(box), cutoff, capacity_multiplier=1.0,
-                                              format=partition.NeighborListFormat.Dense)
-        nbrs = neighbor_fn.allocate(jnp.asarray(positions))
-        # allocate() sizes the buffer from these very positions; an overflow
-        # here would mean a jax-md bug, never a silently lost contact
-        if bool(nbrs.did_buffer_overflow):
-            raise RuntimeError("jax-md neighbour list overflowed on allocation")
-        return np.asarray(nbrs.idx)
+    Spheres ``i, j`` are in contact when ``|c_i - c_j| <= (r_i + r_j)(1 + tolerance)``
+    (touching lattices have gaps of a few ulp). With ``periodic_box`` (``[3]``
+    side lengths, m) distances are minimum-image. See
+    :func:`sintercond.neighbors.cell_list_pairs`.
+
+    Args:
+      centres: ``[n, 3]`` (m). radii: ``[n]`` (m).
+      tolerance: relative gap still counted as contact.
+      periodic_box: ``[3]`` box side lengths (m), or None.
+    """
+    centres = np.asarray(centres, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
+    i, j = cell_list_pairs(centres, radii, tolerance, box)
+    delta = minimum_image(centres[i] - centres[j], box)
+    overlap = np.maximum(radii[i] + radii[j] - np.linalg.norm(delta, axis=1), 0.0)
+    return ContactPairs(i, j, overlap, radii[i], radii[j], len(radii))
+
+
+def ell_table(n_particles, i, j, *pair_values):
+    """Lift pairs to the padded (ELL) layout: ``[n, m]`` neighbours and each pair value on both rows.
+
+    Args:
+      n_particles: ``n``.
+      i, j: ``[n_pairs]`` pairs ``i < j``, sorted by ``(i, j)``, each once.
+      *pair_values: ``[n_pairs]`` arrays, one value per pair (e.g. ``K_ij``).
+
+    Returns:
+      ``(neighbors, *values)``: ``neighbors`` ``[n, m]`` int64 with each row's
+      neighbours in ascending order, padded with the row's own index;
+      ``values`` ``[n, m]`` with the pair's value in both rows (so the network
+      is exactly symmetric) and 0 on padding. ``m = max(degree, 1)``.
+    """
+    # rows j first (their neighbours i < j come out ascending), then rows i
+    rows = np.concatenate([j, i])
+    cols = np.concatenate([i, j])
+    order = np.argsort(rows, kind="stable")
+    rows, cols = rows[order], cols[order]
+    degree = np.bincount(rows, minlength=n_particles)
+    width = max(int(degree.max()) if n_particles else 0, 1)
+    slot = np.arange(len(rows)) - np.repeat(np.cumsum(degree) - degree, degree)
+    neighbors = np.repeat(np.arange(n_particles)[:, None], width, axis=1)
+    neighbors[rows, slot] = cols
+    out = [neighbors]
+    for value in pair_values:
+        table = np.zeros((n_particles, width), dtype=np.asarray(value).dtype)
+        table[rows, slot] = np.concatenate([value, value])[order]
+        out.append(table)
+    return tuple(out)
+
+
+@functools.lru_cache(maxsize=None)
+def _compiled_law(law, neck_model):
+    return jax.jit(functools.partial(pair_conductance, law, neck_model=neck_model))
+
+
+def pair_conductances(law, pairs: ContactPairs, kappa_i, kappa_j, params=None, neck_model=None) -> np.ndarray:
+    """Validated ``K_ij`` (W/K) of :class:`ContactPairs`, ``[n_pairs]``, on the host.
+
+    As :func:`sintercond.conductance.pair_conductance` (validated first),
+    compiled as one call on a length padded to a power of two with harmless
+    touching pairs: eager dispatch would compile every operation at every new
+    length (about 1 s); the bucketed length lets packings of similar size,
+    and the persistent compilation cache, reuse the compiled law.
+
+    Args:
+      law, params, neck_model: as :func:`sintercond.conductance.pair_conductance`.
+      pairs: the contacts (:func:`contact_pairs`).
+      kappa_i, kappa_j: ``[n_pairs]`` conductivities of the two particles (W/(m K)).
+    """
+    n = len(pairs.overlap)
+    size = max(256, 1 << max(n - 1, 0).bit_length())
+
+    def padded(x, value):
+        return np.concatenate([np.asarray(x, dtype=np.float64), np.full(size - n, value)])
+
+    # padding: two unit spheres touching (h = 0, K = 0), inside every law's domain
+    args = (padded(pairs.r_i, 1.0), padded(pairs.r_j, 1.0), padded(pairs.overlap, 0.0), padded(kappa_i, 1.0),
+            padded(kappa_j, 1.0))
+    validate_pair_conductance_inputs(law, *args, params=params, neck_model=neck_model)
+    params = {} if params is None else {name: jnp.asarray(value) for name, value in params.items()}
+    if any(value.ndim for value in params.values()):  # per-pair parameters: the unpadded length
+        args = tuple(a[:n] for a in args)
+    # law objects hold a dict, so they are not hashable: compiled afresh
+    compiled = _compiled_law(law, neck_model) if isinstance(law, str) else _compiled_law.__wrapped__(law, neck_model)
+    return np.asarray(compiled(*args, params=params))[:n]
 
 
 def find_contacts(centres, radii, tolerance=1e-9, periodic_box=None):
@@ -99,21 +179,10 @@ def find_contacts(centres, radii, tolerance=1e-9, periodic_box=None):
     Spheres ``i, j`` are in contact when ``|c_i - c_j| <= (r_i + r_j)(1 + tolerance)``
     (touching lattices have gaps of a few ulp). With ``periodic_box`` (``[3]``
     side lengths, m) distances are minimum-image: a periodic packing.
+    Neighbours are listed in ascending order.
     """
-    centres = np.asarray(centres, dtype=np.float64)
-    radii = np.asarray(radii, dtype=np.float64)
-    n = len(radii)
-    candidates = _neighbor_candidates(centres, radii, periodic_box)  # padding = n
-    valid = candidates < n
-    j = np.where(valid, candidates, 0)
-    box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
-    distance = np.linalg.norm(minimum_image(centres[:, None, :] - centres[j], box), axis=-1)
-    touching = valid & (distance <= (radii[:, None] + radii[j]) * (1.0 + tolerance))
-    width = max(int(touching.sum(axis=1).max()) if n else 0, 1)
-    table = np.tile(np.arange(n)[:, None], (1, width))
-    for i in range(n):
-        row = j[i][touching[i]]
-        table[i, : len(row)] = row
+    pairs = contact_pairs(centres, radii, tolerance, periodic_box)
+    (table,) = ell_table(pairs.n_particles, pairs.i, pairs.j)
     return table
 
 
@@ -133,27 +202,14 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
       :class:`ContactTable` with ``K_ij`` from the law; the input is validated
       first (radii, conductivities, overlaps inside the neck model's domain).
     """
-    centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     kappa = np.broadcast_to(np.asarray(kappa, dtype=np.float64), radii.shape)
-    table = find_contacts(centres, radii, tolerance, periodic_box)
-    rows = np.broadcast_to(np.arange(len(radii))[:, None], table.shape)
-    upper = table > rows  # each pair once (padding points at the row itself)
-    i, j = rows[upper], table[upper]
-    box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
-    # contacts closed within the tolerance have h ~ -1e-16: they touch
-    h = np.maximum(radii[i] + radii[j] - np.linalg.norm(minimum_image(centres[i] - centres[j], box), axis=1), 0.0)
-    validate_pair_conductance_inputs(law, radii[i], radii[j], h, kappa[i], kappa[j], params, neck_model)
-    k_pairs = np.asarray(pair_conductance(law, radii[i], radii[j], h, kappa[i], kappa[j], params=params,
-                                          neck_model=neck_model))
+    p = contact_pairs(centres, radii, tolerance, periodic_box)
+    k_pairs = pair_conductances(law, p, kappa[p.i], kappa[p.j], params, neck_model)
     # one value per pair on both rows: the network is exactly symmetric, so
     # heat is conserved to round-off (touching with h = 0 has no neck: K = 0)
-    k = np.zeros(table.shape)
-    k[upper] = k_pairs
-    lookup = dict(zip(zip(i.tolist(), j.tolist()), k_pairs.tolist()))
-    lower = (table < rows)
-    k[lower] = [lookup[(b, a)] for a, b in zip(rows[lower].tolist(), table[lower].tolist())]
-    return ContactTable(neighbors=jnp.asarray(table, dtype=jnp.int32), conductance=jnp.asarray(k))
+    neighbors, k = ell_table(len(radii), p.i, p.j, k_pairs)
+    return ContactTable(neighbors=jnp.asarray(neighbors, dtype=jnp.int32), conductance=jnp.asarray(k))
 
 
 def heat_inflow(temperature, table: ContactTable):

@@ -122,7 +122,7 @@ def build_model(scene, centres=None, radii=None) -> Model:
         k_wall, t_wall = _merged_wall_conductance(scene, centres, radii, conducting)
         contacts = simulate.table_contacts(table, k_wall, t_wall)
     else:
-        contacts = simulate.lifted_contacts(physics, centres, radii, table.neighbors,
+        contacts = simulate.lifted_contacts(physics, centres, radii,
                                             [(_wall_penetration(centres, radii, axis, position), wall["temperature"])
                                              for _, axis, position, wall in conducting])
     params = scene_params(scene)

@@ -63,6 +63,7 @@ import numpy as np
 from sintercond import thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.neck import NECK_MODELS
+from sintercond.neighbors import did_buffer_overflow
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity
 
@@ -406,13 +407,12 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         if physics.motion is not None:
             positions = physics.motion(state.time).astype(particles.positions.dtype)
             particles = dataclasses.replace(particles, positions=positions)
-        with jax.numpy_dtype_promotion("standard"):
-            nbrs = neighbor_fn.update(particles.positions, contacts.neighbor_list)
+        nbrs = neighbor_fn.update(particles.positions, contacts.neighbor_list)
         j, neck, overlap = _dynamic_geometry(physics, particles.positions, particles.radii, nbrs.idx)
         kappa = jnp.atleast_1d(jnp.asarray(prep.params.conductivity))
         conductance = conductance_lift(physics, particles.radii, particles.material, j, neck, overlap, kappa,
                                        merged_law_params(physics, prep.params))
-        state = dataclasses.replace(state, particles=particles, overflow=state.overflow | nbrs.did_buffer_overflow,
+        state = dataclasses.replace(state, particles=particles, overflow=state.overflow | did_buffer_overflow(nbrs),
                                     contacts=dataclasses.replace(contacts, neighbor_list=nbrs, neighbors=nbrs.idx))
         return state, conductance, j
 
@@ -483,37 +483,72 @@ def table_contacts(table, wall_conductance=None, wall_temperature=None) -> Conta
                     wall_temperature=None if wall_temperature is None else jnp.asarray(wall_temperature))
 
 
-def static_necks(physics: Physics, centres, radii, table_neighbors, periodic_box=None):
-    """Necks and overlaps ``[n, m]`` of a static padded table (host, once), pairs in index order."""
-    from sintercond.network import minimum_image
+def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=None, tolerance=1e-9) -> Contacts:
+    """Contacts of ``conductance="lifted"``: the neck of every pair and of every conducting wall (host, once).
 
-    centres = np.asarray(centres, np.float64)
-    radii = np.asarray(radii, np.float64)
-    nbr = np.asarray(table_neighbors)
-    rows = np.broadcast_to(np.arange(len(radii))[:, None], nbr.shape)
-    lo, hi = np.minimum(rows, nbr), np.maximum(rows, nbr)
-    distance = np.linalg.norm(minimum_image(centres[hi] - centres[lo], periodic_box), axis=-1)
-    overlap = np.where(nbr != rows, np.maximum(radii[lo] + radii[hi] - distance, 0.0), 0.0)
-    neck = np.asarray(NECK_MODELS[physics.neck](radii[lo], radii[hi], overlap))
-    return jnp.asarray(np.where(overlap > 0, neck, 0.0)), jnp.asarray(overlap)
-
-
-def lifted_contacts(physics: Physics, centres, radii, neighbors, walls=(), periodic_box=None) -> Contacts:
-    """Contacts of ``conductance="lifted"``: necks of every pair and of every conducting wall.
-
+    Pairs as :func:`sintercond.network.contact_pairs` finds them, necks by
+    ``physics.neck``, laid out with :func:`sintercond.network.ell_table`.
     ``walls``: ``(penetration [n], temperature)`` per conducting wall (m, K),
     penetration <= 0 where a particle does not touch it.
     """
-    neck, overlap = static_necks(physics, centres, radii, neighbors, periodic_box)
-    contacts = Contacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=neck, overlap=overlap)
+    from sintercond.network import contact_pairs, ell_table
+
+    radii = np.asarray(radii, np.float64)
+    p = contact_pairs(centres, radii, tolerance, periodic_box)
+    a = np.where(p.overlap > 0, np.asarray(NECK_MODELS[physics.neck](p.r_i, p.r_j, p.overlap)), 0.0)
+    neighbors, neck, overlap = ell_table(p.n_particles, p.i, p.j, a, p.overlap)
+    contacts = Contacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=jnp.asarray(neck),
+                        overlap=jnp.asarray(overlap))
     if walls:
-        radii = np.asarray(radii, np.float64)
         r_wall = physics.wall_radius_factor * float(radii.max())
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
         a = np.where(h > 0, np.asarray(NECK_MODELS[physics.neck](radii, r_wall, h)), 0.0)
         contacts = dataclasses.replace(contacts, wall_neck=jnp.asarray(a), wall_overlap=jnp.asarray(h),
                                        wall_temperature=jnp.asarray([float(t) for _, t in walls]))
     return contacts
+
+
+def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=None):
+    """Contacts of ``contacts="dynamic"`` and their neighbour-list functions: ``(contacts, neighbor_fns)``.
+
+    A jax-md Dense list with a Verlet skin (:func:`sintercond.neighbors.neighbor_list`):
+    inside the step it is rebuilt only once a particle moved ``skin / 2``.
+    The cell-list region is the packing's extent widened by ``margin`` (m;
+    default half the extent plus ``2 r_max`` on every side). Pass
+    ``neighbor_fns`` to :func:`simulator`.
+    """
+    from sintercond.neighbors import neighbor_list
+
+    positions = np.asarray(positions, np.float64)
+    radii = np.asarray(radii, np.float64)
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    margin = 0.5 * (hi - lo) + 2.0 * radii.max() if margin is None else margin
+    fns = neighbor_list(radii, skin, lo - margin, hi + margin, capacity_multiplier=capacity_multiplier)
+    nbrs = fns.allocate(jnp.asarray(positions))
+    return Contacts(neighbors=nbrs.idx, neighbor_list=nbrs), fns
+
+
+def reallocate_neighbors(neighbor_fns):
+    """A ``reallocate(start, end)`` for :func:`sintercond.run.advance`: a list sized for the chunk's end positions.
+
+    The redone chunk starts from ``start`` with the larger list; its first
+    update rebuilds it at the start positions (they moved more than the skin
+    from the end positions it was sized at, or it was already valid).
+    """
+    def reallocate(start: SimState, end: SimState) -> SimState:
+        nbrs = neighbor_fns.allocate(end.particles.positions)
+        nbrs = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
+        contacts = dataclasses.replace(start.contacts, neighbor_list=nbrs, neighbors=nbrs.idx)
+        return dataclasses.replace(start, contacts=contacts)
+
+    return reallocate
+
+
+def affine_shrinkage(centres, rate):
+    """Positions shrinking toward the centroid at a linear strain ``rate`` (1/s): ``c0 + (1 - rate t)(c - c0)``."""
+    centres = jnp.asarray(centres)
+    centroid = jnp.mean(centres, axis=0)
+    return lambda t: centroid + (1.0 - rate * t) * (centres - centroid)
 
 
 # --------------------------------------------------------------------------

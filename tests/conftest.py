@@ -7,6 +7,9 @@ import jax
 
 import sintercond  # noqa: F401  (turns on float64)
 
+# the CLI turns JAX's persistent compilation cache on; tests write nothing to ~/.cache
+os.environ.setdefault("SINTERCOND_COMPILATION_CACHE", "0")
+
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 
 hypothesis.settings.register_profile(

@@ -1,10 +1,12 @@
-"""Moving packings: neighbour-list overflow is recovered and no contact is lost."""
+"""Moving packings (dynamic contacts): neighbour-list overflow is recovered and no contact is lost."""
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import geometry, moving, network, packing, thermal
+from sintercond import geometry, network, packing, simulate, thermal
+from sintercond.run import advance
+from sintercond.state import ParticleState
 
 
 @pytest.fixture(scope="module")
@@ -13,29 +15,48 @@ def bed():
     return b.centres * 1e-6, b.radii * 1e-6
 
 
+def _moving_run(t0, positions_fn, radii, capacity, dt, steps, chunk, capacity_multiplier, skin, law="rojek",
+                neck_model=None):
+    """Explicit conduction while the particles follow ``positions_fn``; the host driver redoes overflowing chunks."""
+    physics = simulate.Physics(law=law, neck_model=neck_model, conductance="lifted", contacts="dynamic",
+                               motion=positions_fn)
+    start = np.asarray(positions_fn(0.0))
+    contacts, fns = simulate.dynamic_contacts(start, radii, skin, capacity_multiplier)
+    n = len(radii)
+    particles = ParticleState(jnp.asarray(start), jnp.asarray(radii), t0, jnp.asarray(capacity), jnp.zeros(n, jnp.int32),
+                              jnp.zeros(n, bool), t0)
+    state = simulate.init_state(particles, contacts, dt)
+    params = simulate.Params(conductivity=jnp.array([7.0]), specific_heat=jnp.array([1.0]))
+    sim = simulate.simulator(physics, fns)
+    return advance(sim, state, params, steps, chunk, reallocate=simulate.reallocate_neighbors(fns))
+
+
 def test_shrinking_packing_recovers_overflow_and_matches_a_roomy_run(bed):
     centres, radii = bed
     rate, dt, steps = 40.0, 2e-5, 400  # 1 - rate * t_end = 0.68: necks grow, new contacts appear
-    positions = moving.affine_shrinkage(centres, rate)
-    capacity = jnp.asarray(4 / 3 * np.pi * radii**3 * 4430 * 560)
+    positions = simulate.affine_shrinkage(centres, rate)
+    capacity = 4 / 3 * np.pi * radii**3 * 4430 * 560
     t0 = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
     # a tight list (no spare capacity) must overflow as contacts form, and be redone
-    tight, report = moving.simulate_moving(t0, positions, radii, 7.0, capacity, dt, steps, chunk=50,
-                                           capacity_multiplier=1.0, law="batchelor_obrien", neck_model="intersection")
+    tight, report = _moving_run(t0, positions, radii, capacity, dt, steps, 50, 1.0, 0.0, "batchelor_obrien",
+                                "intersection")
     assert report["reallocations"] >= 1
-    roomy, report_roomy = moving.simulate_moving(t0, positions, radii, 7.0, capacity, dt, steps, chunk=50,
-                                                 capacity_multiplier=4.0, law="batchelor_obrien",
-                                                 neck_model="intersection")
+    roomy, report_roomy = _moving_run(t0, positions, radii, capacity, dt, steps, 50, 4.0, 0.0, "batchelor_obrien",
+                                      "intersection")
     assert report_roomy["reallocations"] == 0
-    np.testing.assert_allclose(np.asarray(tight), np.asarray(roomy), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(tight.temperature), np.asarray(roomy.temperature), rtol=1e-12)
+    # a skin (rebuilds only after half of it is used up) gives the same temperatures
+    skinned, _ = _moving_run(t0, positions, radii, capacity, dt, steps, 50, 1.5, 0.2 * float(radii.min()),
+                             "batchelor_obrien", "intersection")
+    np.testing.assert_allclose(np.asarray(skinned.temperature), np.asarray(roomy.temperature), rtol=1e-12)
     # no contact lost: every brute-force contact at the end is in the final neighbour table
     end = np.asarray(positions(steps * dt))
-    idx = report["final_idx"]
+    idx = np.asarray(tight.contacts.neighbors)
     listed = {(i, int(j)) for i in range(len(radii)) for j in idx[i] if j < len(radii)}
     for i, j in geometry.contacts(end, radii, tolerance=0.0):
         assert (i, j) in listed and (j, i) in listed
     # heat is conserved while the network changes
-    assert float(jnp.sum(capacity * tight)) == pytest.approx(float(jnp.sum(capacity * t0)), rel=1e-12)
+    assert float(jnp.sum(capacity * tight.temperature)) == pytest.approx(float(jnp.sum(capacity * t0)), rel=1e-12)
 
 
 def test_static_motion_equals_the_static_solver():
@@ -48,5 +69,5 @@ def test_static_motion_equals_the_static_solver():
     dt = 0.5 * float(thermal.stable_time_step(capacity, table))
     t0 = jnp.asarray(np.linspace(300, 1000, len(radii)))
     static, _ = thermal.simulate(t0, table, capacity, dt, n_steps=200, save_every=200)
-    still, _ = moving.simulate_moving(t0, moving.affine_shrinkage(centres, 0.0), radii, 7.0, capacity, dt, 200, chunk=50)
-    np.testing.assert_allclose(np.asarray(still), np.asarray(static), rtol=1e-12)
+    still, _ = _moving_run(t0, simulate.affine_shrinkage(centres, 0.0), radii, capacity, dt, 200, 50, 1.25, 0.0)
+    np.testing.assert_allclose(np.asarray(still.temperature), np.asarray(static), rtol=1e-12)

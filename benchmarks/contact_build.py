@@ -1,0 +1,116 @@
+"""Contact-table build: the previous jax-md + Python-loop build against the vectorised NumPy cell list.
+
+Usage: python benchmarks/contact_build.py [--sizes 10000 100000] [--new-sizes 1000000] [--old-rev 43fe49a]
+
+The packing is benchmarks/thermal_step.py's jittered sintered simple-cubic
+lattice (~6 contacts per particle). Each (build, size) runs in a process of
+its own so that its peak RSS is its own: 'first' is the first
+``network.contact_table`` call of the process (with whatever it compiles),
+'again' a second call on the same packing. The old build is
+``sintercond/network.py`` as it was at ``--old-rev`` (read with ``git show``),
+run against today's law modules; both builds must give the same contacts and
+conductances (checked). Prints the table and rewrites its section of
+benchmarks/RESULTS.md.
+"""
+
+import argparse
+import hashlib
+import json
+import pathlib
+import resource
+import subprocess
+import sys
+import time
+import types
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the checkout this script lives in, not an installed sintercond
+
+OLD_REV = "43fe49a"
+
+
+def old_network(rev):
+    """``sintercond/network.py`` at ``rev`` as a module."""
+    source = subprocess.run(["git", "show", f"{rev}:sintercond/network.py"], cwd=ROOT, capture_output=True,
+                            text=True, check=True).stdout
+    module = types.ModuleType(f"network_{rev}")
+    exec(compile(source, f"network@{rev}", "exec"), module.__dict__)
+    return module
+
+
+def child(build, n, rev):
+    """One build at one size in this process; prints a JSON line."""
+    import numpy as np
+    from thermal_step import jittered_packing
+
+    from sintercond import network
+
+    module = old_network(rev) if build == "old" else network
+    centres, radii = jittered_packing(n)
+    times = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        table = module.contact_table(centres, radii, 7.0)
+        table.conductance.block_until_ready()
+        times.append(time.perf_counter() - t0)
+    pairs = table.pairs()
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    nbr, k = np.asarray(table.neighbors), np.asarray(table.conductance)
+    rows = np.broadcast_to(np.arange(len(radii))[:, None], nbr.shape)
+    upper = nbr > rows
+    k_sorted = k[upper][np.lexsort((nbr[upper], rows[upper]))]  # K in the order of the sorted pairs
+    print(json.dumps({
+        "first": times[0], "again": times[1], "pairs": len(pairs),
+        "digest": hashlib.sha1(pairs.astype(np.int64).tobytes()).hexdigest(),
+        "k": k_sorted.tolist() if n <= 20_000 else float(np.sum(k_sorted)),
+        "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
+    }))
+
+
+def run_child(build, n, rev):
+    out = subprocess.run([sys.executable, __file__, "--child", build, str(n), "--old-rev", rev], cwd=ROOT,
+                         capture_output=True, text=True, check=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def main():
+    import numpy as np
+    from _common import markdown_table, write_section
+
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000])
+    parser.add_argument("--new-sizes", type=int, nargs="*", default=[1_000_000], help="sizes for the new build only")
+    parser.add_argument("--old-rev", default=OLD_REV)
+    parser.add_argument("--child", nargs=2, metavar=("BUILD", "N"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        return child(args.child[0], int(args.child[1]), args.old_rev)
+    rows = []
+    for n in sorted(set(args.sizes) | set(args.new_sizes)):
+        results = {build: run_child(build, n, args.old_rev) for build in ("old", "new")
+                   if build == "new" or n in args.sizes}
+        if "old" in results:
+            old, new = results["old"], results["new"]
+            assert old["digest"] == new["digest"], f"different contacts at n = {n}"
+            np.testing.assert_allclose(new["k"], old["k"], rtol=1e-12)
+        for build, r in results.items():
+            speedup = f"{results['old']['again'] / r['again']:.0f}x" if "old" in results and build == "new" else ""
+            rows.append((f"{n:,}", build, f"{r['pairs']:,}", f"{r['first']:.2f}", f"{r['again']:.3f}", speedup,
+                         f"{r['peak_gb']:.2f}"))
+            print(*rows[-1], sep="\t", flush=True)
+    body = (
+        "## Contact build: `network.contact_table` on a static packing\n\n"
+        "Jittered sintered SC packing (`thermal_step.jittered_packing`, ~6 contacts per particle), kappa = 7. "
+        f"'old' is `network.py` at {args.old_rev} (jax-md cell-list candidates, then a Python loop over rows and "
+        "a dict lookup for the lower triangle); 'new' is the vectorised NumPy cell list (`neighbors."
+        "cell_list_pairs`), `ell_table`, and the law compiled once on a power-of-two length. One process per "
+        "row: 'first call' includes what that call compiles (jax-md's cell list for 'old', the law for both); "
+        "peak RSS is the whole process's. Same contacts and K (to 1e-12) checked where both run.\n\n"
+        + markdown_table(("particles", "build", "pairs", "first call (s)", "second call (s)", "speed-up (second)",
+                          "peak RSS (GB)"), rows)
+    )
+    write_section("contact_build", "python benchmarks/contact_build.py", body)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,228 @@
+"""Contact searches against brute force; the skinned jax-md list; per-pair history through rebuilds."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sintercond import geometry, network, neighbors
+
+
+def random_packing(n, seed, spread=1.0, polydispersity=0.5):
+    """``n`` spheres in a cube of side ``spread * n^(1/3)``, radii in ``[0.5 - p/2, 0.5 + p/2]`` (~ a few contacts each)."""
+    rng = np.random.default_rng(seed)
+    side = spread * max(n, 1) ** (1 / 3)
+    centres = rng.uniform(-0.3 * side, 0.7 * side, (n, 3))
+    radii = 0.5 + polydispersity * rng.uniform(-0.5, 0.5, n)
+    return centres, radii
+
+
+def as_set(i, j):
+    return set(zip(i.tolist(), j.tolist()))
+
+
+# --------------------------------------------------------------------------
+# host searches
+
+
+def test_brute_force_equals_the_triangle_search():
+    centres, radii = random_packing(300, seed=0)
+    i, j = neighbors.brute_force_pairs(centres, radii, chunk=37)
+    np.testing.assert_array_equal(np.stack([i, j], axis=1), geometry.contacts(centres, radii))
+    assert len(i) > 300
+
+
+@given(n=st.integers(0, 120), seed=st.integers(0, 2**31), spread=st.sampled_from([0.3, 1.0, 3.0]),
+       polydispersity=st.sampled_from([0.0, 0.5, 0.9]))
+def test_cell_list_equals_brute_force_free(n, seed, spread, polydispersity):
+    centres, radii = random_packing(n, seed, spread, polydispersity)
+    i, j = neighbors.cell_list_pairs(centres, radii, budget=64)  # many chunks
+    bi, bj = neighbors.brute_force_pairs(centres, radii)
+    np.testing.assert_array_equal(i, bi)
+    np.testing.assert_array_equal(j, bj)
+
+
+@given(n=st.integers(0, 120), seed=st.integers(0, 2**31),
+       cells=st.tuples(*[st.sampled_from([0.6, 1.5, 2.5, 3.5, 6.0])] * 3))
+def test_cell_list_equals_brute_force_periodic(n, seed, cells):
+    # boxes of 1, 2, 3 or more cells per axis (the half shell needs 3); centres
+    # partly outside the box and negative: the search wraps them
+    centres, radii = random_packing(n, seed)
+    box = np.array(cells) * 2.0 * (float(radii.max()) if n else 1.0) * 1.0001
+    i, j = neighbors.cell_list_pairs(centres, radii, periodic_box=box, budget=64)
+    bi, bj = neighbors.brute_force_pairs(centres, radii, periodic_box=box)
+    np.testing.assert_array_equal(i, bi)
+    np.testing.assert_array_equal(j, bj)
+
+
+def test_touching_lattice_within_tolerance():
+    # a touching simple-cubic lattice: every gap is a few ulp either way of 0
+    g = np.arange(5) * 0.3
+    centres = np.array(np.meshgrid(g, g, g, indexing="ij")).reshape(3, -1).T + 1e3  # far from 0: rounding
+    radii = np.full(len(centres), 0.15)
+    i, j = neighbors.cell_list_pairs(centres, radii, tolerance=1e-9)
+    assert as_set(i, j) == as_set(*neighbors.brute_force_pairs(centres, radii, tolerance=1e-9))
+    assert len(i) == 3 * 4 * 25  # every lattice bond
+
+
+def test_contact_table_layout():
+    centres, radii = random_packing(400, seed=3)
+    pairs = network.contact_pairs(centres, radii)
+    bi, bj = neighbors.brute_force_pairs(centres, radii)
+    np.testing.assert_array_equal(pairs.i, bi)
+    np.testing.assert_array_equal(pairs.j, bj)
+    d = np.linalg.norm(centres[bi] - centres[bj], axis=1)
+    np.testing.assert_array_equal(pairs.overlap, np.maximum(radii[bi] + radii[bj] - d, 0.0))
+    np.testing.assert_array_equal(pairs.r_i, radii[bi])
+    table = network.find_contacts(centres, radii)
+    own = np.arange(len(radii))[:, None]
+    real = table != own
+    # padding at the end of each row, neighbours ascending
+    assert np.all(np.diff(real.astype(int), axis=1) <= 0)
+    assert np.all(np.where(real[:, 1:] & real[:, :-1], np.diff(table, axis=1) > 0, True))
+    directed = {(a, int(b)) for a, row in enumerate(table) for b in row[row != a]}
+    assert directed == as_set(bi, bj) | as_set(bj, bi)
+    # one value per pair, on both rows
+    value = np.arange(len(bi), dtype=np.float64) + 1.0
+    nbr, v = network.ell_table(len(radii), bi, bj, value)
+    np.testing.assert_array_equal(nbr, table)
+    lookup = {(a, b): x for a, b, x in zip(bi.tolist(), bj.tolist(), value.tolist())}
+    for a in range(len(radii)):
+        for slot in range(nbr.shape[1]):
+            b = int(nbr[a, slot])
+            assert v[a, slot] == (0.0 if b == a else lookup[(min(a, b), max(a, b))])
+
+
+def test_isolated_particles_and_empty_packings():
+    assert network.find_contacts(np.zeros((0, 3)), np.zeros(0)).shape == (0, 1)
+    table = network.find_contacts(np.array([[0.0, 0, 0], [5.0, 0, 0]]), np.ones(2))
+    np.testing.assert_array_equal(table, [[0], [1]])
+
+
+# --------------------------------------------------------------------------
+# the skinned jax-md list
+
+
+def listed_pairs(idx):
+    """Directed pairs ``(i, j)`` of a jax-md Dense table (padding ``n``)."""
+    idx = np.asarray(idx)
+    n = len(idx)
+    return {(a, int(b)) for a, row in enumerate(idx) for b in row if b < n}
+
+
+def within(positions, reach, periodic_box=None):
+    """Directed pairs closer than ``reach``, by brute force."""
+    n = len(positions)
+    i, j = neighbors.brute_force_pairs(np.asarray(positions), np.full(n, reach / 2), tolerance=0.0,
+                                       periodic_box=periodic_box)
+    return as_set(i, j) | as_set(j, i)
+
+
+def free_list(radii, centres, skin, capacity_multiplier=1.25):
+    return neighbors.neighbor_list(radii, skin, box_lo=centres.min(axis=0) - 2.0, box_hi=centres.max(axis=0) + 2.0,
+                                   capacity_multiplier=capacity_multiplier)
+
+
+def test_allocated_list_is_the_pairs_within_cutoff_plus_skin_in_float64():
+    centres, radii = random_packing(250, seed=4)
+    fns = free_list(radii, centres, skin=0.3)
+    assert fns.cutoff == pytest.approx(2 * radii.max(), rel=1e-5)
+    nbrs = fns.allocate(centres)
+    assert nbrs.reference_position.dtype == jnp.float64 and nbrs.idx.dtype == jnp.int32
+    assert not bool(neighbors.did_buffer_overflow(nbrs))
+    assert listed_pairs(nbrs.idx) == within(centres, fns.cutoff + fns.skin)
+    # an update under jit keeps float64 and, with no motion, rebuilds nothing
+    after = jax.jit(fns.update)(jnp.asarray(centres), nbrs)
+    assert after.reference_position.dtype == jnp.float64
+    assert not bool(neighbors.did_rebuild(nbrs, after))
+
+
+def test_periodic_list_wraps():
+    centres, radii = random_packing(200, seed=5)
+    box = np.ptp(centres, axis=0) * 0.9  # centres outside the box too
+    fns = neighbors.neighbor_list(radii, 0.2, periodic_box=box)
+    nbrs = fns.allocate(centres)
+    assert nbrs.reference_position.dtype == jnp.float64
+    assert listed_pairs(nbrs.idx) == within(centres, fns.cutoff + fns.skin, periodic_box=box)
+
+
+def test_overflow_is_flagged_and_reallocation_recovers():
+    centres, radii = random_packing(250, seed=6, spread=1.3)
+    fns = free_list(radii, centres, skin=0.2, capacity_multiplier=1.0)
+    nbrs = fns.allocate(centres)
+    squeezed = centres.mean(axis=0) + 0.7 * (centres - centres.mean(axis=0))  # more neighbours each
+    nbrs = jax.jit(fns.update)(jnp.asarray(squeezed), nbrs)
+    assert bool(neighbors.did_buffer_overflow(nbrs))
+    nbrs = fns.allocate(squeezed)
+    assert not bool(neighbors.did_buffer_overflow(nbrs))
+    assert listed_pairs(nbrs.idx) == within(squeezed, fns.cutoff + fns.skin)
+
+
+def in_contact(positions, radii, idx):
+    n = len(radii)
+    valid = idx < n
+    j = jnp.where(valid, idx, 0)
+    d = jnp.linalg.norm(positions[:, None, :] - positions[j], axis=-1)
+    return valid & (d <= radii[:, None] + radii[j])
+
+
+def test_contact_age_survives_rebuilds_and_a_reallocation():
+    # Each pair's contact age (steps in contact without a break) and the
+    # neighbour it was first seen with ride along in [n, m, 2] history,
+    # remapped at every update. Reference: a dict keyed by (i, j) from the
+    # brute-force contacts of every step.
+    centres, radii = random_packing(150, seed=7, spread=1.05)
+    velocity = np.random.default_rng(8).normal(0.0, 0.005, centres.shape)
+    fns = free_list(radii, centres, skin=0.25, capacity_multiplier=1.5)
+    wide = free_list(radii, centres, skin=0.25, capacity_multiplier=3.0)
+    radii_j = jnp.asarray(radii)
+
+    def step(fns, positions, nbrs, history):
+        new = fns.update(positions, nbrs)
+        carried = neighbors.remap_pair_history(nbrs.idx, new.idx, history)
+        contact = in_contact(positions, radii_j, new.idx)
+        age = jnp.where(contact, carried[..., 0] + 1.0, 0.0)
+        first_seen = jnp.where(contact & (carried[..., 0] == 0.0), new.idx.astype(jnp.float64), carried[..., 1])
+        return new, jnp.stack([age, first_seen], axis=-1), neighbors.did_rebuild(nbrs, new)
+
+    step = jax.jit(step, static_argnums=0)
+    nbrs = fns.allocate(centres)
+    history = jnp.zeros(nbrs.idx.shape + (2,))
+    reference = {}
+    rebuilds, steps = 0, 80
+    for t in range(1, steps + 1):
+        positions = centres + t * velocity
+        if t == steps // 2:  # forced reallocation to a wider table, history carried over
+            wider = wide.allocate(positions)
+            assert wider.idx.shape[1] > nbrs.idx.shape[1]
+            history = neighbors.remap_pair_history(nbrs.idx, wider.idx, history)
+            nbrs, fns = wider, wide
+        nbrs, history, rebuilt = step(fns, jnp.asarray(positions), nbrs, history)
+        assert not bool(neighbors.did_buffer_overflow(nbrs))
+        rebuilds += int(rebuilt)
+        reference = {p: reference.get(p, 0) + 1 for p in as_set(*neighbors.brute_force_pairs(positions, radii, 0.0))}
+        idx, hist = np.asarray(nbrs.idx), np.asarray(history)
+        for a, k in zip(*np.nonzero(idx < len(radii))):
+            b = int(idx[a, k])
+            age = reference.get((min(a, b), max(a, b)), 0)
+            assert hist[a, k, 0] == age, (t, a, b)
+            if age:
+                assert hist[a, k, 1] == b  # carried from the same pair, not the same slot
+        assert set(reference) <= listed_pairs(idx)  # no contact lost between rebuilds
+    assert hist.dtype == np.float64
+    assert max(reference.values()) > 40  # long-lived contacts crossed rebuilds
+    assert 2 <= rebuilds < steps // 4  # the skin saves rebuilds
+
+
+def test_remap_pair_history_padding_and_own_index():
+    # rows of 3 particles; padding as jax-md (n = 3) and as ContactTable (own index)
+    old = jnp.array([[1, 2, 3], [0, 3, 3], [0, 1, 2]])
+    new = jnp.array([[2, 1], [2, 0], [1, 2]])
+    values = jnp.array([[10.0, 20.0, 30.0], [40.0, 50.0, 60.0], [70.0, 80.0, 90.0]])
+    out = neighbors.remap_pair_history(old, new, values, fill=-1.0)
+    np.testing.assert_array_equal(out, [[20.0, 10.0], [-1.0, 40.0], [80.0, -1.0]])
+    springs = jnp.stack([values, 2 * values, 3 * values], axis=-1)  # [n, m, 3]
+    out3 = neighbors.remap_pair_history(old, new, springs)
+    np.testing.assert_array_equal(out3[..., 2], 3 * np.where(out == -1.0, 0.0, out))
