@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import typing
 
 import jax
 import jax.numpy as jnp
@@ -30,6 +31,7 @@ import numpy as np
 from jax.scipy.sparse.linalg import cg
 
 from sintercond import heat_sources
+from sintercond.conductance import validate_pair_conductance_inputs
 from sintercond.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance, wall_inflow
 
 
@@ -236,21 +238,68 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
 
     Definition: the box (default: the bounding box of the centres, widened on
     every side by half the mean centre distance of the contacts, i.e. the
-    lattice cell for a lattice) has faces ``lo`` and ``hi`` along ``axis``. Particles whose sphere reaches the ``lo``
-    face are held at ``T = 1``, those reaching the ``hi`` face at ``T = 0``.
-    ``Q`` is the heat leaving the hot set at steady state, ``L`` the distance
-    between the mean centre planes of the hot and cold sets, and ``A`` the box
-    cross-section normal to ``axis``: ``k* = Q L / (A (T_hot - T_cold))``. For a
-    simple-cubic lattice of spacing ``a`` this is ``K_pair / a`` exactly.
+    lattice cell for a lattice) has faces ``lo`` and ``hi`` along ``axis``.
+    Particles whose sphere reaches the ``lo`` face are held at ``T = 1``,
+    those reaching the ``hi`` face at ``T = 0``. ``Q`` is the heat leaving the
+    hot set at steady state, ``L`` the distance between the mean centre
+    planes of the hot and cold sets, and ``A`` the box cross-section normal
+    to ``axis``: ``k* = Q L / (A (T_hot - T_cold))``. For a simple-cubic
+    lattice of spacing ``a`` this is ``K_pair / a`` exactly.
+
+    Differentiable in ``kappa`` (scalar or ``[n]``) and the law's ``params``:
+    the geometry (contacts, necks, hot and cold sets, ``L``, ``A``) is
+    prepared on the host once, the conductances are lifted from the necks in
+    JAX, and the conjugate-gradient solve is differentiated implicitly
+    (``jax.scipy.sparse.linalg.cg``, a ``custom_linear_solve``). Returns a
+    JAX scalar.
     """
+    from sintercond import simulate as sim_module
+
+    setup = _conductivity_setup(centres, radii, axis, law, neck_model, box)
+    concrete = not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves((kappa, params)))
+    if concrete:
+        validate_pair_conductance_inputs(law, setup.pairs.r_i, setup.pairs.r_j, setup.pairs.overlap,
+                                         np.broadcast_to(np.asarray(kappa, np.float64), setup.radii.shape)[setup.pairs.i],
+                                         np.broadcast_to(np.asarray(kappa, np.float64), setup.radii.shape)[setup.pairs.j],
+                                         params, neck_model)
+    physics = setup.physics
+    n = len(setup.radii)
+    kappa = jnp.broadcast_to(jnp.asarray(kappa, float), (n,))
+    conductance = sim_module.conductance_lift(
+        physics, jnp.asarray(setup.radii), jnp.arange(n, dtype=jnp.int32), setup.contacts.neighbors,
+        setup.contacts.neck, setup.contacts.overlap, kappa, sim_module.merged_law_params(
+            physics, sim_module.Params(kappa, kappa, law={} if params is None else dict(params))))
+    table = ContactTable(setup.contacts.neighbors, conductance)
+    hot = jnp.asarray(setup.hot)
+    temperature = steady_state(table, jnp.asarray(setup.hot | setup.cold), jnp.where(hot, 1.0, 0.0), tol=tol)
+    q = -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0))
+    return q * setup.length / setup.area
+
+
+class _ConductivitySetup(typing.NamedTuple):
+    physics: object
+    radii: np.ndarray
+    pairs: object
+    contacts: object
+    hot: np.ndarray
+    cold: np.ndarray
+    length: float
+    area: float
+
+
+def _conductivity_setup(centres, radii, axis, law, neck_model, box):
+    """Host-side geometry of :func:`steady_state_conductivity`: contacts, necks, faces, ``L`` and ``A``."""
+    from sintercond import simulate as sim_module
+    from sintercond.network import contact_pairs
+
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
-    table = contact_table(centres, radii, kappa, law, params, neck_model)
+    physics = sim_module.Physics(law=law, neck_model=neck_model, conductance="lifted")
+    pairs = contact_pairs(centres, radii)
     if box is None:
-        pairs = table.pairs()
-        if len(pairs) == 0:
+        if len(pairs.i) == 0:
             raise ValueError("the packing has no contacts")
-        half_spacing = 0.5 * float(np.mean(np.linalg.norm(centres[pairs[:, 0]] - centres[pairs[:, 1]], axis=1)))
+        half_spacing = 0.5 * float(np.mean(np.linalg.norm(centres[pairs.i] - centres[pairs.j], axis=1)))
         box = (centres.min(axis=0) - half_spacing, centres.max(axis=0) + half_spacing)
     lo, hi = (np.asarray(b, dtype=np.float64) for b in box)
     hot = centres[:, axis] - radii <= lo[axis] + 1e-12 * (hi[axis] - lo[axis])
@@ -259,9 +308,7 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
         raise ValueError(f"no particle reaches the box faces along axis {axis}; check box")
     if np.any(hot & cold):
         raise ValueError("a particle reaches both faces: the packing is too thin along the axis")
-    fixed = jnp.asarray(hot | cold)
-    temperature = steady_state(table, fixed, jnp.where(jnp.asarray(hot), 1.0, 0.0), tol=tol)
-    q = -float(jnp.sum(jnp.where(jnp.asarray(hot), heat_inflow(temperature, table), 0.0)))
+    contacts = sim_module.lifted_contacts(physics, centres, radii)
     length = float(np.mean(centres[cold, axis]) - np.mean(centres[hot, axis]))
     area = float(np.prod(np.delete(hi - lo, axis)))
-    return q * length / area
+    return _ConductivitySetup(physics, radii, pairs, contacts, hot, cold, length, area)

@@ -191,3 +191,22 @@ class _Pulse:
 
     def __call__(self, temperature, t):
         return jnp.where(t < 2e-3, self.power, 0.0)
+
+
+def test_steady_state_conductivity_is_differentiable():
+    """k* is linear in kappa and in Rojek's slope (exact for any packing without contact resistance);
+    its contact-resistance derivative equals central differences (implicit CG derivative)."""
+    centres, radii = _packing()
+    k_star = thermal.steady_state_conductivity(centres, radii, 7.0, axis=0)
+    d_kappa = jax.grad(lambda k: thermal.steady_state_conductivity(centres, radii, k, axis=0))(7.0)
+    assert float(d_kappa) == pytest.approx(float(k_star) / 7.0, rel=1e-9)
+    d_slope = jax.grad(lambda s: thermal.steady_state_conductivity(centres, radii, 7.0, axis=0,
+                                                                   params={"slope": s}))(1.064)
+    assert float(d_slope) == pytest.approx(float(k_star) / 1.064, rel=1e-9)
+
+    def with_resistance(r):
+        return thermal.steady_state_conductivity(centres, radii, 7.0, axis=0, params={"contact_resistance": r})
+
+    g = jax.grad(with_resistance)(200.0)
+    fd = _central_difference(lambda r: float(with_resistance(r)), 200.0)
+    assert float(g) == pytest.approx(fd, rel=1e-6) and float(g) < 0
