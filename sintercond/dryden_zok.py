@@ -51,7 +51,7 @@ PANEL_ORDER = 8
 """Gauss-Legendre nodes per panel."""
 
 DEFAULT_NODES = 96
-"""Default number of collocation nodes (12 panels of 8): |error| ~ 3e-13."""
+"""Default number of collocation nodes (12 panels of 8): |error| ~ 3e-14 (benchmarks/RESULTS.md)."""
 
 # Smallest distance of a panel break from s = 1 (panel_breaks); meshes up to
 # 352 nodes never reach it, so their weights are unchanged by it.
@@ -256,7 +256,7 @@ def dryden_zok_sigma(alpha, nodes: int = DEFAULT_NODES):
       alpha: contact cap half-angle (rad), ``0 < alpha <= pi/2``; any shape
         (broadcast elementwise). Outside that range the result is NaN.
       nodes: collocation nodes (static), a multiple of 8, >= 16. In float64
-        the error is about 1e-9 at 48 nodes, 2e-11 at 64 and 3e-13 from 80
+        the error is about 1e-9 at 48 nodes, 2e-11 at 64, 3e-13 at 80 and 3e-14 from 96
         on, over the whole range (benchmarks/RESULTS.md); float32 reaches
         about 1e-6.
 
