@@ -7,6 +7,7 @@ import os
 import pathlib
 import platform
 import re
+import sys
 import time
 
 import jax
@@ -39,6 +40,26 @@ def rojek_residual(a, r_i, r_j, h):
     return 3 * a**2 * (h_ci + h_cj - h) - h_ci**2 * (3 * r_i - h_ci) - h_cj**2 * (3 * r_j - h_cj)
 
 
+def lens_radius(r_i, r_j, h):
+    """Radius of the intersection circle of two overlapping spheres (NumPy, the precision of the input)."""
+    d = r_i + r_j - h
+    return np.sqrt(h * (2 * (r_i + r_j) - h) * (2 * r_i - h) * (2 * r_j - h)) / (2 * d)
+
+
+def reference_neck_gradient(a, r_i, r_j, h):
+    """``(da/dr_i, da/dr_j, da/dh)`` at a root ``a`` of Eq. 27, by the implicit function theorem, in 80-bit.
+
+    With ``h_c = r - sqrt(r^2 - a^2)`` and ``a^2 = 2 r h_c - h_c^2`` Eq. 27 gives ``dZ/da = 6 a h_n``
+    (``h_n = h_ci + h_cj - h``), ``dZ/dh = -3 a^2`` and ``dZ/dr_k = -3 h_ck^2``; so ``da/dh = a / (2 h_n)`` and
+    ``da/dr_k = h_ck^2 / (2 a h_n)``. Independent of the library's own (scaled) derivative formulas.
+    """
+    ld = np.longdouble
+    a, r_i, r_j, h = (np.asarray(x, dtype=ld) for x in (a, r_i, r_j, h))
+    h_ci, h_cj = cap_height(a, r_i), cap_height(a, r_j)
+    h_n = h_ci + h_cj - h
+    return h_ci**2 / (2 * a * h_n), h_cj**2 / (2 * a * h_n), a / (2 * h_n)
+
+
 def reference_neck_radius(r_i, r_j, h, iterations=160):
     """Bracketing reference: bisection of Eq. 27 in 80-bit extended precision.
 
@@ -49,8 +70,7 @@ def reference_neck_radius(r_i, r_j, h, iterations=160):
     """
     ld = np.longdouble
     r_i, r_j, h = (np.asarray(x, dtype=ld) for x in (r_i, r_j, h))
-    d = r_i + r_j - h
-    lo = np.sqrt(h * (2 * (r_i + r_j) - h) * (2 * r_i - h) * (2 * r_j - h)) / (2 * d)
+    lo = lens_radius(r_i, r_j, h)
     hi = np.minimum(r_i, r_j)
     for _ in range(iterations):
         mid = np.sqrt(lo * hi)
@@ -99,6 +119,11 @@ def machine_line() -> str:
         f"{os.cpu_count()} CPU cores, JAX {jax.__version__} on {dev.platform}"
         f" ({dev.device_kind}), NumPy {np.__version__}"
     )
+
+
+def command_line() -> str:
+    """The command that ran this script, as RESULTS.md should record it (arguments included)."""
+    return " ".join(["python", f"benchmarks/{pathlib.Path(sys.argv[0]).name}", *sys.argv[1:]])
 
 
 def write_section(name: str, command: str, body: str) -> None:

@@ -15,7 +15,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import best_time, markdown_table, random_pairs, reference_neck_radius, write_section
+from _common import best_time, command_line, markdown_table, random_pairs, reference_neck_radius, write_section
 
 from sintercond.neck import neck_radius
 
@@ -55,11 +55,12 @@ def main():
         f"{n:,} random pairs (radius ratio log-uniform up to 1e3 either way, h uniform in (0, max_overlap]); "
         "reference: bisection of Rojek Eq. 27 in 80-bit precision. Iteration 0 is Coble's start clipped to "
         "min(r_i, r_j). Float32 errors are against the reference for the float32-rounded inputs; its floor is "
-        "float32 round-off (eps 1.2e-7).\n\n" + table + "\n\n"
+        "float32 round-off (eps 1.2e-7). Times exclude compilation (a warm-up call first) and are the minimum "
+        "over up to 25 repeats or 10 s.\n\n" + table + "\n\n"
         + "\n".join(f"- {name}: every pair within {'1e-14' if name == 'float64' else '1e-6'} after {k} iterations"
                     for name, k in converged_at.items())
     )
-    write_section("neck_convergence", "python benchmarks/neck_convergence.py", body)
+    write_section("neck_convergence", command_line(), body)
 
 
 if __name__ == "__main__":

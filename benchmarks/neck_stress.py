@@ -11,7 +11,7 @@ Prints the table and rewrites its section of benchmarks/RESULTS.md.
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import markdown_table, reference_neck_radius, write_section
+from _common import command_line, markdown_table, reference_neck_radius, write_section
 
 from sintercond.neck import max_overlap, neck_radius
 
@@ -75,7 +75,7 @@ def main():
         + markdown_table(("regime", "dtype", "max rel. error", "median rel. error", "NaN/inf in a",
                           "NaN/inf in gradient", "h -> 0 in float32"), rows)
     )
-    write_section("neck_stress", "python benchmarks/neck_stress.py", body)
+    write_section("neck_stress", command_line(), body)
 
 
 if __name__ == "__main__":

@@ -51,7 +51,11 @@ PANEL_ORDER = 8
 """Gauss-Legendre nodes per panel."""
 
 DEFAULT_NODES = 96
-"""Default number of collocation nodes (12 panels of 8): |error| ~ 3e-13."""
+"""Default number of collocation nodes (12 panels of 8): |error| ~ 3e-14 (benchmarks/RESULTS.md)."""
+
+# Smallest distance of a panel break from s = 1 (panel_breaks); meshes up to
+# 352 nodes never reach it, so their weights are unchanged by it.
+_CLOSEST_BREAK = 1e-14
 
 # Panels whose distance to a singular point is below this many panel lengths
 # get product-integration weights.
@@ -110,11 +114,16 @@ def panel_breaks(n_panels: int) -> np.ndarray:
     A quarter of the panels (at least 2) split ``[0, 1/2]`` evenly; the rest
     shrink geometrically (ratio 0.35) toward ``s = 1``, where ``j`` is least
     smooth. Chosen by the convergence study in benchmarks/dryden_zok.py.
+    The last break stays at least ``_CLOSEST_BREAK`` from 1 (the ratio grows
+    where 0.35 would go below it, from 360 nodes on): closer, a panel's
+    Gauss nodes are a few ulp apart, its Lagrange basis divides by zero and
+    sigma came out NaN.
     """
     n_uniform = max(2, round(n_panels / 4))
     n_graded = n_panels - n_uniform
+    ratio = max(0.35, (_CLOSEST_BREAK / 0.5) ** (1.0 / max(n_graded - 1, 1)))
     uniform = np.linspace(0.0, 0.5, n_uniform + 1)
-    graded = 1.0 - 0.5 * 0.35 ** np.arange(1, n_graded)
+    graded = 1.0 - 0.5 * ratio ** np.arange(1, n_graded)
     return np.concatenate([uniform, graded, [1.0]])
 
 
@@ -247,7 +256,7 @@ def dryden_zok_sigma(alpha, nodes: int = DEFAULT_NODES):
       alpha: contact cap half-angle (rad), ``0 < alpha <= pi/2``; any shape
         (broadcast elementwise). Outside that range the result is NaN.
       nodes: collocation nodes (static), a multiple of 8, >= 16. In float64
-        the error is about 1e-9 at 48 nodes, 2e-11 at 64 and 3e-13 from 80
+        the error is about 1e-9 at 48 nodes, 2e-11 at 64, 3e-13 at 80 and 3e-14 from 96
         on, over the whole range (benchmarks/RESULTS.md); float32 reaches
         about 1e-6.
 

@@ -79,7 +79,9 @@ def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
     data = fe_neck_conductance()
     keep = (data["a_over_r"] >= 0.1) & (data["a_over_r"] <= 0.85)
     fit = np.asarray(fitted_half_conductance_ratio(jnp.asarray(data["a_over_r"][keep]), jnp.asarray(stored)))
-    assert np.max(np.abs(fit / data["K_over_Kcyl"][keep] - 1)) < 0.005  # the target: 0.5 %
+    # the README and conductance docstring claim 0.25 % (measured 0.22 %); the former bound 0.5 % let a law
+    # twice as far off pass
+    assert np.max(np.abs(fit / data["K_over_Kcyl"][keep] - 1)) < 0.0025
     linear = 1.064 * data["a_over_r"][keep]
     assert np.max(np.abs(linear / data["K_over_Kcyl"][keep] - 1)) > 0.06  # Rojek's law: up to 6.6 % off
     tiny = jnp.asarray([1e-8, 1e-6])
@@ -87,7 +89,7 @@ def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
                                1.0, atol=1e-4)
     record = json.loads((pathlib.Path(__file__).resolve().parents[1] / "sintercond" / "data"
                          / "fitted_neck_law.json").read_text())
-    assert record["made_by"] == "python -m fitting.neck_law" and record["max_relative_error"] < 0.005
+    assert record["made_by"] == "python -m fitting.neck_law" and record["max_relative_error"] < 0.0025
 
 
 def test_fitted_pair_conductance_unequal_halves():
@@ -180,3 +182,27 @@ def test_fitted_law_changes_a_lattice_k_star_by_the_laws_ratio():
     f = float(conductance.fitted_half_conductance_ratio(x, conductance.fitted_neck_law_coefficients()))
     assert k["fitted"] / k["rojek"] == pytest.approx(f / (1.064 * x), rel=1e-10)
     assert k["fitted"] != pytest.approx(k["rojek"], rel=1e-3)  # the change is real at this neck (a/r ~ 0.4)
+
+
+def test_non_uniform_weights_give_the_weighted_least_squares_solution():
+    """Bug caught: weights were tested only as a constant 1/sigma (which changes neither the optimum nor the
+    stderr of a fit with an estimated scale), so a fit that ignored them, or squared them twice, passed.
+    Reference: the closed-form weighted least squares of a straight line, beta = (X' W X)^-1 X' W y with
+    W = diag(w^2), covariance s^2 (X' W X)^-1, s^2 = sum w^2 r^2 / (n - 2)."""
+    x = np.linspace(0.0, 1.0, 30)
+    rng = np.random.default_rng(4)
+    sigma = np.where(x < 0.5, 0.01, 0.3)  # two very different noise levels
+    y = 0.5 + 2.0 * x + sigma * rng.standard_normal(x.shape) + 1.0 * (x > 0.8)  # the noisy end also pulls
+    design = np.stack([np.ones_like(x), x], axis=1)
+    w2 = 1.0 / sigma**2
+    normal = design.T @ (w2[:, None] * design)
+    beta = np.linalg.solve(normal, design.T @ (w2 * y))
+    s2 = np.sum(w2 * (y - design @ beta) ** 2) / (len(x) - 2)
+    stderr = np.sqrt(np.diag(s2 * np.linalg.inv(normal)))
+    fit = least_squares(lambda p, x: p["b0"] + p["b1"] * x, x, y, {"b0": 0.0, "b1": 1.0}, weights=1.0 / sigma,
+                        method="levenberg_marquardt", max_steps=50)
+    # measured 2.3e-9 (the loop stops on a flat loss), far below the stderr (1e-3 relative)
+    np.testing.assert_allclose([fit.params["b0"], fit.params["b1"]], beta, rtol=1e-7)
+    np.testing.assert_allclose([fit.stderr["b0"], fit.stderr["b1"]], stderr, rtol=1e-6)
+    unweighted = np.linalg.lstsq(design, y, rcond=None)[0]
+    assert abs(unweighted[1] - beta[1]) > 5 * stderr[1]  # the weights matter here

@@ -59,3 +59,21 @@ def test_lone_particle_cools_exponentially_by_convection():
     t_end = 2.0 / rate
     final, _ = thermal.simulate(jnp.array([800.0]), table, c, t_end / 4000, n_steps=4000, save_every=4000, source=source)
     assert float(final[0]) == pytest.approx(300 + 500 * np.exp(-2.0), rel=5e-4)
+
+
+def test_convection_scales_with_the_nusselt_number():
+    """Bug caught: a convection law that ignores ``nusselt`` (or uses h = k/r whatever Nu) passed, since
+    every test used Nu = 2. Eqs. 37-38: h = Nu k_E / (2 r), so Q = 2 pi Nu k_E r (T_E - T), closed form."""
+    r, k_env = 1e-4, 0.026
+    for nu in (2.0, 4.0, 7.5):
+        q = float(hs.convection_power(r, 400.0, 300.0, k_env, nusselt=nu))
+        assert q == pytest.approx(2 * np.pi * nu * k_env * r * (300.0 - 400.0), rel=1e-14)
+
+
+def test_stefan_boltzmann_constant_is_the_papers():
+    """Bug caught: the expectation came from the module's own constant, so any value passed. Quintana-Ruiz
+    & Campello (2020) Eq. 41 use 5.670367e-8 W/(m^2 K^4), within 1.3e-6 of CODATA 2018's exact
+    5.670374419e-8. A black sphere of radius 1 m at 1000 K against 0 K emits eps B T^4 4 pi r^2."""
+    assert hs.STEFAN_BOLTZMANN == pytest.approx(5.670374419e-8, rel=2e-6)
+    q = float(hs.radiation_power(1.0, 1000.0, 0.0, 1.0))
+    assert q == pytest.approx(-5.670367e-8 * 1e12 * 4 * np.pi, rel=1e-14)
