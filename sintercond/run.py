@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import time
 from pathlib import Path
 
@@ -24,6 +23,8 @@ import numpy as np
 from tqdm import tqdm
 
 from sintercond import heat_sources, network, packing, thermal
+from sintercond.io import append_lammps, save_checkpoint as _save_checkpoint, truncate_lammps as _truncate_lammps
+from sintercond.io import write_vtp  # noqa: F401  (moved to sintercond.io; kept importable here)
 from sintercond.scene import SceneError, validate_scene
 from sintercond.state import ParticleState, particle_state
 
@@ -185,50 +186,6 @@ def _apply_walls(scene, centres, radii, table):
     return table, held, held_t
 
 
-def write_vtp(path, centres, radii, temperature, step, t):
-    """VTK XML PolyData (ASCII) with one vertex per particle: temperature, radius, id."""
-    n = len(radii)
-
-    def array(name, values, kind="Float64", components=1):
-        body = " ".join(repr(float(v)) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
-        return (f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}" format="ascii">'
-                f"{body}</DataArray>")
-
-    xml = (
-        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">\n<PolyData>\n'
-        f'<FieldData>{array("TIME", [t])}{array("STEP", [step], "Int64")}</FieldData>\n'
-        f'<Piece NumberOfPoints="{n}" NumberOfVerts="{n}" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">\n'
-        f'<Points>{array("position", centres, components=3)}</Points>\n'
-        f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
-        f'<PointData Scalars="temperature">{array("temperature", temperature)}{array("radius", radii)}'
-        f'{array("id", np.arange(n), "Int64")}</PointData>\n</Piece>\n</PolyData>\n</VTKFile>\n'
-    )
-    _atomic_write_text(path, xml)
-
-
-def append_lammps(path, centres, radii, temperature, step):
-    lo, hi = centres.min(axis=0) - radii.max(), centres.max(axis=0) + radii.max()
-    lines = [f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
-    lines += [f"{lo[k]!r} {hi[k]!r}\n" for k in range(3)]
-    lines.append("ITEM: ATOMS id radius x y z temperature\n")
-    lines += [f"{i + 1} {r!r} {x!r} {y!r} {z!r} {t!r}\n" for i, (r, (x, y, z), t) in
-              enumerate(zip(radii.tolist(), centres.tolist(), np.asarray(temperature).tolist()))]
-    with open(path, "a") as f:
-        f.write("".join(lines))
-
-
-def _atomic_write_text(path, text):
-    tmp = Path(str(path) + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def _save_checkpoint(directory, temperature, step):
-    tmp = directory / "checkpoint.tmp.npz"
-    np.savez(tmp, temperature=np.asarray(temperature), step=step)
-    os.replace(tmp, directory / "checkpoint.npz")
-
-
 def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None):
     """Run a validated scene into ``out_dir``; returns ``(final temperatures, summary dict)``.
 
@@ -313,13 +270,6 @@ def resume(out_dir, progress=True, stop_after_chunks=None):
     if (out / "dump.lammpstrj").exists():
         _truncate_lammps(out / "dump.lammpstrj", step)
     return run_scene(scene, out, progress, stop_after_chunks, _start=(model, jnp.asarray(state["temperature"]), step))
-
-
-def _truncate_lammps(path, last_step):
-    text = path.read_text()
-    frames = text.split("ITEM: TIMESTEP\n")
-    kept = [f for f in frames[1:] if int(f.split("\n", 1)[0]) <= last_step]
-    path.write_text("".join("ITEM: TIMESTEP\n" + f for f in kept))
 
 
 def summary_table(summary) -> str:
