@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import time
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sintercond import heat_sources, network, packing, simulate
+from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
 from sintercond.scene import SceneError, validate_scene
 from sintercond.state import particle_state
 
@@ -202,94 +202,6 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
     return k_wall, t_wall
 
 
-def write_vtp(path, centres, radii, temperature, step, t):
-    """VTK XML PolyData (ASCII) with one vertex per particle: temperature, radius, id."""
-    n = len(radii)
-
-    def array(name, values, kind="Float64", components=1):
-        body = " ".join(repr(float(v)) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
-        return (f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}" format="ascii">'
-                f"{body}</DataArray>")
-
-    xml = (
-        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">\n<PolyData>\n'
-        f'<FieldData>{array("TIME", [t])}{array("STEP", [step], "Int64")}</FieldData>\n'
-        f'<Piece NumberOfPoints="{n}" NumberOfVerts="{n}" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">\n'
-        f'<Points>{array("position", centres, components=3)}</Points>\n'
-        f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
-        f'<PointData Scalars="temperature">{array("temperature", temperature)}{array("radius", radii)}'
-        f'{array("id", np.arange(n), "Int64")}</PointData>\n</Piece>\n</PolyData>\n</VTKFile>\n'
-    )
-    _atomic_write_text(path, xml)
-
-
-def append_lammps(path, centres, radii, temperature, step):
-    lo, hi = centres.min(axis=0) - radii.max(), centres.max(axis=0) + radii.max()
-    lines = [f"ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
-    lines += [f"{lo[k]!r} {hi[k]!r}\n" for k in range(3)]
-    lines.append("ITEM: ATOMS id radius x y z temperature\n")
-    lines += [f"{i + 1} {r!r} {x!r} {y!r} {z!r} {t!r}\n" for i, (r, (x, y, z), t) in
-              enumerate(zip(radii.tolist(), centres.tolist(), np.asarray(temperature).tolist()))]
-    with open(path, "a") as f:
-        f.write("".join(lines))
-
-
-def _atomic_write_text(path, text):
-    tmp = Path(str(path) + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def advance(sim, state, params, n_steps, chunk, on_chunk=None, reallocate=None, progress=None):
-    """The one host loop: advance ``n_steps`` in compiled chunks of ``chunk`` steps.
-
-    After every chunk the host checks the state: a neighbour list that
-    overflowed (``state.overflow``) is reallocated by ``reallocate(start,
-    end) -> start`` and the chunk redone from its saved start, so no contact
-    is lost; non-finite temperatures stop the run with the step. Then
-    ``on_chunk(state)`` (outputs, checkpoints) runs; returning True stops
-    early. The same compiled chunk runs on the same inputs whatever the
-    history, so a run resumed from a checkpoint is bitwise identical to an
-    uninterrupted one.
-
-    Returns:
-      ``(state, report)`` with the number of chunks and reallocations.
-    """
-    run_chunk = _compiled_chunk(sim, chunk)
-    reallocations = chunks = 0
-    target = int(state.step) + n_steps
-    while int(state.step) < target:
-        new = run_chunk(state, params)
-        if bool(new.overflow):
-            if reallocate is None:
-                raise RuntimeError("the neighbour list overflowed and no reallocation was given")
-            state = reallocate(state, new)
-            reallocations += 1
-            if reallocations > 100:
-                raise RuntimeError("the neighbour list keeps overflowing; raise its capacity")
-            continue
-        if not bool(jnp.all(jnp.isfinite(new.particles.temperature))):
-            raise FloatingPointError(f"non-finite temperature at step {int(new.step)}; reduce run.dt")
-        state = new
-        chunks += 1
-        if progress is not None:
-            progress(chunk)
-        if on_chunk is not None and on_chunk(state):
-            break
-    return state, {"chunks": chunks, "reallocations": reallocations}
-
-
-def _compiled_chunk(sim, chunk):
-    def run_chunk(state, params):
-        return simulate.rollout(sim, state, params, chunk, simulate.SaveAt(chunk, _nothing), checkpoint=False)[0]
-
-    return jax.jit(run_chunk)
-
-
-def _nothing(state):
-    return ()
-
-
 def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None):
     """Run a validated scene into ``out_dir``; returns ``(final temperatures, summary dict)``.
 
@@ -352,33 +264,6 @@ def _write_outputs(scene, out, model, state):
         append_lammps(out / "dump.lammpstrj", model.centres, model.radii, temperature, step)
 
 
-def save_checkpoint(directory, state):
-    """Write the whole :class:`~sintercond.simulate.SimState` to ``directory/checkpoint.npz`` atomically.
-
-    Every leaf is stored under its path in the state (plus ``temperature`` and
-    ``step`` for a quick look), written to a temporary file and renamed, so
-    a killed run leaves the last complete checkpoint.
-    """
-    leaves = {jax.tree_util.keystr(path): np.asarray(leaf)
-              for path, leaf in jax.tree_util.tree_flatten_with_path(state)[0]}
-    tmp = Path(directory) / "checkpoint.tmp.npz"
-    np.savez(tmp, temperature=np.asarray(state.particles.temperature), step=int(state.step), **leaves)
-    os.replace(tmp, Path(directory) / "checkpoint.npz")
-
-
-def load_checkpoint(path, like):
-    """The state saved by :func:`save_checkpoint`, with the structure (and neighbour-list capacity) of ``like``."""
-    saved = np.load(path)
-    paths, treedef = jax.tree_util.tree_flatten_with_path(like)
-    leaves = []
-    for key, leaf in paths:
-        name = jax.tree_util.keystr(key)
-        if name not in saved:
-            raise SceneError(f"{path} does not hold {name}: written by another version or scene")
-        leaves.append(jnp.asarray(saved[name], dtype=jnp.asarray(leaf).dtype))
-    return jax.tree_util.tree_unflatten(treedef, leaves)
-
-
 def resume(out_dir, progress=True, stop_after_chunks=None):
     """Continue the run in ``out_dir`` from its last checkpoint (the whole state)."""
     out = Path(out_dir)
@@ -394,15 +279,8 @@ def resume(out_dir, progress=True, stop_after_chunks=None):
         if int(f.stem.split("_")[1]) > step:
             f.unlink()
     if (out / "dump.lammpstrj").exists():
-        _truncate_lammps(out / "dump.lammpstrj", step)
+        truncate_lammps(out / "dump.lammpstrj", step)
     return run_scene(scene, out, progress, stop_after_chunks, _start=(model, state))
-
-
-def _truncate_lammps(path, last_step):
-    text = path.read_text()
-    frames = text.split("ITEM: TIMESTEP\n")
-    kept = [f for f in frames[1:] if int(f.split("\n", 1)[0]) <= last_step]
-    path.write_text("".join("ITEM: TIMESTEP\n" + f for f in kept))
 
 
 def summary_table(summary) -> str:

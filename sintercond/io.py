@@ -1,0 +1,115 @@
+"""Writers of run outputs: VTK XML PolyData (ParaView), LAMMPS dumps (OVITO), atomic files, checkpoints.
+
+Both formats are checked by the readers people open them with, VTK's
+``vtkXMLPolyDataReader`` and OVITO's ``import_file`` (``tests/test_io.py``,
+with the ``readers`` extra):
+
+* ``write_vtp``: one vertex per particle, point data ``temperature`` (K),
+  ``radius`` (m) and ``id``; field data ``TIME`` (s) and ``STEP`` with
+  ``NumberOfTuples="1"`` (without it VTK reads them back empty). Numbers are
+  written with Python's shortest round-trip ``repr`` of a built-in float, so
+  the file holds the exact float64 values.
+* ``append_lammps``: one ``ITEM: TIMESTEP`` frame per call, box bounds the
+  particles' bounding box widened by the largest radius, columns
+  ``id radius x y z temperature`` (OVITO maps ``radius`` and ``x y z`` to its
+  Radius and Position properties).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def _number(value) -> str:
+    """Shortest round-trip text of a float (never NumPy's ``np.float64(...)`` repr)."""
+    return repr(float(value))
+
+
+def write_vtp(path, centres, radii, temperature, step, t):
+    """VTK XML PolyData (ASCII) with one vertex per particle: temperature, radius, id; TIME and STEP field data."""
+    n = len(radii)
+
+    def array(name, values, kind="Float64", components=1, tuples=None):
+        body = " ".join(_number(v) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
+        count = "" if tuples is None else f' NumberOfTuples="{tuples}"'
+        return (f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}"{count} format="ascii">'
+                f"{body}</DataArray>")
+
+    xml = (
+        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">\n<PolyData>\n'
+        f'<FieldData>{array("TIME", [t], tuples=1)}{array("STEP", [step], "Int64", tuples=1)}</FieldData>\n'
+        f'<Piece NumberOfPoints="{n}" NumberOfVerts="{n}" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">\n'
+        f'<Points>{array("position", centres, components=3)}</Points>\n'
+        f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
+        f'<PointData Scalars="temperature">{array("temperature", temperature)}{array("radius", radii)}'
+        f'{array("id", np.arange(n), "Int64")}</PointData>\n</Piece>\n</PolyData>\n</VTKFile>\n'
+    )
+    atomic_write_text(path, xml)
+
+
+def lammps_frame(centres, radii, temperature, step) -> str:
+    """One LAMMPS dump frame (text) of the particles."""
+    centres = np.asarray(centres, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    lo, hi = centres.min(axis=0) - radii.max(), centres.max(axis=0) + radii.max()
+    lines = [f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
+    lines += [f"{_number(lo[k])} {_number(hi[k])}\n" for k in range(3)]
+    lines.append("ITEM: ATOMS id radius x y z temperature\n")
+    lines += [f"{i + 1} {r!r} {x!r} {y!r} {z!r} {t!r}\n" for i, (r, (x, y, z), t) in
+              enumerate(zip(radii.tolist(), centres.tolist(), np.asarray(temperature, dtype=np.float64).tolist()))]
+    return "".join(lines)
+
+
+def append_lammps(path, centres, radii, temperature, step):
+    """Append one frame to the LAMMPS dump at ``path``."""
+    with open(path, "a") as f:
+        f.write(lammps_frame(centres, radii, temperature, step))
+
+
+def truncate_lammps(path, last_step):
+    """Drop the frames after ``last_step`` from the LAMMPS dump at ``path`` (for a resumed run)."""
+    text = Path(path).read_text()
+    frames = text.split("ITEM: TIMESTEP\n")
+    kept = [f for f in frames[1:] if int(f.split("\n", 1)[0]) <= last_step]
+    atomic_write_text(path, "".join("ITEM: TIMESTEP\n" + f for f in kept))
+
+
+def atomic_write_text(path, text):
+    """Write to ``path.tmp`` and rename: a killed writer leaves the old file or the new one, never half of one."""
+    tmp = Path(str(path) + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def save_checkpoint(directory, state):
+    """Write the whole :class:`~sintercond.simulate.SimState` to ``directory/checkpoint.npz`` atomically.
+
+    Every leaf is stored under its path in the state (plus ``temperature`` and
+    ``step`` for a quick look), written to a temporary file and renamed, so
+    a killed run leaves the last complete checkpoint.
+    """
+    leaves = {jax.tree_util.keystr(path): np.asarray(leaf)
+              for path, leaf in jax.tree_util.tree_flatten_with_path(state)[0]}
+    tmp = Path(directory) / "checkpoint.tmp.npz"
+    np.savez(tmp, temperature=np.asarray(state.particles.temperature), step=int(state.step), **leaves)
+    os.replace(tmp, Path(directory) / "checkpoint.npz")
+
+
+def load_checkpoint(path, like):
+    """The state saved by :func:`save_checkpoint`, with the structure (and neighbour-list capacity) of ``like``."""
+    saved = np.load(path)
+    paths, treedef = jax.tree_util.tree_flatten_with_path(like)
+    leaves = []
+    for key, leaf in paths:
+        name = jax.tree_util.keystr(key)
+        if name not in saved:
+            raise ValueError(f"{path} does not hold {name}: written by another version or scene")
+        leaves.append(jnp.asarray(saved[name], dtype=jnp.asarray(leaf).dtype))
+    return jax.tree_util.tree_unflatten(treedef, leaves)
+
+

@@ -1,0 +1,93 @@
+"""Run outputs opened by the readers people use: VTK's own XML reader (ParaView) and OVITO's Python module.
+
+Both readers come with the ``readers`` extra, which CI installs (``.ci/run``).
+"""
+
+import copy
+
+import numpy as np
+import pytest
+
+from sintercond import io
+from sintercond import run as runner
+from sintercond.scene import validate_scene
+
+vtk = pytest.importorskip("vtk", reason="install the 'readers' extra: pip install -e '.[readers]'")
+ovito_io = pytest.importorskip("ovito.io", reason="install the 'readers' extra: pip install -e '.[readers]'")
+from vtk.util.numpy_support import vtk_to_numpy  # noqa: E402
+
+
+def _particles(n=5, seed=0):
+    rng = np.random.default_rng(seed)
+    # NumPy float64 scalars and arrays, as a run hands them over
+    return rng.uniform(0, 1e-3, (n, 3)), rng.uniform(2e-5, 6e-5, n), 300.0 + rng.uniform(0, 500, n)
+
+
+def read_vtp(path):
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    assert reader.GetErrorCode() == 0
+    data = reader.GetOutput()
+    points = vtk_to_numpy(data.GetPoints().GetData())
+    point_data = {data.GetPointData().GetArrayName(k): vtk_to_numpy(data.GetPointData().GetArray(k))
+                  for k in range(data.GetPointData().GetNumberOfArrays())}
+    fields = data.GetFieldData()
+    field = {fields.GetArrayName(k): vtk_to_numpy(fields.GetArray(k)) for k in range(fields.GetNumberOfArrays())}
+    return data, points, point_data, field
+
+
+def test_vtp_read_by_vtk_with_time_and_step(tmp_path):
+    centres, radii, temperature = _particles()
+    io.write_vtp(tmp_path / "a.vtp", centres, radii, temperature, np.int64(70), np.float64(1.25e-3))
+    data, points, point_data, field = read_vtp(tmp_path / "a.vtp")
+    assert data.GetNumberOfPoints() == 5 and data.GetNumberOfVerts() == 5
+    np.testing.assert_array_equal(points, centres)
+    np.testing.assert_array_equal(point_data["temperature"], temperature)
+    np.testing.assert_array_equal(point_data["radius"], radii)
+    np.testing.assert_array_equal(point_data["id"], np.arange(5))
+    # before the fix, TIME and STEP had no NumberOfTuples and came back as empty arrays
+    assert field["TIME"].shape == (1,) and field["TIME"][0] == 1.25e-3
+    assert field["STEP"].shape == (1,) and field["STEP"][0] == 70
+
+
+def test_lammps_dump_read_by_ovito(tmp_path):
+    path = tmp_path / "dump.lammpstrj"
+    frames = [_particles(seed=s) for s in range(3)]
+    for step, (centres, radii, temperature) in zip((0, 10, 20), frames):
+        io.append_lammps(path, centres, radii, temperature, step)
+    text = path.read_text()
+    assert "np.float64" not in text  # NumPy 2's repr of a scalar broke OVITO's box-bounds parser
+    pipeline = ovito_io.import_file(str(path))
+    assert pipeline.num_frames == 3
+    for frame, (centres, radii, temperature) in enumerate(frames):
+        data = pipeline.compute(frame)
+        assert data.attributes["Timestep"] == 10 * frame
+        order = np.argsort(np.asarray(data.particles["Particle Identifier"]))
+        # OVITO's own number parser: within an ulp of the written shortest round-trip text
+        np.testing.assert_allclose(np.asarray(data.particles.positions)[order], centres, rtol=3e-16)
+        np.testing.assert_allclose(np.asarray(data.particles["Radius"])[order], radii, rtol=1e-7)  # OVITO: float32
+        np.testing.assert_allclose(np.asarray(data.particles["temperature"])[order], temperature, rtol=3e-16)
+        lo = centres.min(axis=0) - radii.max()
+        np.testing.assert_allclose(np.asarray(data.cell[:, 3]), lo, rtol=0, atol=1e-18)
+        np.testing.assert_allclose(np.diag(np.asarray(data.cell[:, :3])), centres.max(axis=0) + radii.max() - lo,
+                                   rtol=1e-12)
+
+
+def test_a_run_opens_in_both_readers_with_its_time(tmp_path):
+    from tests.test_scene_run import SMALL
+
+    scene = copy.deepcopy(SMALL)
+    scene["run"].update(duration=1e-3, output_every=5, checkpoint_every=5)
+    scene = validate_scene(scene)
+    final, summary = runner.run_scene(scene, tmp_path, progress=False)
+    last = sorted((tmp_path / "vtp").glob("step_*.vtp"))[-1]
+    _, _, point_data, field = read_vtp(last)
+    assert field["STEP"][0] == summary["steps"]
+    assert field["TIME"][0] == pytest.approx(summary["simulated_s"], rel=1e-12)
+    np.testing.assert_array_equal(point_data["temperature"], np.asarray(final))
+    pipeline = ovito_io.import_file(str(tmp_path / "dump.lammpstrj"))
+    assert pipeline.num_frames == summary["steps"] // 5 + 1
+    data = pipeline.compute(pipeline.num_frames - 1)
+    order = np.argsort(np.asarray(data.particles["Particle Identifier"]))
+    np.testing.assert_allclose(np.asarray(data.particles["temperature"])[order], np.asarray(final), rtol=3e-16)
