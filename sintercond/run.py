@@ -202,6 +202,56 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
     return k_wall, t_wall
 
 
+def advance(sim, state, params, n_steps, chunk, on_chunk=None, reallocate=None, progress=None):
+    """The one host loop: advance ``n_steps`` in compiled chunks of ``chunk`` steps.
+
+    After every chunk the host checks the state: a neighbour list that
+    overflowed (``state.overflow``) is reallocated by ``reallocate(start,
+    end) -> start`` and the chunk redone from its saved start, so no contact
+    is lost; non-finite temperatures stop the run with the step. Then
+    ``on_chunk(state)`` (outputs, checkpoints) runs; returning True stops
+    early. The same compiled chunk runs on the same inputs whatever the
+    history, so a run resumed from a checkpoint is bitwise identical to an
+    uninterrupted one.
+
+    Returns:
+      ``(state, report)`` with the number of chunks and reallocations.
+    """
+    run_chunk = _compiled_chunk(sim, chunk)
+    reallocations = chunks = 0
+    target = int(state.step) + n_steps
+    while int(state.step) < target:
+        new = run_chunk(state, params)
+        if bool(new.overflow):
+            if reallocate is None:
+                raise RuntimeError("the neighbour list overflowed and no reallocation was given")
+            state = reallocate(state, new)
+            reallocations += 1
+            if reallocations > 100:
+                raise RuntimeError("the neighbour list keeps overflowing; raise its capacity")
+            continue
+        if not bool(jnp.all(jnp.isfinite(new.particles.temperature))):
+            raise FloatingPointError(f"non-finite temperature at step {int(new.step)}; reduce run.dt")
+        state = new
+        chunks += 1
+        if progress is not None:
+            progress(chunk)
+        if on_chunk is not None and on_chunk(state):
+            break
+    return state, {"chunks": chunks, "reallocations": reallocations}
+
+
+def _compiled_chunk(sim, chunk):
+    def run_chunk(state, params):
+        return simulate.rollout(sim, state, params, chunk, simulate.SaveAt(chunk, _nothing), checkpoint=False)[0]
+
+    return jax.jit(run_chunk)
+
+
+def _nothing(state):
+    return ()
+
+
 def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None):
     """Run a validated scene into ``out_dir``; returns ``(final temperatures, summary dict)``.
 

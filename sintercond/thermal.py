@@ -251,7 +251,7 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
     prepared on the host once, the conductances are lifted from the necks in
     JAX, and the conjugate-gradient solve is differentiated implicitly
     (``jax.scipy.sparse.linalg.cg``, a ``custom_linear_solve``). Returns a
-    JAX scalar.
+    float for concrete input, a JAX scalar under a transformation.
     """
     from sintercond import simulate as sim_module
 
@@ -273,7 +273,8 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
     hot = jnp.asarray(setup.hot)
     temperature = steady_state(table, jnp.asarray(setup.hot | setup.cold), jnp.where(hot, 1.0, 0.0), tol=tol)
     q = -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0))
-    return q * setup.length / setup.area
+    k_star = q * setup.length / setup.area
+    return float(k_star) if concrete else k_star
 
 
 class _ConductivitySetup(typing.NamedTuple):

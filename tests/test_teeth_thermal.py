@@ -17,7 +17,7 @@ import pytest
 from scipy.optimize import brentq
 
 from fitting import inverse
-from sintercond import network, thermal
+from sintercond import simulate, network, thermal
 from sintercond import run as runner
 from sintercond.scene import validate_scene
 from test_scene_run import SMALL as _SMALL
@@ -58,10 +58,9 @@ def test_chunked_scene_run_equals_one_uninterrupted_simulation(tmp_path):
     crosses the packing once."""
     scene = validate_scene(copy.deepcopy(SMALL) | {"run": {**SMALL["run"], "output_every": 1, "formats": []}})
     model = runner.build_model(scene)
-    state = model.state
-    whole, _ = thermal.simulate(state.temperature, model.table, state.capacity, model.dt, n_steps=model.n_steps,
-                                save_every=model.n_steps, fixed_mask=state.fixed,
-                                fixed_temperature=state.fixed_temperature, source=model.source)
+    whole_state, _ = simulate.rollout(model.sim, model.state, model.params, model.n_steps,
+                                      simulate.SaveAt(model.n_steps))
+    whole = whole_state.particles.temperature
     chunked, summary = runner.run_scene(scene, tmp_path, progress=False)
     assert summary["steps"] == model.n_steps == 24
     np.testing.assert_allclose(np.asarray(chunked), np.asarray(whole), rtol=1e-12)
