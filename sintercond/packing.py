@@ -27,13 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-
-def _jax_md():
-    # jax-md's import-time code (rigid_body) and minimizers rely on implicit
-    # int/float promotion; keep them working under strict dtype promotion.
-    with jax.numpy_dtype_promotion("standard"):
-        from jax_md import minimize, space
-    return minimize, space
+from sintercond.neighbors import jax_md_guard, jax_md_modules
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,7 +117,7 @@ def relax_under_gravity(centres, radii, lateral_size, steps=30_000, stiffness=1e
         v = v + dt * (force(x) / mass[:, None] - damping * v)
         return (x + dt * v, v), None
 
-    minimize, space = _jax_md()
+    minimize, space = jax_md_modules("minimize", "space")
     _, shift = space.free()
     init, apply = minimize.fire_descent(energy, shift, dt_start=dt, dt_max=4 * dt)
 
@@ -133,7 +127,7 @@ def relax_under_gravity(centres, radii, lateral_size, steps=30_000, stiffness=1e
         state = jax.lax.fori_loop(0, polish_steps, lambda _, s: apply(s), init(x))
         return state.position
 
-    with jax.numpy_dtype_promotion("standard"):
+    with jax_md_guard():  # jax-md's minimizers rely on implicit int/float promotion
         settled = run(jnp.asarray(centres / scale))
     return np.asarray(settled) * scale
 
