@@ -155,13 +155,20 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
     def allocate(positions):
         positions = jnp.asarray(positions)
         with jax_md_guard():
-            return fns.allocate(to_box(positions))
+            return _kept_dtype(fns.allocate(to_box(positions)), positions)
 
     def update(positions, nbrs):
         with jax_md_guard():
-            return fns.update(to_box(positions), nbrs)
+            return _kept_dtype(fns.update(to_box(positions), nbrs), positions)
 
     return NeighborListFns(allocate, update, cutoff, float(skin))
+
+
+def _kept_dtype(nbrs, positions):
+    """``nbrs``, after checking (at trace time) that jax-md kept the positions' float dtype."""
+    if nbrs.reference_position.dtype != positions.dtype:
+        raise TypeError(f"jax-md turned {positions.dtype} positions into {nbrs.reference_position.dtype}")
+    return nbrs
 
 
 def did_buffer_overflow(nbrs):
