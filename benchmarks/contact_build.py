@@ -67,6 +67,28 @@ def child(build, n, rev):
     }))
 
 
+def update_costs(n, skin_fraction=0.1, repeats=20):
+    """Seconds per jitted ``update`` of a skinned list that only checks, and of one that rebuilds (skin 0)."""
+    import jax
+    import jax.numpy as jnp
+    from _common import best_time
+    from thermal_step import jittered_packing
+
+    from sintercond import neighbors
+
+    centres, radii = jittered_packing(n)
+    moved = jnp.asarray(centres + 1e-3 * radii.max())  # far below half the skin
+    costs = {}
+    for name, skin in (("check only (skin 0.1 r_max)", skin_fraction * radii.max()), ("rebuild (skin 0)", 0.0)):
+        fns = neighbors.neighbor_list(radii, skin, box_lo=centres.min(axis=0) - radii.max(),
+                                      box_hi=centres.max(axis=0) + radii.max())
+        nbrs = fns.allocate(centres)
+        update = jax.jit(fns.update)
+        assert bool(neighbors.did_rebuild(nbrs, update(moved, nbrs))) == (skin == 0.0)
+        costs[name] = best_time(update, moved, nbrs, repeats=repeats)
+    return costs
+
+
 def run_child(build, n, rev):
     out = subprocess.run([sys.executable, __file__, "--child", build, str(n), "--old-rev", rev], cwd=ROOT,
                          capture_output=True, text=True, check=True).stdout
@@ -109,6 +131,15 @@ def main():
         + markdown_table(("particles", "build", "pairs", "first call (s)", "second call (s)", "speed-up (second)",
                           "peak RSS (GB)"), rows)
     )
+    n_update = max(args.sizes)
+    costs = update_costs(n_update)
+    check, rebuild = costs.values()
+    body += (
+        f"\n\nDynamic list (`neighbors.neighbor_list`, jax-md Dense, jitted `update`) at {n_update:,} particles "
+        f"moved by 1e-3 r_max: {check * 1e3:.2f} ms per update that only checks the displacement (skin 0.1 r_max) "
+        f"against {rebuild * 1e3:.1f} ms per rebuild (skin 0, as `moving.py` builds it): {rebuild / check:.0f}x."
+    )
+    print(body.splitlines()[-1])
     write_section("contact_build", "python benchmarks/contact_build.py", body)
 
 

@@ -52,11 +52,15 @@ def jax_md_guard():
         yield
 
 
-def jax_md_modules():
-    """``(partition, space)`` of jax-md, imported under :func:`jax_md_guard`."""
+def jax_md_modules(*names):
+    """jax-md submodules by name (e.g. ``"partition", "space"``), imported under :func:`jax_md_guard`.
+
+    Its import-time code (``rigid_body``) relies on implicit int/float promotion.
+    """
+    import importlib
+
     with jax_md_guard():
-        from jax_md import partition, space
-    return partition, space
+        return tuple(importlib.import_module(f"jax_md.{name}") for name in names)
 
 
 def minimum_image(delta, periodic_box=None):
@@ -121,7 +125,7 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
         raise ValueError("radii must be a non-empty [n] array of positive values")
     if (periodic_box is None) == (box_lo is None or box_hi is None):
         raise ValueError("give either box_lo and box_hi (free boundaries) or periodic_box")
-    partition, space = jax_md_modules()
+    partition, space = jax_md_modules("partition", "space")
     cutoff = 2.0 * float(radii.max()) * (1.0 + CANDIDATE_MARGIN)
     if periodic_box is None:
         lo, hi = np.asarray(box_lo, dtype=np.float64), np.asarray(box_hi, dtype=np.float64)
@@ -151,13 +155,20 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
     def allocate(positions):
         positions = jnp.asarray(positions)
         with jax_md_guard():
-            return fns.allocate(to_box(positions))
+            return _kept_dtype(fns.allocate(to_box(positions)), positions)
 
     def update(positions, nbrs):
         with jax_md_guard():
-            return fns.update(to_box(positions), nbrs)
+            return _kept_dtype(fns.update(to_box(positions), nbrs), positions)
 
     return NeighborListFns(allocate, update, cutoff, float(skin))
+
+
+def _kept_dtype(nbrs, positions):
+    """``nbrs``, after checking (at trace time) that jax-md kept the positions' float dtype."""
+    if nbrs.reference_position.dtype != positions.dtype:
+        raise TypeError(f"jax-md turned {positions.dtype} positions into {nbrs.reference_position.dtype}")
+    return nbrs
 
 
 def did_buffer_overflow(nbrs):

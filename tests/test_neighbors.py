@@ -11,7 +11,7 @@ from sintercond import geometry, network, neighbors
 
 
 def random_packing(n, seed, spread=1.0, polydispersity=0.5):
-    """``n`` spheres in a cube of side ``spread * n^(1/3)``, radii in ``[0.5 - p/2, 0.5 + p/2]`` (~ a few contacts each)."""
+    """``n`` spheres in a cube of side ``spread * n^(1/3)``, radii ``0.5 +- p/2`` (a few contacts each)."""
     rng = np.random.default_rng(seed)
     side = spread * max(n, 1) ** (1 / 3)
     centres = rng.uniform(-0.3 * side, 0.7 * side, (n, 3))
