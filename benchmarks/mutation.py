@@ -33,7 +33,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 # Known survivors: mutant name -> why it is equivalent or left (listed in RESULTS.md).
-EXPLAINED = {}
+EXPLAINED = {
+    "safe_sqrt grad": "equivalent: the inner where's safe argument 0 makes d sqrt = inf * 0 = NaN on the entries "
+                      "not taken, but the same where then selects 0 for them, in reverse and forward mode; the "
+                      "safe value matters only where no inner where guards it (see the mutant 'no inner where')",
+}
 
 T = "tests/"
 NECK = [T + "test_neck.py"]
@@ -66,6 +70,8 @@ MUTANTS = [
     # --- sintercond/_numerics.py, _validation.py
     ("safe_sqrt grad", "sintercond/_numerics.py", "x_safe = jnp.where(positive, x, jnp.ones_like(x))",
      "x_safe = jnp.where(positive, x, jnp.zeros_like(x))", NECK),
+    ("no inner where", "sintercond/_numerics.py", "x_safe = jnp.where(positive, x, jnp.ones_like(x))",
+     "x_safe = x", NECK),
     ("safe_divide fill", "sintercond/_numerics.py", "return jnp.where(nonzero, numerator / safe_den, fill)",
      "return jnp.where(nonzero, numerator / safe_den, 1.0)", COND),
     ("positive allows 0", "sintercond/_validation.py", "(values >= np.finfo(np.float64).tiny)", "(values >= 0)",
@@ -182,8 +188,9 @@ MUTANTS = [
      '.joinpath("fe_neck_conductance.csv"))[::-1] if False else None', FIT),
     ("flash energy", "fitting/inverse.py", "power = temperature_rise * specific_heat_min * mass.sum() / pulse_duration",
      "power = 0.5 * temperature_rise * specific_heat_min * mass.sum() / pulse_duration", [TEETH]),
-    ("pulse edge", "fitting/inverse.py", "return jnp.where(time < duration, power, 0.0)",
-     "return jnp.where(time <= duration + 1e-300, power, 0.0)", [T + "test_inverse.py"]),
+    ("adjoint pulse clock", "fitting/inverse.py", "jnp.asarray(k, experiment.power.dtype) * experiment.dt)",
+     "jnp.asarray(k + 1, experiment.power.dtype) * experiment.dt)",
+     [T + "test_inverse.py::test_adjoint_and_simulate_give_the_same_readings"]),
     ("fitting x64", "fitting/__init__.py", "import sintercond  # noqa: F401,E402", "import jax  # noqa: F401,E402",
      [T + "test_fitting.py::test_slope_against_closed_form_least_squares"]),
 ]

@@ -119,6 +119,27 @@ def test_rojek_first_newton_iterate_from_coble():
     assert a1 == pytest.approx(0.745039, abs=5e-7)
 
 
+def test_newton_starts_from_coble_clipped_to_the_smaller_radius():
+    """Iteration 0 is Coble's neck sqrt(2 r* h), r* = 2 r_i r_j / (r_i + r_j) (Eqs. 11-12), clipped to
+    min(r_i, r_j) (``iterations=0``). Mutant "coble start" (half of Coble's u) still converged in 5 steps,
+    so no accuracy test saw it."""
+    r_i = np.array([1.0, 1.0, 1.0, 2.0])
+    r_j = np.array([3.0, 1e3, 1.5, 0.5])  # unequal radii: equal ones take the closed form, no Newton
+    h = np.array([0.2, 0.3, 0.01, 0.18])  # the last: Coble (0.54) beyond the smaller radius 0.5
+    r_star = 2 * r_i * r_j / (r_i + r_j)
+    expected = np.minimum(np.sqrt(2 * r_star * h), np.minimum(r_i, r_j))
+    np.testing.assert_allclose(np.asarray(neck_radius(r_i, r_j, h, iterations=0)), expected, rtol=1e-15)
+
+
+def test_closed_form_necks_have_finite_zero_gradients_without_contact():
+    """Coble, Hertz and lens radii at h = 0 and h < 0: value 0, gradient 0 (not NaN from d sqrt/dx at 0).
+    Mutant "safe_sqrt grad" (the double-where's safe argument 0 instead of 1) gave NaN gradients here."""
+    for fn in (coble_radius, hertz_radius, intersection_radius):
+        for h in (0.0, -0.1):
+            g = jax.grad(fn, argnums=(0, 1, 2))(1.0, 3.0, h)
+            assert float(fn(1.0, 3.0, h)) == 0.0 and all(float(x) == 0.0 for x in g), (fn.__name__, h, g)
+
+
 def test_neck_residual_derivative_is_6_a_hn():
     a = jnp.linspace(0.05, 0.99, 50)
     dz = jax.vmap(jax.grad(neck_residual), in_axes=(0, None, None, None))(a, 1.0, 3.0, 0.2)
@@ -370,6 +391,10 @@ def test_validate_names_field_and_range():
         validate_neck_inputs([1.0, 1.0], [1.0, -2.0], 0.1)
     with pytest.raises(ValueError, match=r"h must be finite"):
         validate_neck_inputs(1.0, 1.0, np.nan)
+    # mutant "finite dropped" (a check for NaN only) let inf through to a misleading max_overlap message
+    for bad in (np.inf, -np.inf):
+        with pytest.raises(ValueError, match=r"h must be finite; got -?inf"):
+            validate_neck_inputs(1.0, 1.0, bad)
     with pytest.raises(TypeError, match="needs concrete values"):
         jax.jit(validate_neck_inputs)(1.0, 1.0, 0.1)
     # other models have other domains
