@@ -93,7 +93,7 @@ _SCHEMA = {
                            doc="a particle is heated when its centre lies within spot_radius + r of the beam axis"),
         "absorptance": Key(float, FRACTION, True, doc="absorbed fraction a"),
         "speed": Key(float, _within(0.0, 1e3, "m/s"), True, "m/s", doc="speed along the path"),
-        "path": Key(list, None, True, "m", doc="[[x, y], ...] waypoints in absolute coordinates of the packing "
+        "path": Key(list, ("a non-empty list of [x, y] points (m)", lambda v: True), True, "m", doc="[[x, y], ...] waypoints in absolute coordinates of the packing "
                                                 "(the container's corner or the lattice's first sphere side at 0), "
                                                 "each within the packing's lateral extent widened by spot_radius"),
     },
@@ -119,7 +119,8 @@ _SCHEMA = {
         "output_every": Key(int, _within(1, 1e9), True, "steps", doc="steps between output frames"),
         "checkpoint_every": Key(int, _within(1, 1e9), True, "steps",
                                 doc="steps between checkpoints, a multiple of output_every"),
-        "formats": Key(list, None, False, default=["vtp"],
+        "formats": Key(list, ("a non-empty list of distinct names from ['lammps', 'vtp']", lambda v: True), False,
+                       default=["vtp"],
                        doc='non-empty list of distinct "vtp" (ParaView) and "lammps" (OVITO)'),
         "override_limits": Key(bool, None, False, default=False,
                                doc="true lifts the limits on steps, frames and output bytes (MAX_STEPS, "
@@ -132,7 +133,7 @@ _PACKING = {
         "lateral_size": Key(float, _within(1e-7, 1.0, "m"), True, "m", doc="side of the square container"),
         "height": Key(float, _within(1e-7, 1.0, "m"), True, "m",
                       doc="bed height to fill, >= the largest diameter; the bed holds 0.62 of this volume"),
-        "diameter_range": Key(list, None, True, "m",
+        "diameter_range": Key(list, ("a list [low, high] of numbers in [1e-08, 1] m", lambda v: True), True, "m",
                               doc="[low, high] diameters, uniform by volume, 1e-8 <= low <= high < lateral_size"),
         "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed"),
         "sinter_swelling": Key(float, _within(0.0, 0.05), False, default=0.0,
@@ -141,7 +142,7 @@ _PACKING = {
     },
     "simple_cubic": {
         "kind": Key(str, _choice("powder_bed", "simple_cubic"), True, doc="the packing"),
-        "counts": Key(list, None, True, doc="[nx, ny, nz] spheres per axis, integers >= 1; at most "
+        "counts": Key(list, ("a list of 3 integers in [1, 10000]", lambda v: True), True, doc="[nx, ny, nz] spheres per axis, integers >= 1; at most "
                                              f"{MAX_LATTICE_PARTICLES} in all"),
         "spacing": Key(float, _within(1e-8, 1.0, "m"), True, "m", doc="centre distance of neighbours"),
         "radius": Key(float, _within(1e-8, 1.0, "m"), True, "m",
@@ -187,7 +188,7 @@ def _describe(key: Key) -> str:
             dict: "a table", object: "a value"}[key.kind]
     if key.rule is None:
         return kind
-    return key.rule[0] if key.kind in (str, object) or key.rule[0].startswith("one of") else f"{kind} {key.rule[0]}"
+    return key.rule[0] if key.kind in (str, object, list) or key.rule[0].startswith("one of") else f"{kind} {key.rule[0]}"
 
 
 def _value(name, value, key: Key):
