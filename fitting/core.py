@@ -65,7 +65,8 @@ class FitResult:
 
     Attributes:
       params: fitted parameters (dict of floats).
-      stderr: standard errors (dict), Gauss-Newton at the optimum.
+      stderr: standard errors (dict), Gauss-Newton at the optimum; ``inf`` when the data do not
+        determine them (as many observations as parameters, or a rank-deficient Jacobian).
       covariance: ``[p, p]`` in the order of ``names``.
       names: parameter names.
       loss_history: loss per step (NaN after the stop).
@@ -112,11 +113,10 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
       :class:`FitResult`.
     """
     names = tuple(params0)
+    _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method)
     transforms = tuple((n, (transforms or {}).get(n, Free())) for n in names)
-    if method not in ("adam", "levenberg_marquardt"):
-        raise ValueError(f"method must be 'adam' or 'levenberg_marquardt'; got {method!r}")
     y = jnp.asarray(y)
-    w = jnp.ones_like(y) if weights is None else jnp.asarray(weights, y.dtype)
+    w = jnp.ones_like(y) if weights is None else jnp.broadcast_to(jnp.asarray(weights, y.dtype), y.shape)
     program = _fit_program(model, model if jacobian_model is None else jacobian_model, transforms, bool(relative),
                            method, float(learning_rate), int(max_steps), float(grad_tol), float(loss_tol),
                            int(report_every))
@@ -139,12 +139,70 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
         else:
             break
     r, jac = program.residuals_and_jacobian(theta, x, y, w)
-    dof = max(int(r.shape[0]) - len(names), 1)
-    s2 = float(jnp.sum(r**2)) / dof
-    covariance = np.asarray(s2 * jnp.linalg.inv(jac.T @ jac))
+    if not bool(jnp.all(jnp.isfinite(theta))):
+        raise FloatingPointError(f"the fit diverged: parameters {dict(zip(names, np.asarray(theta).tolist()))}; "
+                                 "check params0, the transforms' ranges and learning_rate")
+    dof = int(r.shape[0]) - len(names)
+    jtj = np.asarray(jac.T @ jac, dtype=np.float64)
+    if dof == 0 or np.linalg.matrix_rank(jtj) < len(names):
+        # as many observations as parameters, or parameters the data do not determine: no error estimate
+        covariance = np.full((len(names), len(names)), np.inf)
+        s2 = float(jnp.sum(r**2)) / max(dof, 1)
+    else:
+        s2 = float(jnp.sum(r**2)) / dof
+        covariance = s2 * np.linalg.inv(jtj)
     params = {n: float(theta[k]) for k, n in enumerate(names)}
     stderr = {n: float(np.sqrt(covariance[k, k])) for k, n in enumerate(names)}
     return FitResult(params, stderr, covariance, names, np.asarray(history), int(steps), float(np.sqrt(s2)))
+
+
+def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method):
+    """Raise ``ValueError`` naming the argument for input :func:`least_squares` cannot fit (before compiling)."""
+    from sintercond._validation import fail_where
+
+    if method not in ("adam", "levenberg_marquardt"):
+        raise ValueError(f"method must be 'adam' or 'levenberg_marquardt'; got {method!r}")
+    if not isinstance(params0, Mapping) or not params0:
+        raise ValueError(f"params0 must be a non-empty dict name -> starting value; got {params0!r}")
+    unknown = set(transforms or {}) - set(params0)
+    if unknown:
+        raise ValueError(f"transforms has keys that are not parameters: {sorted(unknown)}; params0 has {list(params0)}")
+    y_np = np.asarray(y, dtype=np.float64)
+    if y_np.ndim == 0 or y_np.size == 0:
+        raise ValueError(f"y must be a non-empty array of observations; got shape {y_np.shape}")
+    fail_where(~np.isfinite(y_np), lambda i: f"y must be finite; got {y_np[i]!r} at index {i}")
+    if relative:
+        fail_where(y_np == 0, lambda i: f"y must be nonzero for relative=True (residuals are divided by y); "
+                                        f"got 0 at index {i}")
+    if y_np.size < len(params0):
+        raise ValueError(f"y has {y_np.size} observations for {len(params0)} parameters: an underdetermined fit; "
+                         "y needs at least as many observations as params0 has parameters")
+    if weights is not None:
+        w = np.asarray(weights, dtype=np.float64)
+        try:
+            w = np.broadcast_to(w, y_np.shape)
+        except ValueError:
+            raise ValueError(f"weights must broadcast to y's shape {y_np.shape}; got shape {w.shape}") from None
+        fail_where(~(np.isfinite(w) & (w > 0)), lambda i: f"weights must be finite and > 0; got {w[i]!r} at index {i}")
+    for name, value in params0.items():
+        v = np.asarray(value, dtype=np.float64)
+        if v.shape != () or not np.isfinite(v):
+            raise ValueError(f"params0[{name!r}] must be a finite number; got {value!r}")
+        t = (transforms or {}).get(name, Free())
+        if isinstance(t, Positive) and not v > 0:
+            raise ValueError(f"params0[{name!r}] must be > 0 for its Positive transform; got {float(v)!r}")
+        if isinstance(t, Bounded) and not t.low < v < t.high:
+            raise ValueError(f"params0[{name!r}] must be in ({t.low:g}, {t.high:g}) for its Bounded transform; "
+                             f"got {float(v)!r}")
+        if not isinstance(t, (Free, Positive, Bounded)):
+            raise ValueError(f"transforms[{name!r}] must be Free(), Positive() or Bounded(low, high); got {t!r}")
+    try:
+        out = jax.eval_shape(model, {n: jnp.asarray(v, y_np.dtype) for n, v in params0.items()}, x)
+    except Exception as err:  # noqa: BLE001 - any failure to trace the model is the caller's to see, named
+        raise ValueError(f"model(params0, x) cannot be evaluated: {type(err).__name__}: {err}") from None
+    if getattr(out, "shape", None) != y_np.shape:
+        raise ValueError(f"model(params0, x) has shape {getattr(out, 'shape', None)} but y has shape {y_np.shape}; "
+                         "they must be equal")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -103,32 +103,74 @@ def main(argv=None) -> int:
 
 
 def _scene_command(parser, args) -> int:
-    from sintercond import run as runner
-    from sintercond import thermal
-    from sintercond.scene import SceneError, load_scene
+    """``run`` and ``effective``: a clean one-line error (exit 2 for bad input, 1 for a failed run), no traceback."""
+    from sintercond.scene import SceneError
 
     try:
-        if args.command == "effective":
-            scene = load_scene(args.scene)
-            centres, radii = runner.build_packing(scene)
-            c = scene["conduction"]
-            k_star = thermal.steady_state_conductivity(centres, radii, scene["material"]["conductivity"],
-                                                       axis=args.axis, law=c["law"], params=c.get("params"),
-                                                       neck_model=c.get("neck_model"))
-            print(f"effective conductivity along axis {args.axis}: {k_star:.6g} W/(m K) "
-                  f"({len(radii)} particles, solid conductivity {scene['material']['conductivity']:g} W/(m K))")
-            return 0
-        if args.resume is not None:
-            _, summary = runner.resume(args.resume, progress=not args.no_progress)
-            out = args.resume
-        else:
-            scene = load_scene(args.scene)
-            _, summary = runner.run_scene(scene, args.out, progress=not args.no_progress)
-            out = args.out
+        return _effective(args) if args.command == "effective" else _run(args)
     except SceneError as err:
         parser.exit(2, f"sintercond: error: {err}\n")
+    except ValueError as err:  # raised while building the packing or network from a valid scene
+        parser.exit(2, f"sintercond: error: the scene cannot be built: {err}\n")
+    except MemoryError:
+        parser.exit(1, "sintercond: error: out of memory while building or running the scene; make [packing] "
+                       "smaller (docs/scenes.md, Limits)\n")
+    except FloatingPointError as err:
+        parser.exit(1, f"sintercond: error: the run left the physical range: {err}\n")
+    except OSError as err:
+        parser.exit(1, f"sintercond: error: {err.strerror or err}: {err.filename or ''}\n")
+    except KeyboardInterrupt:
+        parser.exit(130, "sintercond: interrupted; `sintercond run --resume DIR` continues from the last checkpoint\n")
+
+
+def _run(args) -> int:
+    from sintercond import run as runner
+    from sintercond.scene import load_scene
+
+    if args.resume is not None:
+        _, summary = runner.resume(args.resume, progress=not args.no_progress)
+        out = args.resume
+    else:
+        scene = load_scene(args.scene)
+        _, summary = runner.run_scene(scene, args.out, progress=not args.no_progress)
+        out = args.out
     print(runner.summary_table(summary))
     print(f"outputs in {out}/ (vtp/*.vtp for ParaView, dump.lammpstrj for OVITO, checkpoint.npz)")
+    return 0
+
+
+def effective_box(scene, bed):
+    """The box ``k*`` is measured in, chosen from the scene; ``None`` for a lattice (its cell, see thermal).
+
+    A powder bed's box is its container: the side walls laterally, and from the
+    floor to the bed's mean surface height vertically (the rough top above it
+    is cut off). The particles reaching a face of the box along the axis are
+    held (hot at ``lo``, cold at ``hi``).
+    """
+    if scene["packing"]["kind"] != "powder_bed":
+        return None
+    lo, hi = bed.container
+    return lo, np.array([hi[0], hi[1], bed.height])
+
+
+def _effective(args) -> int:
+    from sintercond import packing, thermal
+    from sintercond.scene import load_scene
+
+    scene = load_scene(args.scene)
+    bed = packing.from_scene(scene["packing"])
+    box = effective_box(scene, bed)
+    c = scene["conduction"]
+    kappa = scene["material"]["conductivity"]
+    k_star = thermal.steady_state_conductivity(bed.centres, bed.radii, kappa, axis=args.axis, law=c["law"],
+                                               params=c.get("params"), neck_model=c.get("neck_model"), box=box)
+    where = ("the lattice cell" if box is None else
+             f"the container cut at the mean surface height, {box[1][0]:.4g} x {box[1][1]:.4g} x {box[1][2]:.4g} m")
+    print(f"effective conductivity along axis {args.axis}: {k_star:.6g} W/(m K) "
+          f"({len(bed.radii)} particles, solid conductivity {kappa:g} W/(m K), k*/k = {k_star / kappa:.4g})")
+    print(f"k* = Q L / (A dT): particles reaching the two faces of {where} along axis {args.axis} held at "
+          "dT apart, Q the steady heat flow, L the distance of the mean centre planes of the two held sets, "
+          "A the box cross-section")
     return 0
 
 

@@ -35,6 +35,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, safe_divide
@@ -121,8 +122,15 @@ def _feng_half_conductance(a, r, kappa, thickness):
     ``sin(alpha) = a / r``; the result is per unit out-of-plane thickness
     times ``thickness``.
     """
-    alpha = jnp.arcsin(jnp.clip(a / r, 0.0, 1.0))
-    return thickness * jnp.pi * kappa / (-jnp.log(alpha) + 1.5 + alpha**2 / 36.0 + alpha**4 / 2700.0)
+    # double where: arcsin' is infinite at a/r = 1 and log' at alpha = 0; their cotangents would be
+    # inf (or inf * 0 = NaN) in reverse mode although the selected value is finite
+    x = a / r
+    below = x < 1
+    alpha = jnp.where(below, jnp.arcsin(jnp.where(below, jnp.maximum(x, 0.0), 0.5)), jnp.pi / 2)
+    tiny = jnp.finfo(alpha.dtype).tiny
+    positive = alpha > tiny
+    log_alpha = jnp.where(positive, jnp.log(jnp.where(positive, alpha, 1.0)), jnp.log(tiny))
+    return thickness * jnp.pi * kappa / (-log_alpha + 1.5 + alpha**2 / 36.0 + alpha**4 / 2700.0)
 
 
 def _feng_law(a, r_i, r_j, h, kappa_i, kappa_j, params):
@@ -216,6 +224,9 @@ def pair_conductance(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_
       ``K_ij`` (W/K), broadcast shape of the geometry and materials.
     """
     law = _resolve_law(law)
+    params = _merge_params(law, params)
+    if _all_concrete(kappa_i, kappa_j, *params.values()):
+        validate_law_inputs(law, params, kappa_i, kappa_j)
     kappa_j = kappa_i if kappa_j is None else kappa_j
     r_i, r_j, h, kappa_i, kappa_j = as_float_arrays(r_i, r_j, h, kappa_i, kappa_j)
     a = NECK_MODELS[_resolve_neck_model(law, neck_model)](r_i, r_j, h)
@@ -240,7 +251,50 @@ def conductance_from_neck(law, a, r_i, r_j, h, kappa_i, kappa_j, params=None):
     a_safe = jnp.where(contact, a, 0.5 * jnp.minimum(r_i, r_j))
     h_safe = jnp.where(contact, h, 0.0)
     k = law.from_neck(a_safe, r_i, r_j, h_safe, kappa_i, kappa_j, params)
+    # under jit, invalid materials or parameters give NaN, never a negative conductance
+    undefined = undefined | ~((kappa_i > 0) & (kappa_j > 0)) | ~_params_valid(law, params)
     return jnp.where(undefined, jnp.nan, jnp.where(contact, k, 0.0))
+
+
+def _all_concrete(*values) -> bool:
+    return not any(isinstance(v, jax.core.Tracer) for v in values)
+
+
+def _params_valid(law: ConductanceLaw, params):
+    ok = jnp.asarray(True)
+    for name, value in params.items():
+        value = jnp.asarray(value)
+        if name in law.params_any_sign:
+            ok = ok & jnp.all(jnp.isfinite(value))
+        elif name in law.params_allowing_zero:
+            ok = ok & jnp.all(jnp.isfinite(value) & (value >= 0))
+        else:
+            ok = ok & jnp.all(jnp.isfinite(value) & (value > 0))
+    return ok
+
+
+def validate_law_inputs(law, params, kappa_i, kappa_j=None, names=None):
+    """Raise ``ValueError`` naming the argument unless the law's parameters and the conductivities are valid.
+
+    Parameters must be finite and > 0 (those in ``law.params_allowing_zero``
+    >= 0, ``law.params_any_sign`` any finite value); conductivities finite and
+    > 0 (normal floats). ``names`` maps ``kappa_i``, ``kappa_j`` and parameter
+    keys to the names the message uses.
+    """
+    law = _resolve_law(law)
+    params = _merge_params(law, params)
+    names = names or {}
+    for name, value in params.items():
+        (value,) = concrete_arrays("validate_law_inputs", value)
+        label = names.get(name, f"params[{name!r}] of law {law.name!r}")
+        if name in law.params_any_sign:
+            require_finite(label, value)
+        else:
+            require_positive(label, value, allow_zero=name in law.params_allowing_zero)
+    kappas = {"kappa_i": kappa_i} if kappa_j is None else {"kappa_i": kappa_i, "kappa_j": kappa_j}
+    for name, value in kappas.items():
+        (value,) = concrete_arrays("validate_law_inputs", value)
+        require_positive(f"{names.get(name, name)} (W/(m K))", value)
 
 
 def validate_pair_conductance_inputs(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_model=None):
@@ -253,19 +307,8 @@ def validate_pair_conductance_inputs(law, r_i, r_j, h, kappa_i, kappa_j=None, pa
     (:func:`sintercond.neck.validate_neck_inputs`).
     """
     law = _resolve_law(law)
-    params = _merge_params(law, params)
     model = _resolve_neck_model(law, neck_model)
-    for name, value in params.items():
-        (value,) = concrete_arrays("validate_pair_conductance_inputs", value)
-        label = f"params[{name!r}] of law {law.name!r}"
-        if name in law.params_any_sign:
-            require_finite(label, value)
-        else:
-            require_positive(label, value, allow_zero=name in law.params_allowing_zero)
-    kappas = {"kappa_i": kappa_i} if kappa_j is None else {"kappa_i": kappa_i, "kappa_j": kappa_j}
-    for name, value in kappas.items():
-        (value,) = concrete_arrays("validate_pair_conductance_inputs", value)
-        require_positive(f"{name} (W/(m K))", value)
+    validate_law_inputs(law, params, kappa_i, kappa_j)
     validate_neck_inputs(r_i, r_j, h, model=model)
 
 
@@ -289,6 +332,9 @@ def rojek_pair_conductance(r_i, r_j, h, kappa, slope=ROJEK_SLOPE, contact_conduc
     Returns:
       ``K_ij`` (W/K).
     """
+    if contact_conductance is not None and _all_concrete(contact_conductance):
+        (k_c,) = concrete_arrays("rojek_pair_conductance", contact_conductance)
+        require_positive("contact_conductance (W/K)", k_c)
     contact_resistance = 0.0 if contact_conductance is None else 1.0 / jnp.asarray(contact_conductance)
     return pair_conductance(
         "rojek", r_i, r_j, h, kappa, kappa_j,

@@ -335,6 +335,25 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
                    float(2 * np.sum(touching) / n), isolated, residual)
 
 
+def from_scene(p) -> Packing:
+    """The packing of a validated scene's ``[packing]`` table (radii after ``sinter_swelling``).
+
+    ``powder_bed``: :func:`powder_bed`, radii then grown by ``sinter_swelling``
+    (settled contacts become necks). ``simple_cubic``: centres
+    ``radius + spacing * (i, j, k)``, container ``[0, (counts - 1) spacing + 2 radius]``.
+    """
+    if p["kind"] == "simple_cubic":
+        counts = np.asarray(p["counts"])
+        grid = np.array(np.meshgrid(*(np.arange(c) for c in counts), indexing="ij")).reshape(3, -1).T
+        centres = grid * p["spacing"] + p["radius"]
+        radii = np.full(len(centres), float(p["radius"]))
+        hi = (counts - 1) * p["spacing"] + 2 * p["radius"]
+        overlap = max(2 * p["radius"] - p["spacing"], 0.0) / (2 * p["radius"])
+        return Packing(centres, radii, (np.zeros(3), hi), overlap, float(hi[2]))
+    bed = powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0))
+    return dataclasses.replace(bed, radii=bed.radii * (1.0 + p.get("sinter_swelling", 0.0)))
+
+
 def rev_box(packing: Packing, size, floor_clearance=None):
     """A cube of side ``size`` centred laterally, starting ``floor_clearance`` above the floor.
 

@@ -56,14 +56,8 @@ class Model:
 
 
 def build_packing(scene):
-    p = scene["packing"]
-    if p["kind"] == "simple_cubic":
-        nx, ny, nz = p["counts"]
-        grid = np.array(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")).reshape(3, -1).T
-        centres = grid * p["spacing"] + p["radius"]
-        return centres, np.full(len(centres), p["radius"])
-    bed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0))
-    return bed.centres, bed.radii * (1.0 + p.get("sinter_swelling", 0.0))
+    bed = packing.from_scene(scene["packing"])
+    return bed.centres, bed.radii
 
 
 def _nusselt(convection):

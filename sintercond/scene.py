@@ -1,53 +1,29 @@
-"""Scene files (TOML): what a thermal run simulates, validated before anything compiles.
+"""Scene files (TOML): what a thermal run simulates, validated before anything is built or compiled.
 
-A scene has the sections below; every key is checked (unknown keys, wrong
-types and out-of-range values raise :class:`SceneError` naming the key).
-SI units throughout (m, s, K, W, kg). See ``sintercond/data/default_scene.toml``
-for a complete example (the scene ``sintercond run`` uses without arguments).
+A scene has the sections ``[packing]`` (``kind = "powder_bed"`` or
+``"simple_cubic"``), ``[material]``, ``[conduction]`` (with
+``[conduction.params]``), ``[initial]``, optional ``[boundary]``,
+``[[walls]]``, ``[beam]``, ``[convection]``, ``[radiation]``, and ``[run]``.
+SI units throughout (m, s, K, W, kg). The reference of every key (type,
+range, unit, default, meaning) is ``docs/scenes.md``, generated from the
+schema below (:func:`scene_reference`); ``sintercond/data/default_scene.toml``
+is a complete example (the scene ``sintercond run`` uses without arguments).
 
-``[packing]``
-    ``kind = "powder_bed"``: ``lateral_size``, ``height``, ``diameter_range``
-    ``[low, high]``, ``seed``, ``sinter_swelling`` (relative radius increase
-    that turns settled contacts into sintered necks, 0 <= s <= 0.05).
-    ``kind = "simple_cubic"``: ``counts`` ``[nx, ny, nz]``, ``spacing``, ``radius``.
-``[material]``
-    ``density``, ``specific_heat``, ``conductivity`` (all > 0).
-``[conduction]``
-    ``law`` (a key of ``sintercond.CONDUCTANCE_LAWS``), optional
-    ``neck_model`` and ``[conduction.params]``.
-``[initial]``
-    ``temperature``.
-``[boundary]`` (optional)
-    ``floor_temperature``: shorthand for a held wall at the bottom (axis 2, min).
-``[[walls]]`` (optional, any number)
-    ``axis`` (0, 1, 2), ``side`` (``"min"`` or ``"max"``: the wall plane lies
-    at the packing's extreme along the axis, moved ``penetration`` mean
-    radii into it, default 0.02), ``mode``: ``"held"`` (touching particles
-    held at ``temperature``), ``"conducting"`` (touching particles exchange
-    heat with a wall at ``temperature`` through the conduction law, the wall
-    taken as a very large sphere) or ``"insulated"`` (no flux, the default of
-    any face).
-``[beam]`` (optional; a heat source moving along a polyline)
-    ``kind`` (``"laser"``, Lambert-Beer with ``attenuation`` in 1/m, the
-    default; or ``"nozzle"``, linear attenuation to ``max_depth`` in m),
-    ``intensity`` (W/m^2), ``spot_radius``, ``absorptance``, ``speed`` (m/s),
-    ``path`` ``[[x, y], ...]``.
-``[convection]`` / ``[radiation]`` (optional)
-    ``environment_temperature`` and ``environment_conductivity``, and
-    ``nusselt`` (default 2) or ``reynolds`` and ``prandtl`` (Whitaker's
-    correlation) / ``emissivity``.
-``[run]``
-    ``duration`` (s), ``dt`` (s or ``"auto"`` = 0.9 x the stable step),
-    ``output_every`` and ``checkpoint_every`` (steps; the second a multiple of
-    the first), ``formats`` (``"vtp"``, ``"lammps"``).
+Every key is checked (unknown keys, wrong types, out-of-range values,
+inconsistent combinations raise :class:`SceneError` naming the key and the
+allowed range), and the work of the run is estimated from the scene alone
+(:func:`estimate_run`: particles, steps, output frames and bytes, memory) and
+refused beyond the documented limits, all before a packing is built.
 """
 
 from __future__ import annotations
 
+import difflib
 import importlib.resources
 import math
 import tomllib
 from pathlib import Path
+from typing import NamedTuple
 
 from sintercond.conductance import CONDUCTANCE_LAWS
 from sintercond.neck import NECK_MODELS
@@ -57,113 +33,215 @@ class SceneError(ValueError):
     """An invalid scene: the message names the key and the allowed range."""
 
 
-_POSITIVE = ("> 0", lambda v: v > 0)
-_NON_NEGATIVE = (">= 0", lambda v: v >= 0)
-_FRACTION = ("in [0, 1]", lambda v: 0 <= v <= 1)
+class Key(NamedTuple):
+    """One scene key: its type, allowed range, unit, default and meaning (the scene reference is made from these)."""
 
-# section -> key -> (type, rule or None, required)
+    kind: type  # float, int, str, bool, list or dict
+    rule: tuple | None  # (text, predicate) or None
+    required: bool
+    unit: str = ""
+    default: object = None
+    doc: str = ""
+
+
+def _within(low, high, unit="", low_open=False):
+    text = f"in {'(' if low_open else '['}{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+    return text, (lambda v: (low < v if low_open else low <= v) and v <= high)
+
+
+def _choice(*options):
+    return "one of " + ", ".join(repr(o).replace("'", '"') for o in options), (lambda v: v in options)
+
+
+TEMPERATURE = _within(1.0, 1e4, "K")
+FRACTION = _within(0.0, 1.0)
+
+# Limits of a run, checked before anything is built (``run.override_limits = true`` lifts the last three).
+MAX_LATTICE_PARTICLES = 2_000_000
+"""Largest ``simple_cubic`` lattice (memory of the network build, ~4 kB a particle)."""
+MAX_STEPS = 10_000_000
+"""Most time steps of a run (estimated from the scene: ``duration`` over the (estimated stable) step)."""
+MAX_FRAMES = 10_000
+"""Most output frames of a run (``steps / output_every + 1``): files in ``vtp/``, frames of the dump."""
+MAX_OUTPUT_BYTES = 2e9
+"""Most bytes of outputs of a run (about 230 B a particle and frame in VTP, 140 B in the LAMMPS dump)."""
+MAX_MEMORY_BYTES = 8e9
+"""Most memory of the network build (about 4 kB a particle)."""
+
 _SCHEMA = {
     "material": {
-        "density": (float, _POSITIVE, True),
-        "specific_heat": (float, _POSITIVE, True),
-        "conductivity": (float, _POSITIVE, True),
+        "density": Key(float, _within(1.0, 1e5, "kg/m^3"), True, "kg/m^3", doc="solid density"),
+        "specific_heat": Key(float, _within(1.0, 1e5, "J/(kg K)"), True, "J/(kg K)", doc="specific heat capacity"),
+        "conductivity": Key(float, _within(1e-6, 1e4, "W/(m K)"), True, "W/(m K)", doc="solid conductivity kappa"),
     },
-    "conduction": {"law": (str, None, True), "neck_model": (str, None, False), "params": (dict, None, False)},
-    "initial": {"temperature": (float, _POSITIVE, True)},
-    "boundary": {"floor_temperature": (float, _POSITIVE, False)},
+    "conduction": {
+        "law": Key(str, _choice(*sorted(CONDUCTANCE_LAWS)), True, doc="pair conductance law"),
+        "neck_model": Key(str, _choice(*sorted(NECK_MODELS)), False, default="the law's",
+                          doc="neck (contact) radius the law takes"),
+        "params": Key(dict, None, False, default="the law's", doc="the law's parameters, see [conduction.params]"),
+    },
+    "initial": {"temperature": Key(float, TEMPERATURE, True, "K", doc="initial temperature of every particle")},
+    "boundary": {"floor_temperature": Key(float, TEMPERATURE, False, "K",
+                                          doc="shorthand for a held wall at the bottom (axis 2, min)")},
     "beam": {
-        "kind": (str, ('"laser" or "nozzle"', lambda v: v in ("laser", "nozzle")), False),
-        "intensity": (float, _NON_NEGATIVE, True),
-        "attenuation": (float, _NON_NEGATIVE, False),
-        "max_depth": (float, _POSITIVE, False),
-        "spot_radius": (float, _POSITIVE, True),
-        "absorptance": (float, _FRACTION, True),
-        "speed": (float, _NON_NEGATIVE, True),
-        "path": (list, None, True),
+        "kind": Key(str, _choice("laser", "nozzle"), False, default="laser",
+                    doc="laser: Lambert-Beer attenuation; nozzle: linear attenuation to max_depth"),
+        "intensity": Key(float, _within(0.0, 1e12, "W/m^2"), True, "W/m^2", doc="I0, power per unit spot area"),
+        "attenuation": Key(float, _within(0.0, 1e9, "1/m"), False, "1/m", doc="mu of a laser (required for it)"),
+        "max_depth": Key(float, _within(1e-9, 1.0, "m"), False, "m", doc="reach d_max of a nozzle (required for it)"),
+        "spot_radius": Key(float, _within(1e-9, 1.0, "m"), True, "m",
+                           doc="a particle is heated when its centre lies within spot_radius + r of the beam axis"),
+        "absorptance": Key(float, FRACTION, True, doc="absorbed fraction a"),
+        "speed": Key(float, _within(0.0, 1e3, "m/s"), True, "m/s", doc="speed along the path"),
+        "path": Key(list, ("a non-empty list of [x, y] points (m)", lambda v: True), True, "m", doc="[[x, y], ...] waypoints in absolute coordinates of the packing "
+                                                "(the container's corner or the lattice's first sphere side at 0), "
+                                                "each within the packing's lateral extent widened by spot_radius"),
     },
     "convection": {
-        "environment_temperature": (float, _POSITIVE, True),
-        "environment_conductivity": (float, _POSITIVE, True),
-        "nusselt": (float, _POSITIVE, False),
-        "reynolds": (float, _NON_NEGATIVE, False),
-        "prandtl": (float, _POSITIVE, False),
+        "environment_temperature": Key(float, TEMPERATURE, True, "K", doc="T_E of the gas"),
+        "environment_conductivity": Key(float, _within(1e-6, 1e3, "W/(m K)"), True, "W/(m K)",
+                                        doc="k_E of the gas"),
+        "nusselt": Key(float, _within(0.0, 1e4, low_open=True), False, default=2.0,
+                       doc="Nu of h = Nu k_E / (2 r); or give reynolds and prandtl"),
+        "reynolds": Key(float, _within(0.0, 1e6), False, doc="Re of Whitaker's correlation (with prandtl)"),
+        "prandtl": Key(float, _within(1e-3, 1e5), False, doc="Pr of Whitaker's correlation (with reynolds)"),
     },
-    "radiation": {"environment_temperature": (float, _POSITIVE, True), "emissivity": (float, _FRACTION, True)},
+    "radiation": {
+        "environment_temperature": Key(float, TEMPERATURE, True, "K", doc="T_E of the surroundings"),
+        "emissivity": Key(float, FRACTION, True, doc="epsilon"),
+    },
     "run": {
-        "duration": (float, _POSITIVE, True),
-        "dt": (object, None, False),
-        "output_every": (int, _POSITIVE, True),
-        "checkpoint_every": (int, _POSITIVE, True),
-        "formats": (list, None, False),
+        "duration": Key(float, _within(0.0, 1e6, "s", low_open=True), True, "s",
+                        doc="simulated time; the run ends exactly there"),
+        "dt": Key(object, ('"auto" or a number in (0, 1e3] s', lambda v: v == "auto" or (
+            not isinstance(v, (bool, str)) and isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1e3)),
+            False, "s", default="auto", doc='explicit step; "auto" = 0.9 x the stable step'),
+        "output_every": Key(int, _within(1, 1e9), True, "steps", doc="steps between output frames"),
+        "checkpoint_every": Key(int, _within(1, 1e9), True, "steps",
+                                doc="steps between checkpoints, a multiple of output_every"),
+        "formats": Key(list, ("a non-empty list of distinct names from ['lammps', 'vtp']", lambda v: True), False,
+                       default=["vtp"],
+                       doc='non-empty list of distinct "vtp" (ParaView) and "lammps" (OVITO)'),
+        "override_limits": Key(bool, None, False, default=False,
+                               doc="true lifts the limits on steps, frames and output bytes (MAX_STEPS, "
+                                   "MAX_FRAMES, MAX_OUTPUT_BYTES)"),
     },
 }
 _PACKING = {
     "powder_bed": {
-        "kind": (str, None, True),
-        "lateral_size": (float, _POSITIVE, True),
-        "height": (float, _POSITIVE, True),
-        "diameter_range": (list, None, True),
-        "seed": (int, _NON_NEGATIVE, False),
-        "sinter_swelling": (float, ("in [0, 0.05]", lambda v: 0 <= v <= 0.05), False),
+        "kind": Key(str, _choice("powder_bed", "simple_cubic"), True, doc="the packing"),
+        "lateral_size": Key(float, _within(1e-7, 1.0, "m"), True, "m", doc="side of the square container"),
+        "height": Key(float, _within(1e-7, 1.0, "m"), True, "m",
+                      doc="bed height to fill, >= the largest diameter; the bed holds 0.62 of this volume"),
+        "diameter_range": Key(list, ("a list [low, high] of numbers in [1e-08, 1] m", lambda v: True), True, "m",
+                              doc="[low, high] diameters, uniform by volume, 1e-8 <= low <= high < lateral_size"),
+        "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed"),
+        "sinter_swelling": Key(float, _within(0.0, 0.05), False, default=0.0,
+                               doc="relative radius increase after settling that turns contacts into sintered "
+                                   "necks (overlap h = 2 r s for equal spheres)"),
     },
     "simple_cubic": {
-        "kind": (str, None, True),
-        "counts": (list, None, True),
-        "spacing": (float, _POSITIVE, True),
-        "radius": (float, _POSITIVE, True),
+        "kind": Key(str, _choice("powder_bed", "simple_cubic"), True, doc="the packing"),
+        "counts": Key(list, ("a list of 3 integers in [1, 10000]", lambda v: True), True, doc="[nx, ny, nz] spheres per axis, integers >= 1; at most "
+                                             f"{MAX_LATTICE_PARTICLES} in all"),
+        "spacing": Key(float, _within(1e-8, 1.0, "m"), True, "m", doc="centre distance of neighbours"),
+        "radius": Key(float, _within(1e-8, 1.0, "m"), True, "m",
+                      doc="sphere radius; the lattice conducts only for radius > spacing/2 (overlap "
+                          "h = 2 radius - spacing > 0), up to the neck model's largest overlap "
+                          "(0.75 spacing for the volume-conserving neck)"),
     },
 }
 _WALL = {
-    "axis": (int, ("one of 0, 1, 2", lambda v: v in (0, 1, 2)), True),
-    "side": (str, ('"min" or "max"', lambda v: v in ("min", "max")), True),
-    "mode": (str, ('"held", "conducting" or "insulated"', lambda v: v in ("held", "conducting", "insulated")), True),
-    "temperature": (float, _POSITIVE, False),
-    "penetration": (float, ("in [0, 0.2]", lambda v: 0 <= v <= 0.2), False),
+    "axis": Key(int, _choice(0, 1, 2), True, doc="normal axis of the wall"),
+    "side": Key(str, _choice("min", "max"), True, doc="which face of the packing"),
+    "mode": Key(str, _choice("held", "conducting", "insulated"), True,
+                doc="held: touching particles held at temperature; conducting: they exchange heat with a wall "
+                    "at temperature through the conduction law (a sphere 1000 x the largest radius); "
+                    "insulated: no flux (the default of any face)"),
+    "temperature": Key(float, TEMPERATURE, False, "K", doc="wall temperature (required unless insulated)"),
+    "penetration": Key(float, _within(0.0, 0.2), False, "mean radii", default=0.02,
+                       doc="the wall plane lies at the packing's extreme along the axis moved this many mean "
+                           "radii into the packing: the particles it cuts touch the wall"),
 }
+# the laws' parameters in a scene: physical ranges (the API only requires them finite, > 0 or >= 0)
+_LAW_PARAMS = {
+    "slope": Key(float, _within(0.0, 100.0, low_open=True), False, doc="s of K_i = s kappa pi a (Rojek Eq. 43)"),
+    "contact_resistance": Key(float, _within(0.0, 1e12, "K/W"), False, "K/W", default=0.0,
+                              doc="R_c in series with the halves (Rojek Eq. 8)"),
+    "thickness": Key(float, _within(0.0, 1e3, "m", low_open=True), False, "m", default=1.0,
+                     doc="out-of-plane thickness of Feng's 2-D law"),
+    **{c: Key(float, _within(-1e3, 1e3), False, doc="coefficient of the fitted smooth law")
+       for c in ("c1", "c2", "c3", "c4")},
+}
+_SECTIONS = ("packing", "material", "conduction", "initial", "boundary", "walls", "beam", "convection", "radiation",
+             "run")
 _REQUIRED_SECTIONS = ("packing", "material", "conduction", "initial", "run")
+
+
+def _suggest(name, allowed):
+    close = difflib.get_close_matches(name, allowed, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _describe(key: Key) -> str:
+    kind = {float: "a number", int: "an integer", str: "a string", bool: "true or false", list: "a list",
+            dict: "a table", object: "a value"}[key.kind]
+    if key.rule is None:
+        return kind
+    return key.rule[0] if key.kind in (str, object, list) or key.rule[0].startswith("one of") else f"{kind} {key.rule[0]}"
+
+
+def _value(name, value, key: Key):
+    """``value`` checked against ``key``; raises :class:`SceneError` naming ``name`` and the range."""
+    if key.kind is float:
+        ok = not isinstance(value, bool) and isinstance(value, (int, float))
+        value = float(value) if ok else value
+        ok = ok and math.isfinite(value)
+    elif key.kind is int:
+        ok = not isinstance(value, bool) and isinstance(value, int)
+    elif key.kind is object:
+        ok = True
+    else:
+        ok = isinstance(value, key.kind)
+    if not ok or (key.rule is not None and not key.rule[1](value)):
+        raise SceneError(f"{name} must be {_describe(key)}; got {value!r}")
+    return value
 
 
 def _check_section(name, table, schema):
     if not isinstance(table, dict):
-        raise SceneError(f"[{name}] must be a table")
-    unknown = set(table) - set(schema)
-    if unknown:
-        raise SceneError(f"unknown key {name}.{sorted(unknown)[0]}; allowed: {sorted(schema)}")
+        raise SceneError(f"[{name}] must be a table of keys {sorted(schema)}; got {table!r}")
+    for key in table:
+        if key not in schema:
+            raise SceneError(f"unknown key {name}.{key}{_suggest(key, schema)}; allowed keys: {sorted(schema)}")
     out = {}
-    for key, (kind, rule, required) in schema.items():
+    for key, spec in schema.items():
         if key not in table:
-            if required:
-                raise SceneError(f"missing key {name}.{key}")
+            if spec.required:
+                raise SceneError(f"missing key {name}.{key} ({_describe(spec)})")
             continue
-        value = table[key]
-        if kind is float:
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise SceneError(f"{name}.{key} must be a number; got {value!r}")
-            value = float(value)
-            if not math.isfinite(value):
-                raise SceneError(f"{name}.{key} must be finite; got {value!r}")
-        elif kind is int:
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise SceneError(f"{name}.{key} must be an integer; got {value!r}")
-        elif kind is not object and not isinstance(value, kind):
-            raise SceneError(f"{name}.{key} must be a {kind.__name__}; got {value!r}")
-        if rule is not None and not rule[1](value):
-            raise SceneError(f"{name}.{key} must be {rule[0]}; got {value!r}")
-        out[key] = value
+        out[key] = _value(f"{name}.{key}", table[key], spec)
     return out
 
 
 def validate_scene(raw: dict) -> dict:
-    """Check a parsed scene and return it with numbers normalised; raises :class:`SceneError`."""
+    """Check a parsed scene and return it with numbers normalised; raises :class:`SceneError`.
+
+    Everything is checked here, before any packing or network is built:
+    keys, types and ranges, combinations (beam path over the packing,
+    lattice overlap within the neck model's domain, bed size), and the work
+    of the run estimated from the scene (particles, steps, frames, output
+    bytes, memory) against the limits above.
+    """
     if not isinstance(raw, dict):
         raise SceneError("a scene must be a TOML table")
-    unknown = set(raw) - set(_SCHEMA) - {"packing", "walls"}
-    if unknown:
-        raise SceneError(f"unknown section [{sorted(unknown)[0]}]; allowed: "
-                         f"{sorted(set(_SCHEMA) | {'packing', 'walls'})}")
+    for name in raw:
+        if name not in _SECTIONS:
+            raise SceneError(f"unknown section [{name}]{_suggest(name, _SECTIONS)}; allowed sections: "
+                             f"{sorted(_SECTIONS)}")
     for name in _REQUIRED_SECTIONS:
         if name not in raw:
-            raise SceneError(f"missing section [{name}]")
+            raise SceneError(f"missing section [{name}] (required: {list(_REQUIRED_SECTIONS)})")
     scene = {name: _check_section(name, raw[name], schema) for name, schema in _SCHEMA.items() if name in raw}
     packing = raw["packing"]
     kind = packing.get("kind") if isinstance(packing, dict) else None
@@ -172,90 +250,254 @@ def validate_scene(raw: dict) -> dict:
     scene["packing"] = _check_section("packing", packing, _PACKING[kind])
     walls = raw.get("walls", [])
     if not isinstance(walls, list):
-        raise SceneError("walls must be an array of tables ([[walls]])")
+        raise SceneError(f"walls must be an array of tables ([[walls]]) with keys {sorted(_WALL)}; got {walls!r}")
     scene["walls"] = [_check_section(f"walls[{k}]", w, _WALL) for k, w in enumerate(walls)]
     for k, wall in enumerate(scene["walls"]):
         if wall["mode"] != "insulated" and "temperature" not in wall:
-            raise SceneError(f"walls[{k}].temperature is required for a {wall['mode']} wall")
+            raise SceneError(f"walls[{k}].temperature is required for a {wall['mode']} wall "
+                             f"({_describe(_WALL['temperature'])})")
     _check_details(scene)
+    estimate_run(scene)
     return scene
 
 
-def _numbers(name, value, length=None, rule=_POSITIVE, integer=False):
-    if not isinstance(value, list) or (length is not None and len(value) != length):
-        raise SceneError(f"{name} must be a list of {length or 'some'} numbers; got {value!r}")
+def _numbers(name, value, length, rule, integer=False):
+    what = "integers" if integer else "numbers"
+    if not isinstance(value, list) or len(value) != length:
+        raise SceneError(f"{name} must be a list of {length} {what} {rule[0]}; got {value!r}")
     for v in value:
         bad_type = isinstance(v, bool) or not isinstance(v, int if integer else (int, float))
         if bad_type or not math.isfinite(v) or not rule[1](v):
-            raise SceneError(f"{name} entries must be {'integers' if integer else 'numbers'} {rule[0]}; got {value!r}")
+            raise SceneError(f"{name} must be a list of {length} {what} {rule[0]}; got {value!r}")
     return [int(v) if integer else float(v) for v in value]
 
 
-def _check_details(scene):
-    packing = scene["packing"]
+def _lateral_extent(packing):
     if packing["kind"] == "powder_bed":
-        low, high = _numbers("packing.diameter_range", packing["diameter_range"], 2)
-        if not low <= high < packing["lateral_size"]:
-            raise SceneError("packing.diameter_range must satisfy low <= high < packing.lateral_size; "
-                             f"got {packing['diameter_range']} with lateral_size {packing['lateral_size']}")
-        packing["diameter_range"] = [low, high]
-    else:
-        packing["counts"] = _numbers("packing.counts", packing["counts"], 3, integer=True)
-        if not packing["spacing"] / 2 <= packing["radius"] <= packing["spacing"]:
-            raise SceneError("packing.radius must be in [spacing/2, spacing] (touching to strongly sintered); "
-                             f"got radius {packing['radius']} with spacing {packing['spacing']}")
+        return packing["lateral_size"], packing["lateral_size"]
+    nx, ny, _ = packing["counts"]
+    return ((nx - 1) * packing["spacing"] + 2 * packing["radius"], (ny - 1) * packing["spacing"] + 2 * packing["radius"])
+
+
+def _check_packing(packing, conduction):
+    from sintercond import neck
+    from sintercond.packing import PackingError, check_bed
+
+    if packing["kind"] == "powder_bed":
+        packing["diameter_range"] = _numbers("packing.diameter_range", packing["diameter_range"], 2,
+                                             _within(1e-8, 1.0, "m"))
+        try:
+            check_bed(packing["lateral_size"], packing["height"], packing["diameter_range"],
+                      names={k: f"packing.{k}" for k in ("lateral_size", "height", "diameter_range")})
+        except PackingError as err:
+            raise SceneError(str(err)) from None
+        return
+    packing["counts"] = _numbers("packing.counts", packing["counts"], 3, _within(1, 10_000), integer=True)
+    n = math.prod(packing["counts"])
+    if n > MAX_LATTICE_PARTICLES:
+        raise SceneError(f"packing.counts {packing['counts']} make {n} particles; the limit is "
+                         f"{MAX_LATTICE_PARTICLES} (product of the counts)")
+    radius, spacing = packing["radius"], packing["spacing"]
+    if not radius > spacing / 2:
+        raise SceneError(f"packing.radius must be > packing.spacing/2 = {spacing / 2:g} m for the lattice to conduct "
+                         f"(touching spheres have no neck); got {radius:g}")
+    model = conduction.get("neck_model", CONDUCTANCE_LAWS[conduction["law"]].neck_model)
+    try:
+        neck.validate_neck_inputs(radius, radius, 2 * radius - spacing, model=model,
+                                  names=("packing.radius", "packing.radius", "the overlap 2 packing.radius - "
+                                         "packing.spacing"))
+    except ValueError as err:
+        raise SceneError(f"{err} ({model} neck of conduction.law {conduction['law']!r}; packing.radius must be in "
+                         f"(spacing/2, {_largest_lattice_radius(model, spacing):g}] m)") from None
+
+
+def _largest_lattice_radius(model, spacing):
+    # equal spheres: h_max = 2r/3 (volume-conserving), h < 2r (intersection), any h (Coble, Hertz)
+    return {"volume_conserving": 0.75 * spacing}.get(model, spacing)
+
+
+def _check_details(scene):
     conduction = scene["conduction"]
-    if conduction["law"] not in CONDUCTANCE_LAWS:
-        raise SceneError(f"conduction.law must be one of {sorted(CONDUCTANCE_LAWS)}; got {conduction['law']!r}")
-    if "neck_model" in conduction and conduction["neck_model"] not in NECK_MODELS:
-        raise SceneError(f"conduction.neck_model must be one of {sorted(NECK_MODELS)}; got {conduction['neck_model']!r}")
-    allowed = set(CONDUCTANCE_LAWS[conduction["law"]].default_params)
-    for key, value in conduction.get("params", {}).items():
-        if key not in allowed:
-            raise SceneError(f"unknown key conduction.params.{key}; law {conduction['law']!r} takes {sorted(allowed)}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise SceneError(f"conduction.params.{key} must be a finite number; got {value!r}")
+    law = CONDUCTANCE_LAWS[conduction["law"]]
+    params = conduction.get("params", {})
+    for key, value in params.items():
+        if key not in law.default_params:
+            raise SceneError(f"unknown key conduction.params.{key}{_suggest(key, list(law.default_params))}; "
+                             f"law {law.name!r} takes {sorted(law.default_params)}")
+        params[key] = _value(f"conduction.params.{key}", value, _LAW_PARAMS[key])
+    _check_packing(scene["packing"], conduction)
     if "beam" in scene:
         beam = scene["beam"]
         beam.setdefault("kind", "laser")
         needed = "attenuation" if beam["kind"] == "laser" else "max_depth"
         if needed not in beam:
-            raise SceneError(f"beam.{needed} is required for a {beam['kind']} beam")
-        path = scene["beam"]["path"]
-        if not path or any(not isinstance(p, list) or len(p) != 2 for p in path):
-            raise SceneError(f"beam.path must be a list of [x, y] points; got {path!r}")
-        scene["beam"]["path"] = [_numbers("beam.path point", p, 2, rule=("finite", lambda v: True)) for p in path]
+            raise SceneError(f"beam.{needed} is required for a {beam['kind']} beam "
+                             f"({_describe(_SCHEMA['beam'][needed])})")
+        path = beam["path"]
+        if not path or any(not isinstance(p, list) for p in path):
+            raise SceneError(f"beam.path must be a non-empty list of [x, y] points (m); got {path!r}")
+        extent = _lateral_extent(scene["packing"])
+        reach = beam["spot_radius"]
+        rule = (f"within the packing's lateral extent [0, {extent[0]:g}] x [0, {extent[1]:g}] m widened by "
+                f"beam.spot_radius", lambda v: True)
+        beam["path"] = [_numbers(f"beam.path[{k}]", p, 2, rule) for k, p in enumerate(path)]
+        for k, (x, y) in enumerate(beam["path"]):
+            if not (-reach <= x <= extent[0] + reach and -reach <= y <= extent[1] + reach):
+                raise SceneError(f"beam.path[{k}] = {[x, y]} must be {rule[0]} (beam coordinates are absolute)")
     convection = scene.get("convection", {})
     if ("reynolds" in convection) != ("prandtl" in convection):
         raise SceneError("convection.reynolds and convection.prandtl go together (Whitaker's correlation)")
     if "reynolds" in convection and "nusselt" in convection:
         raise SceneError("give convection.nusselt or convection.reynolds and prandtl, not both")
     run = scene["run"]
-    dt = run.get("dt", "auto")
-    if dt != "auto" and (isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0):
-        raise SceneError(f"run.dt must be \"auto\" or a number > 0 (s); got {dt!r}")
-    run["dt"] = dt if dt == "auto" else float(dt)
+    run.setdefault("dt", "auto")
+    run["dt"] = run["dt"] if run["dt"] == "auto" else float(run["dt"])
     if run["checkpoint_every"] % run["output_every"]:
         raise SceneError(f"run.checkpoint_every ({run['checkpoint_every']}) must be a multiple of "
                          f"run.output_every ({run['output_every']})")
     formats = run.get("formats", ["vtp"])
-    if not isinstance(formats, list) or not set(formats) <= {"vtp", "lammps"}:
-        raise SceneError(f"run.formats must be a list from ['lammps', 'vtp']; got {formats!r}")
-    run["formats"] = formats
+    allowed = ("lammps", "vtp")
+    if (not formats or any(not isinstance(f, str) or f not in allowed for f in formats)
+            or len(set(formats)) != len(formats)):
+        raise SceneError(f"run.formats must be a non-empty list of distinct names from {list(allowed)}; "
+                         f"got {formats!r}")
+    run["formats"] = list(formats)
+    run.setdefault("override_limits", False)
+
+
+class RunEstimate(NamedTuple):
+    """What a scene will cost, estimated before anything is built (order of magnitude for steps)."""
+
+    particles: int
+    dt: float  # s: run.dt, or 0.9 x an estimate of the stable step
+    steps: int
+    frames: int
+    output_bytes: float
+    memory_bytes: float
+
+
+def estimate_run(scene) -> RunEstimate:
+    """Estimate particles, step, steps, frames, output bytes and memory of a validated scene; refuse beyond limits.
+
+    The stable step is estimated as ``C / (z K + G)`` for the smallest
+    particle: ``C = rho c (4/3) pi r^3``, ``z`` = 12 neighbours (6 in a
+    simple-cubic lattice) plus one wall, ``K = kappa pi a`` with Coble's neck
+    ``a = sqrt(r h)`` (an upper bound on the necks of every law's default
+    model but Feng's 2-D law, which takes ``thickness`` instead), and ``G``
+    the linearised convection ``2 pi Nu k_E r`` and radiation
+    ``16 pi eps sigma T^3 r^2`` at the highest temperature the scene names.
+    """
+    from sintercond.heat_sources import STEFAN_BOLTZMANN
+    from sintercond.packing import bed_particle_count
+
+    packing, material, run = scene["packing"], scene["material"], scene["run"]
+    if packing["kind"] == "powder_bed":
+        n = bed_particle_count(packing["lateral_size"], packing["height"], packing["diameter_range"])
+        r = packing["diameter_range"][0] / 2
+        h, z = 2 * r * max(packing.get("sinter_swelling", 0.0), 1e-3), 13
+    else:
+        n = math.prod(packing["counts"])
+        r = packing["radius"]
+        h, z = 2 * r - packing["spacing"], 7
+    kappa = material["conductivity"]
+    law = scene["conduction"]["law"]
+    k_pair = kappa * scene["conduction"].get("params", {}).get("thickness", 1.0) * math.pi if law == "feng" else (
+        kappa * math.pi * math.sqrt(r * h))
+    g = 0.0
+    temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in scene["walls"] if "temperature" in w]
+    if "convection" in scene:
+        c = scene["convection"]
+        nusselt = c.get("nusselt", 2.0)
+        if "reynolds" in c:
+            nusselt = 2.0 + (0.4 * c["reynolds"] ** 0.5 + 0.06 * c["reynolds"] ** (2 / 3)) * c["prandtl"] ** 0.4
+        g += 2 * math.pi * nusselt * c["environment_conductivity"] * r
+        temperatures.append(c["environment_temperature"])
+    if "radiation" in scene:
+        temperatures.append(scene["radiation"]["environment_temperature"])
+        g += 16 * math.pi * scene["radiation"]["emissivity"] * STEFAN_BOLTZMANN * max(temperatures) ** 3 * r**2
+    capacity = material["density"] * material["specific_heat"] * 4 / 3 * math.pi * r**3
+    dt = 0.9 * capacity / (z * k_pair + g) if run["dt"] == "auto" else run["dt"]
+    steps = max(1, math.ceil(run["duration"] / dt))
+    frames = steps // run["output_every"] + 1
+    per_frame = n * (("vtp" in run["formats"]) * 230 + ("lammps" in run["formats"]) * 140)
+    estimate = RunEstimate(n, dt, steps, frames, frames * per_frame, 4e3 * n)
+    if estimate.memory_bytes > MAX_MEMORY_BYTES:
+        raise SceneError(f"the packing needs about {estimate.memory_bytes / 1e9:.3g} GB ({n} particles); the limit "
+                         f"is {MAX_MEMORY_BYTES / 1e9:g} GB: make [packing] smaller")
+    if not run["override_limits"]:
+        for what, value, limit, advice in (
+                ("time steps", steps, MAX_STEPS, "shorten run.duration or raise run.dt"),
+                ("output frames", frames, MAX_FRAMES, "raise run.output_every or shorten run.duration"),
+                ("bytes of output", estimate.output_bytes, MAX_OUTPUT_BYTES,
+                 "raise run.output_every, drop a run.formats entry or shorten run.duration")):
+            if value > limit:
+                raise SceneError(f"run.duration {run['duration']:g} s with a step of about {dt:.3g} s means about "
+                                 f"{value:.3g} {what}; the limit is {limit:g}: {advice}, or set "
+                                 f"run.override_limits = true")
+    return estimate
+
+
+def scene_reference() -> str:
+    """The scene reference (Markdown), generated from the schema: ``docs/scenes.md``."""
+    lines = ["# Scene reference", "",
+             "Generated from `sintercond.scene` by `python -m sintercond.scene > docs/scenes.md`;",
+             "`tests/test_bad_input.py` checks that it is current. SI units. Every key is checked before anything",
+             "is built; an error names the key and the allowed range.", ""]
+
+    def table(title, schema, note=""):
+        lines.extend([f"## {title}", ""] + ([note, ""] if note else []) + [
+            "| key | required | allowed | unit | default | meaning |", "| --- | --- | --- | --- | --- | --- |"])
+        for name, key in schema.items():
+            default = "" if key.default is None else str(key.default).replace("'", '"')
+            lines.append(f"| `{name}` | {'yes' if key.required else 'no'} | {_describe(key)} | {key.unit} | "
+                         f"{default} | {key.doc} |")
+        lines.append("")
+
+    table("[packing] kind = \"powder_bed\"", _PACKING["powder_bed"],
+          "A random bed settled under gravity (`sintercond.packing.powder_bed`), at most 20000 particles.")
+    table("[packing] kind = \"simple_cubic\"", _PACKING["simple_cubic"],
+          "Sphere centres at `radius + spacing * (i, j, k)`.")
+    for section in ("material", "conduction"):
+        table(f"[{section}]", _SCHEMA[section])
+    table("[conduction.params]", _LAW_PARAMS, "Keys the chosen law takes: " + "; ".join(
+        f"`{name}`: {', '.join(law.default_params) or 'none'}" for name, law in sorted(CONDUCTANCE_LAWS.items())))
+    for section in ("initial", "boundary"):
+        table(f"[{section}]", _SCHEMA[section])
+    table("[[walls]]", _WALL, "Any number of walls; a face without one is insulated.")
+    for section in ("beam", "convection", "radiation", "run"):
+        table(f"[{section}]", _SCHEMA[section])
+    lines.extend(["## Limits", "",
+                  f"- at most {MAX_LATTICE_PARTICLES} lattice particles and 20000 powder-bed particles, "
+                  f"about {MAX_MEMORY_BYTES / 1e9:g} GB;",
+                  f"- at most {MAX_STEPS:g} steps, {MAX_FRAMES} output frames and {MAX_OUTPUT_BYTES / 1e9:g} GB of "
+                  "output, estimated from the scene (`sintercond.scene.estimate_run`); "
+                  "`run.override_limits = true` lifts these three.", ""])
+    return "\n".join(lines)
 
 
 def load_scene(path=None) -> dict:
     """Read and validate a scene file; ``None`` loads the built-in default scene."""
     if path is None:
-        text = importlib.resources.files("sintercond.data").joinpath("default_scene.toml").read_text()
+        data = importlib.resources.files("sintercond.data").joinpath("default_scene.toml").read_bytes()
         source = "default scene"
     else:
         path = Path(path)
         if not path.is_file():
             raise SceneError(f"scene file {str(path)!r} does not exist")
-        text, source = path.read_text(), str(path)
+        data, source = path.read_bytes(), str(path)
+    if b"\x00" in data:
+        raise SceneError(f"{source} is a binary file, not a TOML scene (UTF-8 text)")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise SceneError(f"{source} is not UTF-8 text (byte {err.start}: {data[err.start:err.start + 1]!r}; "
+                         "Latin-1?): save the scene as UTF-8") from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneError(f"{source} is not valid TOML: {err}") from None
     return validate_scene(raw)
+
+
+if __name__ == "__main__":
+    print(scene_reference())

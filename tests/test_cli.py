@@ -27,3 +27,19 @@ def test_console_script_runs():
     # the installed entry point, as a user runs it
     result = subprocess.run([sys.executable, "-m", "sintercond.cli", "demo"], capture_output=True, text=True, check=True)
     assert "K_rojek" in result.stdout
+
+
+def test_effective_on_a_powder_bed(tmp_path, capsys):
+    # before: "no particle reaches the box faces" on every powder bed
+    scene = tmp_path / "bed.toml"
+    scene.write_text(
+        '[packing]\nkind = "powder_bed"\nlateral_size = 300e-6\nheight = 200e-6\ndiameter_range = [45e-6, 90e-6]\n'
+        'sinter_swelling = 0.02\n[material]\ndensity = 4430.0\nspecific_heat = 560.0\nconductivity = 12.6\n'
+        '[conduction]\nlaw = "rojek"\n[initial]\ntemperature = 300.0\n'
+        '[run]\nduration = 1e-3\noutput_every = 5\ncheckpoint_every = 5\n')
+    assert cli.main(["effective", str(scene)]) == 0
+    out = capsys.readouterr().out
+    k_star = float(out.split(":")[1].split()[0])
+    assert "k* = Q L / (A dT)" in out and "mean surface height" in out
+    # a sintered bed conducts, far below the solid and above nothing
+    assert 0.02 * 12.6 < k_star < 0.6 * 12.6
