@@ -27,8 +27,8 @@ def _scene(edit):
 
 
 @pytest.mark.parametrize("section,key,good,bad,message", [
-    ("packing", "sinter_swelling", [0.0, 0.05], [-1e-3, 0.0501], r"packing\.sinter_swelling must be in \[0, 0\.05\]"),
-    ("walls", "penetration", [0.0, 0.2], [-1e-3, 0.201], r"walls\[0\]\.penetration must be in \[0, 0\.2\]"),
+    ("packing", "sinter_swelling", [0.0, 0.05], [-1e-3, 0.0501], r"packing\.sinter_swelling must be a number in \[0, 0\.05\]"),
+    ("walls", "penetration", [0.0, 0.2], [-1e-3, 0.201], r"walls\[0\]\.penetration must be a number in \[0, 0\.2\]"),
 ])
 def test_bounded_keys_accept_their_limits_and_refuse_beyond(section, key, good, bad, message):
     def put(value):
@@ -46,12 +46,12 @@ def test_bounded_keys_accept_their_limits_and_refuse_beyond(section, key, good, 
                                          ("run", "duration"), ("packing", "height"),
                                          ("convection", "environment_conductivity")])
 def test_non_finite_numbers_are_refused(section, key, value):
-    with pytest.raises(SceneError, match=rf"{section}\.{key} must be finite"):
+    with pytest.raises(SceneError, match=rf"{section}\.{key} must be a number in .*; got {value}"):
         validate_scene(_scene(lambda s: s[section].update({key: value})))
 
 
 def test_non_finite_list_entries_and_dt_are_refused():
-    with pytest.raises(SceneError, match=r"packing\.diameter_range entries"):
+    with pytest.raises(SceneError, match=r"packing\.diameter_range must be a list of 2 numbers in .*; got \[4\.5e-05, inf\]"):
         validate_scene(_scene(lambda s: s["packing"].update(diameter_range=[45e-6, math.inf])))
     with pytest.raises(SceneError, match=r"run\.dt must be"):
         validate_scene(_scene(lambda s: s["run"].update(dt=math.inf)))

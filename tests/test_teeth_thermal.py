@@ -56,7 +56,7 @@ def test_chunked_scene_run_equals_one_uninterrupted_simulation(tmp_path):
     steps (T_max 2465 K -> 2816 K on this scene, and another particle is hottest); the run tests only
     asserted T_max > 300 K. Reference: one ``simulate`` call over all steps of the same model, whose beam
     crosses the packing once."""
-    scene = validate_scene(copy.deepcopy(SMALL) | {"run": {**SMALL["run"], "output_every": 1, "formats": []}})
+    scene = validate_scene(copy.deepcopy(SMALL) | {"run": {**SMALL["run"], "output_every": 1, "formats": ["lammps"]}})
     model = runner.build_model(scene)
     whole_state, _ = simulate.rollout(model.sim, model.state, model.params, model.n_steps,
                                       simulate.SaveAt(model.n_steps))
