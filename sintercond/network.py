@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond._symmetric import self_adjoint
+from sintercond._validation import require_finite, require_positive
 from sintercond.conductance import pair_conductance, validate_pair_conductance_inputs
 from sintercond.neighbors import cell_list_pairs, minimum_image
 
@@ -97,6 +98,10 @@ def contact_pairs(centres, radii, tolerance=1e-9, periodic_box=None) -> ContactP
     """
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
+    if centres.ndim != 2 or centres.shape[1] != 3 or radii.shape != (len(centres),):
+        raise ValueError(f"centres must be [n, 3] and radii [n]; got shapes {centres.shape} and {radii.shape}")
+    require_finite("centres (m)", centres)
+    require_positive("radii (m)", radii)
     box = None if periodic_box is None else np.asarray(periodic_box, dtype=np.float64)
     i, j = cell_list_pairs(centres, radii, tolerance, box)
     delta = minimum_image(centres[i] - centres[j], box)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -22,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import heat_sources, network, packing, simulate
+from sintercond import heat_sources, network, packing, simulate, thermal
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
 from sintercond.scene import SceneError, validate_scene
 from sintercond.state import particle_state
@@ -37,6 +38,8 @@ class Model:
     state: simulate.SimState
     n_steps: int
     contacts: int
+    stable_step: float = float("inf")
+    bed: dict = dataclasses.field(default_factory=dict)
 
     @property
     def physics(self) -> simulate.Physics:
@@ -96,12 +99,25 @@ def scene_params(scene) -> simulate.Params:
                                                                     f(rad["emissivity"])))
 
 
-def build_model(scene, centres=None, radii=None) -> Model:
-    """Packing, network, held particles, sources, time step and simulator of a validated scene."""
+def build_model(scene, centres=None, radii=None, log=None) -> Model:
+    """Packing, network, held particles, sources, time step and simulator of a validated scene.
+
+    The time step: ``run.dt`` or, for ``"auto"``, 0.9 of the stable step
+    ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` where ``G_i`` linearises
+    convection and radiation (:func:`sintercond.thermal.source_conductance`);
+    then shortened to ``duration / n_steps`` so that the run ends exactly at
+    ``run.duration``. ``log(message)`` reports each phase.
+    """
+    log = log or (lambda message: None)
+    bed = {}
     if centres is None:
-        centres, radii = build_packing(scene)
+        log("packing: building the scene's packing")
+        packed = packing.from_scene(scene["packing"])
+        centres, radii = packed.centres, packed.radii
+        bed = {k: v for k, v in packed.summary().items() if k != "particles"}
     m, c = scene["material"], scene["conduction"]
     physics = scene_physics(scene)
+    log(f"network: contacts and conductances of {len(radii)} particles")
     try:
         table = network.contact_table(centres, radii, 1.0 if physics.conductance == "table" else m["conductivity"],
                                       c["law"], c.get("params"), c.get("neck_model"))
@@ -123,18 +139,26 @@ def build_model(scene, centres=None, radii=None) -> Model:
     sim = simulate.simulator(physics)
     state = simulate.init_state(particles, contacts, 1.0)
     run = scene["run"]
-    limit = float(simulate.stable_time_step(sim, state, params))
+    sources = thermal.source_conductance(physics, particles.radii, params, _highest_temperature(scene))
+    limit = float(simulate.stable_time_step(sim, state, params, sources))
     if run["dt"] == "auto":
-        dt = 0.9 * limit if np.isfinite(limit) else run["duration"] / 1000
+        dt = 0.9 * limit if np.isfinite(limit) else run["duration"]
     else:
         dt = run["dt"]
         if dt > limit:
-            raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds the explicit stability limit min(C_i / sum_j K_ij) = "
-                             f"{limit:.6g} s; use dt <= {limit:.6g} s or the implicit integrator")
-    n_steps = max(1, int(np.ceil(run["duration"] / dt)))
-    chunk = run["output_every"]
-    n_steps = int(np.ceil(n_steps / chunk) * chunk)
-    return Model(sim, params, simulate.init_state(particles, contacts, dt), n_steps, len(table.pairs()))
+            raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds the explicit stability limit "
+                             f"min(C_i / (sum_j K_ij + G_i)) = {limit:.6g} s (G_i: linearised convection and "
+                             f"radiation); use dt <= {limit:.6g} s or the implicit integrator")
+    n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
+    dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
+    return Model(sim, params, simulate.init_state(particles, contacts, dt), n_steps, len(table.pairs()), limit, bed)
+
+
+def _highest_temperature(scene) -> float:
+    """The highest temperature a scene names (initial, walls, environment): where radiation is stiffest."""
+    temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in _walls(scene) if "temperature" in w]
+    temperatures += [scene[k]["environment_temperature"] for k in ("convection", "radiation") if k in scene]
+    return float(max(temperatures))
 
 
 def _walls(scene):
@@ -196,26 +220,30 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
     return k_wall, t_wall
 
 
-def advance(sim, state, params, n_steps, chunk, on_chunk=None, reallocate=None, progress=None):
-    """The one host loop: advance ``n_steps`` in compiled chunks of ``chunk`` steps.
+def advance(sim, state, params, n_steps, chunk, on_chunk=None, reallocate=None, progress=None, check=None):
+    """The one host loop: advance ``n_steps`` in compiled chunks of ``chunk`` steps (the last one may be shorter).
 
     After every chunk the host checks the state: a neighbour list that
     overflowed (``state.overflow``) is reallocated by ``reallocate(start,
     end) -> start`` and the chunk redone from its saved start, so no contact
-    is lost; non-finite temperatures stop the run with the step. Then
-    ``on_chunk(state)`` (outputs, checkpoints) runs; returning True stops
-    early. The same compiled chunk runs on the same inputs whatever the
-    history, so a run resumed from a checkpoint is bitwise identical to an
-    uninterrupted one.
+    is lost; ``check(state)`` raises on an unphysical state (default:
+    non-finite temperatures). Then ``on_chunk(state)`` (outputs,
+    checkpoints) runs; returning True stops early. The same compiled chunk
+    runs on the same inputs whatever the history, so a run resumed from a
+    checkpoint is bitwise identical to an uninterrupted one.
 
     Returns:
       ``(state, report)`` with the number of chunks and reallocations.
     """
-    run_chunk = _compiled_chunk(sim, chunk)
+    compiled = {}
     reallocations = chunks = 0
     target = int(state.step) + n_steps
+    check = check or _finite_temperatures
     while int(state.step) < target:
-        new = run_chunk(state, params)
+        length = min(chunk, target - int(state.step))
+        if length not in compiled:
+            compiled[length] = _compiled_chunk(sim, length)
+        new = compiled[length](state, params)
         if bool(new.overflow):
             if reallocate is None:
                 raise RuntimeError("the neighbour list overflowed and no reallocation was given")
@@ -224,15 +252,19 @@ def advance(sim, state, params, n_steps, chunk, on_chunk=None, reallocate=None, 
             if reallocations > 100:
                 raise RuntimeError("the neighbour list keeps overflowing; raise its capacity")
             continue
-        if not bool(jnp.all(jnp.isfinite(new.particles.temperature))):
-            raise FloatingPointError(f"non-finite temperature at step {int(new.step)}; reduce run.dt")
+        check(new)
         state = new
         chunks += 1
         if progress is not None:
-            progress(chunk)
+            progress(length)
         if on_chunk is not None and on_chunk(state):
             break
     return state, {"chunks": chunks, "reallocations": reallocations}
+
+
+def _finite_temperatures(state):
+    if not bool(jnp.all(jnp.isfinite(state.particles.temperature))):
+        raise FloatingPointError(f"non-finite temperature at step {int(state.step)}; reduce the time step")
 
 
 def _compiled_chunk(sim, chunk):
@@ -246,20 +278,67 @@ def _nothing(state):
     return ()
 
 
+MAX_TEMPERATURE = 1e5
+"""K; a run whose temperatures leave (0, MAX_TEMPERATURE] stops: no material of this field gets there."""
+
+
+def physical_range_check(scene):
+    """``check(state)`` for :func:`advance`: temperatures finite, > 0 K and <= :data:`MAX_TEMPERATURE`.
+
+    The error names the step and the scene keys that can drive a run there.
+    """
+    causes = [key for key, section in (("beam.intensity", "beam"), ("convection.nusselt", "convection"),
+                                       ("radiation.emissivity", "radiation")) if section in scene] + ["run.dt"]
+
+    def check(state):
+        t = state.particles.temperature
+        bad = ~jnp.isfinite(t) | (t <= 0) | (t > MAX_TEMPERATURE)
+        if bool(jnp.any(bad)):
+            worst = float(jnp.max(jnp.where(jnp.isfinite(t), jnp.abs(t), jnp.inf)))
+            raise FloatingPointError(
+                f"temperature left the physical range (0, {MAX_TEMPERATURE:g}] K at step {int(state.step)} "
+                f"(|T| up to {worst:.3g} K); likely cause: {', '.join(causes)} too large for the time step")
+    return check
+
+
+HISTORY_COLUMNS = ("step", "time_s", "T_mean_K", "T_min_K", "T_max_K")
+"""Columns of ``history.csv``, one row per output step (the LAMMPS "thermo" analogue)."""
+
+
+def _history_row(state) -> str:
+    t = np.asarray(state.particles.temperature)
+    return f"{int(state.step)},{float(state.time)!r},{t.mean()!r},{t.min()!r},{t.max()!r}\n"
+
+
+def _log(message):
+    print(f"sintercond: {message}", file=sys.stderr, flush=True)
+
+
+def _clear_outputs(out):
+    """A new run into ``out`` first removes the outputs an earlier run left there."""
+    for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
+        f.unlink()
+    for name in ("dump.lammpstrj", "checkpoint.npz", "history.csv", "summary.json"):
+        if (out / name).exists():
+            (out / name).unlink()
+
+
 def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None):
     """Run a validated scene into ``out_dir``; returns ``(final temperatures, summary dict)``.
 
-    ``stop_after_chunks`` stops early as a kill would, right after that many
-    chunks (for tests of resume).
+    Prints each phase (packing, network, compile) and, before stepping, the
+    step count and the stable step. ``stop_after_chunks`` stops early as a
+    kill would, right after that many chunks (for tests of resume).
     """
     out = Path(out_dir)
     if _start is None:
         out.mkdir(parents=True, exist_ok=True)
+        _clear_outputs(out)
         (out / "scene.json").write_text(json.dumps(scene, indent=1))
-        model = build_model(scene)
+        model = build_model(scene, log=_log)
         np.savez(out / "packing.npz", centres=model.centres, radii=model.radii)
-        if (out / "dump.lammpstrj").exists():
-            (out / "dump.lammpstrj").unlink()
+        (out / "bed.json").write_text(json.dumps(model.bed))
+        (out / "history.csv").write_text(",".join(HISTORY_COLUMNS) + "\n" + _history_row(model.state))
         _write_outputs(scene, out, model, model.state)
         state = model.state
     else:
@@ -267,11 +346,15 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     run = scene["run"]
     chunk = run["output_every"]
     chunks_done = 0
+    _log(f"{len(model.radii)} particles, {model.contacts} contacts; stable step {model.stable_step:.4g} s, "
+         f"dt {model.dt:.4g} s, {model.n_steps} steps to {model.n_steps * model.dt:.6g} s; compiling the step")
 
     def on_chunk(s):
         nonlocal chunks_done
         step = int(s.step)
         _write_outputs(scene, out, model, s)
+        with open(out / "history.csv", "a") as f:
+            f.write(_history_row(s))
         if step % run["checkpoint_every"] == 0 or step >= model.n_steps:
             save_checkpoint(out, s)
         chunks_done += 1
@@ -281,7 +364,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     bar = tqdm(total=model.n_steps, initial=int(state.step), unit="step", disable=not progress, desc="sintercond run")
     try:
         state, _ = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
-                           progress=bar.update)
+                           progress=bar.update, check=physical_range_check(scene))
     finally:
         bar.close()
     temperature = state.particles.temperature
@@ -289,17 +372,19 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         return temperature, None
     elapsed = time.perf_counter() - wall
     summary = {
-        "particles": len(model.radii), "contacts": model.contacts, "steps": int(state.step),
-        "dt_s": model.dt, "simulated_s": int(state.step) * model.dt, "wall_s": elapsed,
-        "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()), "T_max_K": float(temperature.max()),
+        "particles": len(model.radii), "contacts": model.contacts, **model.bed, "steps": int(state.step),
+        "dt_s": model.dt, "stable_step_s": model.stable_step, "simulated_s": int(state.step) * model.dt,
+        "wall_s": elapsed, "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()),
+        "T_max_K": float(temperature.max()),
     }
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return temperature, summary
 
 
 def _write_outputs(scene, out, model, state):
     formats = scene["run"]["formats"]
     step = int(state.step)
-    t = step * model.dt
+    t = float(state.time)
     temperature = state.particles.temperature
     if "vtp" in formats:
         (out / "vtp").mkdir(exist_ok=True)
@@ -309,21 +394,36 @@ def _write_outputs(scene, out, model, state):
 
 
 def resume(out_dir, progress=True, stop_after_chunks=None):
-    """Continue the run in ``out_dir`` from its last checkpoint (the whole state)."""
+    """Continue the run in ``out_dir`` from its last checkpoint (the whole state).
+
+    A finished run (its ``summary.json`` at the checkpoint's step) is not
+    rebuilt: its final temperatures and summary are returned as they are.
+    """
     out = Path(out_dir)
     if not (out / "checkpoint.npz").exists():
         raise SceneError(f"{str(out)!r} has no checkpoint.npz to resume from")
+    saved = np.load(out / "checkpoint.npz")
+    step = int(saved["step"])
+    if (out / "summary.json").exists():
+        summary = json.loads((out / "summary.json").read_text())
+        if summary.get("steps") == step:
+            _log(f"the run in {out} is finished (step {step}); nothing to resume")
+            return jnp.asarray(saved["temperature"]), summary
     scene = validate_scene(json.loads((out / "scene.json").read_text()))
     packed = np.load(out / "packing.npz")
-    model = build_model(scene, packed["centres"], packed["radii"])
+    model = build_model(scene, packed["centres"], packed["radii"], log=_log)
+    if (out / "bed.json").exists():
+        model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
     state = load_checkpoint(out / "checkpoint.npz", model.state)
-    step = int(state.step)
     # outputs written after the checkpoint by the interrupted run are redone
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         if int(f.stem.split("_")[1]) > step:
             f.unlink()
     if (out / "dump.lammpstrj").exists():
         truncate_lammps(out / "dump.lammpstrj", step)
+    if (out / "history.csv").exists():
+        lines = (out / "history.csv").read_text().splitlines(keepends=True)
+        (out / "history.csv").write_text("".join([lines[0]] + [r for r in lines[1:] if int(r.split(",")[0]) <= step]))
     return run_scene(scene, out, progress, stop_after_chunks, _start=(model, state))
 
 

@@ -448,12 +448,14 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
     return Simulator(physics, step_fn, prepare_fn, advance_fn, heat_power_fn)
 
 
-def stable_time_step(sim: Simulator, state: SimState, params: Params):
-    """Largest explicit-Euler step with the maximum principle, ``min_i C_i / (sum_j K_ij + sum_w K_iw)`` (s).
+def stable_time_step(sim: Simulator, state: SimState, params: Params, source_conductance=None):
+    """Largest explicit-Euler step with the maximum principle, ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` (s).
 
-    Conduction only (static contacts at the state's geometry); inf for a
-    particle with no conductance. At or below it every new temperature is a
-    convex combination of old ones (conduction alone).
+    Static contacts at the state's geometry; ``source_conductance`` ``G_i``
+    (W/K, optional) linearises sources that depend on the temperature
+    (:func:`sintercond.thermal.source_conductance`). inf for a particle with
+    no conductance. At or below it every new temperature is a convex
+    combination of old ones and the sources' reference temperatures.
     """
     prep = sim.prepare_fn(state, params)
     if prep.conductance is None:
@@ -461,6 +463,8 @@ def stable_time_step(sim: Simulator, state: SimState, params: Params):
     total = prep.scale * jnp.sum(prep.conductance, axis=1)
     if prep.wall_conductance is not None:
         total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
+    if source_conductance is not None:
+        total = total + source_conductance
     return jnp.min(jnp.where(total > 0, prep.capacity / jnp.where(total > 0, total, 1.0), jnp.inf))
 
 

@@ -31,6 +31,7 @@ import numpy as np
 from jax.scipy.sparse.linalg import cg
 
 from sintercond import heat_sources
+from sintercond._validation import require_positive
 from sintercond.conductance import validate_pair_conductance_inputs
 from sintercond.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance, wall_inflow
 
@@ -138,6 +139,23 @@ def source_power(physics, state, params):
     return power
 
 
+def source_conductance(physics, radii, params, temperature_bound):
+    """``G_i = -dQ_i/dT_i`` (W/K) of the temperature-dependent sources, an upper bound for ``T <= temperature_bound``.
+
+    Convection (Quintana-Ruiz & Campello 2020, Eqs. 37-38) is linear,
+    ``G = h 4 pi r^2 = 2 pi Nu k_E r``; radiation (Eq. 41) has
+    ``dQ/dT = -16 pi eps sigma T^3 r^2``, largest at the highest temperature
+    the run can reach. Added to the conductances in the stable step.
+    """
+    g = jnp.zeros_like(radii)
+    if physics.convection:
+        c = params.convection
+        g = g + 2.0 * jnp.pi * c.nusselt * c.environment_conductivity * radii
+    if physics.radiation:
+        g = g + 16.0 * jnp.pi * params.radiation.emissivity * heat_sources.STEFAN_BOLTZMANN * temperature_bound**3 * radii**2
+    return g
+
+
 def explicit_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
                         source=None, time=0.0):
     """One explicit Euler step on a table, ``T + dt / C * (sum_j K_ij (T_j - T_i) + Q(T, t))``; held particles stay.
@@ -171,7 +189,6 @@ class _TemperatureSource:
         return self.source(state.particles.temperature, t)
 
 
-@functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
 def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every=1, fixed_mask=None,
              fixed_temperature=None, method="explicit", source=None, start_step=0, probes=None):
     """Advance a table network ``n_steps`` steps; returns ``(final, saved [n_steps // save_every, n])``.
@@ -185,11 +202,25 @@ def simulate(temperature, table: ContactTable, capacity, dt, n_steps, save_every
     particles to save (``saved`` is then ``[.., len(probes)]``); None saves
     all. ``n_steps`` must be a multiple of ``save_every``.
     """
+    if method not in ("explicit", "implicit"):
+        raise ValueError(f"method must be 'explicit' or 'implicit'; got {method!r}")
+    if not (isinstance(n_steps, int) and isinstance(save_every, int) and n_steps >= 1 and save_every >= 1):
+        raise ValueError(f"n_steps and save_every must be integers >= 1; got {n_steps!r}, {save_every!r}")
+    if n_steps % save_every:
+        raise ValueError(f"n_steps ({n_steps}) must be a multiple of save_every ({save_every})")
+    for name, value in (("dt (s)", dt), ("capacity (J/K)", capacity)):
+        if not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(value)):
+            require_positive(name, np.atleast_1d(np.asarray(value, np.float64)))
+    return _simulate(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature, method,
+                     source, start_step, probes)
+
+
+@functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
+def _simulate(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature, method, source,
+              start_step, probes):
     from sintercond import simulate as sim_module
     from sintercond.state import ParticleState
 
-    if method not in ("explicit", "implicit"):
-        raise ValueError(f"method must be 'explicit' or 'implicit'; got {method!r}")
     if method == "implicit" and source is not None:
         raise ValueError("source terms need method='explicit'")
     walls = table.wall_conductance is not None

@@ -1,7 +1,6 @@
-"""Defects of issue 10 whose fix belongs in run.py / thermal.py / network.py (being redesigned): strict xfails.
+"""Defects of issue 10 fixed in run.py / thermal.py / network.py: time, limits, phases, stale outputs, API checks.
 
-Each test states the change it needs; it fails today and will pass (and then
-must lose its xfail mark) once the change is wired in.
+Each test failed on the code before the fix (written first as a strict xfail).
 """
 
 import copy
@@ -21,23 +20,17 @@ def _scene(**run):
     return validate_scene(scene)
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: the last step is shortened so that n_steps * dt ends "
-                                       "at run.duration (no rounding up to a multiple of output_every)")
 def test_simulated_time_ends_at_the_duration(tmp_path):
     scene = _scene(duration=1.3e-3, output_every=7, checkpoint_every=7)
     _, summary = runner.run_scene(scene, tmp_path, progress=False)
     assert summary["simulated_s"] == pytest.approx(1.3e-3, rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: dt = 'auto' is min(0.9 x stable step, duration)")
 def test_auto_step_is_capped_by_the_duration():
     scene = _scene(duration=1e-9)
     assert runner.build_model(scene).dt <= 1e-9
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: the automatic step uses C_i / (sum_j K_ij + G_i) with "
-                                       "G_i = dQ/dT of convection and radiation, linearised at the hottest named "
-                                       "temperature (scene.estimate_run does the same estimate)")
 def test_auto_step_accounts_for_convection():
     scene = copy.deepcopy(SMALL)
     scene["convection"] = {"environment_temperature": 300.0, "environment_conductivity": 0.026, "nusselt": 1e4}
@@ -47,9 +40,6 @@ def test_auto_step_accounts_for_convection():
     assert cooled.dt < plain.dt
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: after each chunk, stop with FloatingPointError naming "
-                                       "the step and the likely cause (the source terms' scene keys, run.dt) when any "
-                                       "T <= 0, T > 1e5 K or T is not finite (today: only non-finite, 'reduce run.dt')")
 def test_run_leaving_the_physical_range_stops(tmp_path):
     scene = copy.deepcopy(SMALL)
     scene["beam"]["intensity"] = 1e12
@@ -58,16 +48,12 @@ def test_run_leaving_the_physical_range_stops(tmp_path):
         runner.run_scene(validate_scene(scene), tmp_path, progress=False)
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: run_scene prints the step count and the stable step "
-                                       "before stepping, and progress for packing, network and compile phases")
 def test_run_prints_steps_and_stable_step_first(tmp_path, capsys):
     runner.run_scene(_scene(), tmp_path, progress=False)
     out = capsys.readouterr()
     assert "stable step" in out.out + out.err and "steps" in out.out + out.err
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: the summary reports the bed (packing.Packing.summary(): "
-                                       "height, packing fraction, coordination, isolated particles)")
 def test_summary_reports_the_bed(tmp_path):
     scene = copy.deepcopy(SMALL)
     scene["packing"] = {"kind": "powder_bed", "lateral_size": 400e-6, "height": 200e-6,
@@ -78,8 +64,6 @@ def test_summary_reports_the_bed(tmp_path):
     assert {"packing_fraction", "coordination", "isolated_particles", "bed_height_m"} <= set(summary)
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: a new run into an existing --out removes the earlier "
-                                       "run's vtp/step_*.vtp, dump and checkpoint first")
 def test_rerun_leaves_no_stale_frames(tmp_path):
     runner.run_scene(_scene(duration=6e-3), tmp_path, progress=False)  # 15 steps
     runner.run_scene(_scene(duration=1e-3), tmp_path, progress=False)  # 5 steps
@@ -88,17 +72,12 @@ def test_rerun_leaves_no_stale_frames(tmp_path):
     assert max(steps) <= model.n_steps
 
 
-@pytest.mark.xfail(strict=True, reason="needs run.py change: resume of a finished run returns its summary without "
-                                       "rebuilding the model or showing a progress bar")
 def test_resume_of_a_finished_run_does_nothing(tmp_path, monkeypatch):
     runner.run_scene(_scene(), tmp_path, progress=False)
     monkeypatch.setattr(runner, "build_model", lambda *a, **k: (_ for _ in ()).throw(AssertionError("rebuilt")))
     runner.resume(tmp_path, progress=False)
 
 
-@pytest.mark.xfail(strict=True, reason="needs network.py change: contact_table validates radii and centres "
-                                       "(finite, > 0) before the neighbour search; today one NaN radius drops every "
-                                       "contact silently")
 def test_contact_table_refuses_a_nan_radius():
     from sintercond import network
 
@@ -111,8 +90,6 @@ def test_contact_table_refuses_a_nan_radius():
     ({"method": "rk4"}, "method"), ({"method": "explict"}, "method"),
     ({"n_steps": 10, "save_every": 3}, "save_every"), ({"dt": -1e-3}, "dt"),
 ])
-@pytest.mark.xfail(strict=True, reason="needs thermal.py change: simulate validates method in ('explicit', "
-                                       "'implicit'), n_steps % save_every == 0, dt > 0 and capacity > 0 at the boundary")
 def test_simulate_refuses_bad_arguments(kwargs, field):
     from sintercond import network, thermal
 
