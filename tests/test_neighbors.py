@@ -226,3 +226,27 @@ def test_remap_pair_history_padding_and_own_index():
     springs = jnp.stack([values, 2 * values, 3 * values], axis=-1)  # [n, m, 3]
     out3 = neighbors.remap_pair_history(old, new, springs)
     np.testing.assert_array_equal(out3[..., 2], 3 * np.where(out == -1.0, 0.0, out))
+
+
+def test_pair_conductances_compiled_equal_the_eager_law():
+    from sintercond.conductance import CONDUCTANCE_LAWS, pair_conductance
+
+    # a jittered sintered simple-cubic lattice: overlaps of a few % of the radius
+    rng = np.random.default_rng(9)
+    g = np.arange(7.0)
+    centres = np.array(np.meshgrid(g, g, g, indexing="ij")).reshape(3, -1).T + rng.uniform(-0.02, 0.02, (343, 3))
+    radii = 0.53 * (1 + rng.uniform(-0.02, 0.02, 343))
+    pairs = network.contact_pairs(centres, radii)
+    kappa = np.linspace(5.0, 9.0, len(radii))
+    k_i, k_j = kappa[pairs.i], kappa[pairs.j]
+    eager = np.asarray(pair_conductance("rojek", pairs.r_i, pairs.r_j, pairs.overlap, k_i, k_j))
+    assert len(eager) > 100 and np.all(eager[pairs.overlap > 0] > 0)
+    np.testing.assert_allclose(network.pair_conductances("rojek", pairs, k_i, k_j), eager, rtol=1e-14)
+    # a law object (compiled afresh) and per-pair parameters (unpadded length) take the same path
+    law = CONDUCTANCE_LAWS["rojek"]
+    np.testing.assert_allclose(network.pair_conductances(law, pairs, k_i, k_j), eager, rtol=1e-14)
+    slope = np.full(len(eager), law.default_params["slope"])
+    np.testing.assert_allclose(network.pair_conductances("rojek", pairs, k_i, k_j, params={"slope": slope}), eager,
+                               rtol=1e-14)
+    with pytest.raises(ValueError, match="kappa_i"):
+        network.pair_conductances("rojek", pairs, -k_i, k_j)
