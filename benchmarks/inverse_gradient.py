@@ -9,9 +9,10 @@ Variants, each in its own process so that its peak memory is its own:
 * forward: the readings alone (jit).
 * adjoint: value and d/d(kappa, c) by fitting.inverse's checkpointed discrete
   adjoint (states every ~sqrt(steps) steps, each segment recomputed once).
-* autodiff plain: JAX reverse mode through sintercond.thermal.simulate.
-* autodiff checkpointed: the same with jax.checkpoint around segments of
-  ~sqrt(steps) steps (JAX's own nested rematerialisation).
+* autodiff checkpointed: JAX's own reverse mode through `sintercond.simulate.rollout`
+  (jax.checkpoint around segments of ~sqrt(steps) steps; the network mat-vec's custom
+  JVP makes the transpose a gather, not a scatter-add).
+* autodiff plain: the same rollout without checkpoints (every step's residuals kept).
 
 Times: the best of alternating runs of the variant and the forward program in the same process
 (the VM's speed drifts by up to 2x over minutes, so ratios between processes are unreliable).
@@ -56,7 +57,7 @@ def run_one(path, variant, steps, max_gb):
     import jax.numpy as jnp
 
     from fitting import inverse
-    from sintercond import thermal
+    from sintercond import simulate
     from sintercond.network import ContactTable
 
     data = np.load(path)
@@ -67,25 +68,10 @@ def run_one(path, variant, steps, max_gb):
                                  pulse_duration=0.1 * steps * dt, dt=dt, n_steps=steps, save_every=10,
                                  probes=jnp.asarray(data["probes"]))
 
-    def checkpointed(kappa, c):
-        seg = math.isqrt(steps // 10 - 1) + 1  # readings per segment, ~sqrt(steps / 10)
-        n_seg = steps // 10 // seg
-        scaled = ContactTable(table.neighbors, kappa * table.conductance)
-
-        @jax.checkpoint
-        def segment(carry, _):
-            t, k = carry
-            t, saved = thermal.simulate(t, scaled, c * ex.mass, dt, seg * 10, 10, source=ex._source,
-                                        start_step=k, probes=ex.probes)
-            return (t, k + seg * 10), saved
-
-        (t, k), saved = jax.lax.scan(segment, (ex.initial, 0), None, length=n_seg)
-        rest = steps // 10 - n_seg * seg
-        if rest:
-            _, tail = thermal.simulate(t, scaled, c * ex.mass, dt, rest * 10, 10, source=ex._source, start_step=k,
-                                       probes=ex.probes)
-            saved = jnp.concatenate([saved.reshape(-1, len(ex.probes)), tail])
-        return saved.reshape(-1, len(ex.probes))
+    def unchecked(kappa, c):
+        n_readings = steps // 10
+        return simulate.rollout(ex._sim, ex.initial_state(), ex.params(kappa, c), n_readings * 10,
+                                simulate.SaveAt(10, simulate.probe_temperatures(ex.probes)), checkpoint=False)[1]
 
     loss = jax.jit(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2))
     if variant == "forward":
@@ -93,9 +79,10 @@ def run_one(path, variant, steps, max_gb):
     elif variant == "adjoint":
         fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2), argnums=(0, 1)))
     elif variant == "autodiff plain":
-        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(ex._simulate(k, c) ** 2), argnums=(0, 1)))
+        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(unchecked(k, c) ** 2), argnums=(0, 1)))
     else:
-        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(checkpointed(k, c) ** 2), argnums=(0, 1)))
+        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(ex.temperatures(k, c, "autodiff") ** 2),
+                                        argnums=(0, 1)))
     args = (jnp.asarray(7.0), jnp.asarray(560.0))
     compiled = fn.lower(*args).compile()
     mem = compiled.memory_analysis()
@@ -134,8 +121,8 @@ def main():
     parser.add_argument("--particles", type=int, default=100_000)
     parser.add_argument("--steps", type=int, nargs="+", default=[1000, 10_000, 100_000])
     parser.add_argument("--max-gb", type=float, default=40.0)
-    parser.add_argument("--max-checkpointed-steps", type=int, default=10_000,
-                        help="skip 'autodiff checkpointed' beyond this (it runs ~20x the forward time)")
+    parser.add_argument("--max-checkpointed-steps", type=int, default=100_000,
+                        help="skip 'autodiff checkpointed' beyond this many steps")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--one", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()

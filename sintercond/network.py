@@ -291,14 +291,17 @@ def total_conductance(table: ContactTable):
 
 
 def wall_conductance(centres, radii, kappa, axis, position, law="rojek", params=None, neck_model=None,
-                     wall_kappa=None, wall_radius_factor=1e3):
-    """Conductance of each particle to a plane wall ``p[axis] = position`` (0 if not touching).
+                     wall_kappa=None):
+    """Conductance (W/K) of each particle to a plane wall ``p[axis] = position`` (0 if not touching).
 
-    The wall enters the pair law as a sphere ``wall_radius_factor`` times the
-    largest particle radius, its surface on the plane; the overlap is the
-    particle's penetration ``r - |c[axis] - position|``. Validated like any pair
-    (overlaps inside the neck model's domain).
+    The wall enters the pair law as a neighbour of infinite radius
+    (:mod:`sintercond.walls`); the overlap is the particle's penetration
+    ``r - |c[axis] - position|``. Validated like any pair: the law's
+    parameters and conductivities, and penetrations inside the neck model's
+    domain (``r/3`` for the volume-conserving neck).
     """
+    from sintercond import walls
+
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     kappa = np.broadcast_to(np.asarray(kappa, dtype=np.float64), radii.shape)
@@ -307,11 +310,16 @@ def wall_conductance(centres, radii, kappa, axis, position, law="rojek", params=
     touching = h > 0
     k = np.zeros(len(radii))
     if touching.any():
-        r_wall = np.full(int(touching.sum()), wall_radius_factor * float(radii.max()))
-        validate_pair_conductance_inputs(law, radii[touching], r_wall, h[touching], kappa[touching],
-                                         wall_kappa[touching], params, neck_model)
-        k[touching] = np.asarray(pair_conductance(law, radii[touching], r_wall, h[touching], kappa[touching],
-                                                  wall_kappa[touching], params=params, neck_model=neck_model))
+        # the law, its parameters and conductivities as for any pair (the plane's radius plays no part there)
+        validate_pair_conductance_inputs(law, radii[touching], radii[touching], np.zeros(int(touching.sum())),
+                                         kappa[touching], wall_kappa[touching], params, neck_model)
+        k[touching] = np.asarray(walls.wall_conductance(law, radii[touching], h[touching], kappa[touching],
+                                                        wall_kappa[touching], params, neck_model))
+        bad = ~np.isfinite(k)
+        if bad.any():
+            first = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"wall penetration h = {h[first]!r} m of the particle of radius {radii[first]!r} m is "
+                             f"beyond the neck model's domain for a plane (r/3 for the volume-conserving neck)")
     return k
 
 

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import heat_sources, network, packing, simulate, thermal
+from sintercond import heat_sources, network, packing, simulate, thermal, walls
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
 from sintercond.scene import SceneError, validate_scene
 from sintercond.state import particle_state
@@ -133,8 +133,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         contacts = simulate.table_contacts(table, k_wall, t_wall)
     else:
         contacts = simulate.lifted_contacts(physics, centres, radii,
-                                            [(_wall_penetration(centres, radii, axis, position), wall["temperature"])
-                                             for _, axis, position, wall in conducting])
+                                            [(penetration, wall.temperature) for _, wall, penetration in conducting])
     params = scene_params(scene)
     sim = simulate.simulator(physics)
     state = simulate.init_state(particles, contacts, 1.0)
@@ -168,37 +167,42 @@ def _walls(scene):
     return walls
 
 
-def _apply_walls(scene, centres, radii):
-    """Held walls become fixed particles; returns them and the conducting walls as ``(index, axis, position, wall)``.
+def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
+    """The scene's walls as :class:`~sintercond.walls.PlaneWall` (insulated ones included).
 
     A wall plane lies at the packing's extreme along its axis, moved
-    ``penetration`` mean radii into it; the particles it cuts touch it.
+    ``penetration`` mean radii into it; its normal points into the packing.
     """
+    planes = []
+    for wall in _walls(scene):
+        axis, depth = wall["axis"], wall.get("penetration", 0.02) * float(np.mean(radii))
+        normal = np.zeros(3)
+        if wall["side"] == "min":
+            normal[axis] = 1.0
+            position = float(np.min(centres[:, axis] - radii)) + depth
+        else:
+            normal[axis] = -1.0
+            position = float(np.max(centres[:, axis] + radii)) - depth
+        point = np.zeros(3)
+        point[axis] = position
+        planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall["mode"], wall.get("temperature")))
+    return planes
+
+
+def _apply_walls(scene, centres, radii):
+    """Held walls become fixed particles; returns them and the conducting walls as ``(index, wall, penetration)``."""
     held = np.zeros(len(radii), bool)
     held_t = np.zeros(len(radii))
     conducting = []
-    for index, wall in enumerate(_walls(scene)):
-        axis, mode = wall["axis"], wall["mode"]
-        if mode == "insulated":
-            continue
-        depth = wall.get("penetration", 0.02) * float(np.mean(radii))
-        if wall["side"] == "min":
-            position = float(np.min(centres[:, axis] - radii)) + depth
-            touching = centres[:, axis] - radii <= position
-        else:
-            position = float(np.max(centres[:, axis] + radii)) - depth
-            touching = centres[:, axis] + radii >= position
-        if mode == "held":
+    for index, wall in enumerate(scene_walls(scene, centres, radii)):
+        penetration = np.asarray(wall.penetration(centres, radii))
+        if wall.mode == "held":
+            touching = penetration >= 0
             held |= touching
-            held_t = np.where(touching, wall["temperature"], held_t)
-        else:
-            conducting.append((index, axis, position, wall))
+            held_t = np.where(touching, wall.temperature, held_t)
+        elif wall.mode == "conducting":
+            conducting.append((index, wall, penetration))
     return held, held_t, conducting
-
-
-def _wall_penetration(centres, radii, axis, position):
-    """How far each sphere cuts the plane ``p[axis] = position`` (m; <= 0: not touching)."""
-    return radii - np.abs(centres[:, axis] - position)
 
 
 def _merged_wall_conductance(scene, centres, radii, conducting):
@@ -208,13 +212,16 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
     c = scene["conduction"]
     k_wall = np.zeros(len(radii))
     t_wall = np.zeros(len(radii))
-    for index, axis, position, wall in conducting:
+    for index, wall, penetration in conducting:
         try:
-            k_w = network.wall_conductance(centres, radii, 1.0, axis, position, c["law"], c.get("params"),
-                                           c.get("neck_model"))
+            k_w = np.asarray(walls.wall_conductance(c["law"], radii, penetration, 1.0, params=c.get("params"),
+                                                    neck_model=c.get("neck_model")))
         except ValueError as err:
             raise SceneError(f"walls[{index}]: {err}") from None
-        t_wall = np.where(k_w > 0, (k_wall * t_wall + k_w * wall["temperature"]) / np.maximum(k_wall + k_w, 1e-300),
+        if not np.all(np.isfinite(k_w)):
+            raise SceneError(f"walls[{index}].penetration: the wall cuts a particle deeper than the neck model "
+                             f"allows for a plane (r/3 for the volume-conserving neck)")
+        t_wall = np.where(k_w > 0, (k_wall * t_wall + k_w * wall.temperature) / np.maximum(k_wall + k_w, 1e-300),
                           t_wall)
         k_wall = k_wall + k_w
     return k_wall, t_wall

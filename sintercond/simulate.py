@@ -66,6 +66,7 @@ from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity
+from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
 
 _INTEGRATORS = ("explicit", "implicit")
 _CONDUCTANCE_MODES = ("table", "lifted")
@@ -98,8 +99,6 @@ class Physics:
       motion: prescribed positions ``fn(t) -> [n, 3]`` (m) for dynamic
         contacts, or None (positions stay).
       implicit_tol: relative residual of the implicit CG solve.
-      wall_radius_factor: a conducting wall enters the pair law as a sphere
-        this many times the largest particle radius (the plane limit).
       mechanics: reserved for the thermo-mechanical model (not yet built).
     """
 
@@ -117,7 +116,6 @@ class Physics:
     source: Callable | None = None
     motion: Callable | None = None
     implicit_tol: float = 1e-13
-    wall_radius_factor: float = 1e3
     mechanics: bool = False
 
     def __post_init__(self):
@@ -331,11 +329,10 @@ def conductance_lift(physics: Physics, radii, material, neighbors, neck, overlap
 
 
 def _wall_lift(physics, particles, contacts, conductivity, law_params):
-    r = particles.radii
-    r_wall = physics.wall_radius_factor * jnp.max(r)
+    """``[n_walls, n]`` conductances to the conducting walls (a neighbour of infinite radius, :mod:`sintercond.walls`)."""
     kappa = jnp.asarray(conductivity)[particles.material]
-    return conductance_from_neck(physics.law, contacts.wall_neck, r, r_wall, contacts.wall_overlap, kappa, kappa,
-                                 law_params)
+    return wall_conductance_from_neck(physics.law, contacts.wall_neck, particles.radii, contacts.wall_overlap, kappa,
+                                      kappa, law_params)
 
 
 def _dynamic_geometry(physics, positions, radii, neighbors):
@@ -504,9 +501,8 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
     contacts = Contacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=jnp.asarray(neck),
                         overlap=jnp.asarray(overlap))
     if walls:
-        r_wall = physics.wall_radius_factor * float(radii.max())
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
-        a = np.where(h > 0, np.asarray(NECK_MODELS[physics.neck](radii, r_wall, h)), 0.0)
+        a = np.asarray(wall_neck_radius(physics.neck, radii, h))
         contacts = dataclasses.replace(contacts, wall_neck=jnp.asarray(a), wall_overlap=jnp.asarray(h),
                                        wall_temperature=jnp.asarray([float(t) for _, t in walls]))
     return contacts

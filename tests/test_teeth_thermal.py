@@ -101,15 +101,23 @@ def _rojek_residual(a, r_i, r_j, h):
 
 def test_wall_conductance_magnitude():
     """Bug caught: the wall's magnitude was only checked against itself (a 4.5 % change passed). Definition
-    (network.wall_conductance): the Rojek law with the wall as a sphere 1e3 times the largest radius and the
-    overlap the particle's penetration; both halves have the same a and kappa, so K_w = 1.064 kappa pi a / 2
-    with a from Eq. 27, solved here by brentq."""
+    (network.wall_conductance): the Rojek law with the wall as a neighbour of infinite radius (Quintana-Ruiz
+    Remark 1) and the overlap the particle's penetration; both halves have the same a and kappa, so
+    K_w = 1.064 kappa pi a / 2. Reference for a: by mirror symmetry the volume-conserving neck of a sphere on a
+    plane at penetration h is that of two equal spheres overlapping by 2h (Rojek Eqs. 19-20), and it solves
+    the one-cap residual (brentq here)."""
     r, kappa, depth = 0.52e-4, 20.0, 0.02 * 0.52e-4
     centres = np.array([[0.0, 0.0, 0.0], [3 * r, 0.0, 0.0]])
     k_w = network.wall_conductance(centres, np.full(2, r), kappa, axis=0, position=-r + depth)
-    r_wall = 1e3 * r
-    a = brentq(lambda a: _rojek_residual(a, r, r_wall, depth), _lens(r, r_wall, depth) * (1 + 1e-12), r,
-               xtol=1e-20, rtol=1e-15)
+
+    def one_cap(a):  # Rojek Eq. 27 with the plane's cap 0, divided by 3 a^2
+        s = np.sqrt((r - a) * (r + a))
+        return a**2 * (r + 2 * s) / (3 * (r + s) ** 2) - depth
+
+    a = brentq(one_cap, 1e-3 * r, r, xtol=1e-20, rtol=1e-15)
+    from sintercond import neck_radius
+
+    assert a == pytest.approx(float(neck_radius(r, r, 2 * depth)), rel=1e-13)
     assert k_w[0] == pytest.approx(1.064 * kappa * np.pi * a / 2, rel=1e-10) and k_w[1] == 0.0
 
 
