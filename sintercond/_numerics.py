@@ -45,3 +45,21 @@ def as_float_arrays(*values):
     if not jnp.issubdtype(dtype, jnp.floating):
         dtype = jnp.result_type(float)
     return jnp.broadcast_arrays(*(a.astype(dtype) for a in arrays))
+
+
+def safe_power(x, exponent):
+    """``x**exponent`` for ``x > 0`` and 0 (with zero gradient) for ``x <= 0``.
+
+    For fractional exponents (Hertz's ``delta^(3/2)``, ``delta^(1/4)``): the
+    derivative ``exponent x^(exponent - 1)`` is finite at every positive
+    float, and the substituted argument keeps it from reaching ``0**negative``
+    at ``x = 0``.
+    """
+    positive = x > 0
+    x_safe = jnp.where(positive, x, jnp.ones_like(x))
+    return jnp.where(positive, x_safe**exponent, jnp.zeros_like(x))
+
+
+def safe_norm(vectors, keepdims=False):
+    """Euclidean norm over the last axis, with zero gradient (not NaN) at the zero vector."""
+    return safe_sqrt(jnp.sum(vectors * vectors, axis=-1, keepdims=keepdims))
