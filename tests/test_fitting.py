@@ -206,3 +206,28 @@ def test_non_uniform_weights_give_the_weighted_least_squares_solution():
     np.testing.assert_allclose([fit.stderr["b0"], fit.stderr["b1"]], stderr, rtol=1e-6)
     unweighted = np.linalg.lstsq(design, y, rcond=None)[0]
     assert abs(unweighted[1] - beta[1]) > 5 * stderr[1]  # the weights matter here
+
+
+def test_bcc_conductivity_is_the_mean_of_eq_1_over_the_two_couples():
+    """lambda = n lambda_0 / tau^2 (Rizza & Galati Eq. 1), tau^2 = (S_ss/S_0) gamma n^(1 - phi) (Eq. 5), for the
+    corner-corner and corner-centre couples of the BCC cell, averaged. Mutant "phi mean" (the larger couple
+    instead of the mean) shifted every prediction and the fitted phi alike, and passed the recovery test."""
+    from fitting import phi as phi_fit
+
+    inputs = phi_fit.bcc_inputs()
+    for p in (4.0, 6.5):
+        couples = [inputs.n * inputs.lambda0 / (inputs.sss_over_s0 * inputs.gamma[:, k] * inputs.n ** (1 - p))
+                   for k in range(2)]
+        np.testing.assert_allclose(np.asarray(phi_fit.bcc_conductivity({"phi": p}, inputs)),
+                                   (couples[0] + couples[1]) / 2, rtol=1e-13)
+
+
+def test_importing_fitting_alone_turns_on_float64():
+    """``import fitting`` must give float64 like ``import sintercond`` (the test suite's conftest imports
+    sintercond, so only a fresh process sees it). Mutant "fitting x64" dropped the import."""
+    import subprocess
+    import sys
+
+    code = "import fitting.core, jax; print(jax.config.jax_enable_x64)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.strip() == "True"

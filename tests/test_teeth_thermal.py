@@ -198,3 +198,53 @@ def test_run_killed_mid_way_resumes_identically(tmp_path):
     assert names == sorted(p.name for p in (out / "vtp").iterdir())
     for name in names:
         assert (tmp_path / "full" / "vtp" / name).read_text() == (out / "vtp" / name).read_text()
+
+
+def test_touching_within_the_tolerance_is_a_contact():
+    """Spheres whose gap is within ``tolerance`` of r_i + r_j touch (lattices built from float spacings have
+    gaps of a few ulp); beyond it they do not. Mutant "contact tolerance" (strict distance < r_i + r_j)
+    dropped such contacts; no packing in the other tests had one."""
+    radii = np.array([1e-4, 2e-4])
+    for gap, touching in ((1e-12, True), (1e-10, True), (1e-8, False)):
+        centres = np.array([[0.0, 0.0, 0.0], [3e-4 * (1 + gap), 0.0, 0.0]])
+        table = network.find_contacts(centres, radii, tolerance=1e-9)
+        assert (table[0] == 1).any() == touching and (table[1] == 0).any() == touching
+
+
+def test_auto_time_step_is_nine_tenths_of_the_stable_step():
+    """``dt = "auto"`` is 0.9 x min_i C_i / sum_j K_ij (sintercond.scene), computed here from the table and
+    the capacities C_i = rho c 4/3 pi r^3 directly. Mutant "dt auto factor" (1.9x, unstable) passed: the
+    small scene's radiation and floor kept the run finite."""
+    model = runner.build_model(validate_scene(copy.deepcopy(SMALL)))
+    capacity = 4430.0 * 560.0 * 4 / 3 * np.pi * model.radii**3
+    total = np.asarray(model.table.conductance).sum(axis=1)
+    assert model.dt == pytest.approx(0.9 * np.min(capacity[total > 0] / total[total > 0]), rel=1e-12)
+
+
+def test_conducting_wall_penetration_sets_the_overlap():
+    """A conducting wall lies ``penetration`` mean radii inside the packing's extreme (sintercond.scene), so
+    the outermost particles overlap it by exactly that: K_w = 1.064 kappa pi a / 2 with a from Eq. 27 for
+    (r, 1e3 r, penetration r). Mutant "wall penetration" (twice the depth) passed the scene tests, which only
+    counted the touching particles."""
+    scene = copy.deepcopy(SMALL)
+    scene.pop("beam"), scene.pop("radiation"), scene.pop("boundary")
+    r = scene["packing"]["radius"]
+    for penetration in (0.02, 0.1):
+        scene["walls"] = [{"axis": 0, "side": "max", "mode": "conducting", "temperature": 300.0,
+                           "penetration": penetration}]
+        k_w = np.asarray(runner.build_model(validate_scene(copy.deepcopy(scene))).table.wall_conductance)
+        depth = penetration * r
+        a = brentq(lambda a: _rojek_residual(a, r, 1e3 * r, depth), _lens(r, 1e3 * r, depth) * (1 + 1e-12), r,
+                   xtol=1e-20, rtol=1e-15)
+        np.testing.assert_allclose(k_w[k_w > 0], 1.064 * 12.6 * np.pi * a / 2, rtol=1e-10)
+        assert np.sum(k_w > 0) == 9  # the x = max face of the 6 x 3 x 3 lattice
+
+
+def test_sinter_swelling_grows_the_settled_radii():
+    """``sinter_swelling = s`` multiplies the settled bed's radii by 1 + s and leaves the centres (so settled
+    contacts become necks). Mutant "swelling ignored" passed: no test built a powder bed scene."""
+    packing = {"kind": "powder_bed", "lateral_size": 2.5e-4, "height": 1.5e-4, "diameter_range": [45e-6, 60e-6]}
+    plain = runner.build_packing({"packing": packing})
+    swollen = runner.build_packing({"packing": {**packing, "sinter_swelling": 0.03}})
+    np.testing.assert_array_equal(swollen[0], plain[0])
+    np.testing.assert_allclose(swollen[1], 1.03 * plain[1], rtol=1e-15)

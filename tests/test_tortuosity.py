@@ -102,3 +102,13 @@ def test_tables4_5_bcc_do_not_follow_as_printed():
         deviation = np.abs(tau2 / v["tau2"] - 1)
         # SPEC.md: up to ~13 % off; reported, not forced
         assert 0.005 < deviation.max() < 0.15
+
+
+def test_preheating_ramp_holds_each_step_until_its_end():
+    """Eq. 6's int() is a floor: within step k (of 25, each 0.38 s, 17.12 K) the temperature is
+    T_bp + k 17.12 K all the way to the step's end. Mutant "ramp floor" (round instead) jumped a step early
+    in the second half of every step, which the table's step-end values and the end points did not see."""
+    width, rise = 9.5 / 25, (1273.0 - 845.0) / 25
+    for k in (0, 3, 24):
+        for part in (0.1, 0.6, 0.95):
+            assert float(tt.preheating_temperature((k + part) * width)) == pytest.approx(845.0 + k * rise, rel=1e-14)
