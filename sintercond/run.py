@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import heat_sources, network, packing, simulate
+from sintercond import heat_sources, network, packing, plots, simulate
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
 from sintercond.scene import SceneError, validate_scene
 from sintercond.state import particle_state
@@ -293,6 +293,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         "dt_s": model.dt, "simulated_s": int(state.step) * model.dt, "wall_s": elapsed,
         "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()), "T_max_K": float(temperature.max()),
     }
+    plots.write_run_pictures(out, model.centres, model.radii, temperature, summary)
     return temperature, summary
 
 
