@@ -15,8 +15,6 @@ import numpy as np
 STATE_PICTURE = "final_state.png"
 HISTORY_PLOT = "history.png"
 
-_AXIS_NAMES = "xyz"
-
 
 def length_unit(extent: float) -> tuple[float, str]:
     """``(scale, label)`` to show lengths in m as µm (extent below 1 mm) or mm."""
@@ -40,33 +38,32 @@ def _figure(**kwargs):
     return Figure(**kwargs)
 
 
-def _project(ax, positions, radii, temperature, norm, cmap, axes, depth_axis, nearest_last, scale):
-    """Draw the spheres as discs on the plane of ``axes``; the ones nearest the viewer on top."""
+def _discs(ax, centres, disc_radii, temperature, norm, cmap, limits, scale):
+    """Draw discs (centres ``[m, 2]``, radii ``[m]``, in m) coloured by temperature, in the given order."""
     from matplotlib.collections import PatchCollection
     from matplotlib.patches import Circle
 
-    depth = positions[:, depth_axis] if nearest_last == "max" else -positions[:, depth_axis]
-    order = np.argsort(depth, kind="stable")
-    discs = [Circle((positions[k, axes[0]] * scale, positions[k, axes[1]] * scale), radii[k] * scale) for k in order]
+    discs = [Circle(tuple(c * scale), r * scale) for c, r in zip(centres, disc_radii)]
     collection = PatchCollection(discs, cmap=cmap, norm=norm, edgecolor="k", linewidth=0.2)
-    collection.set_array(temperature[order])
+    collection.set_array(temperature)
     ax.add_collection(collection)
-    lo = (positions - radii[:, None]).min(axis=0) * scale
-    hi = (positions + radii[:, None]).max(axis=0) * scale
-    pad = 0.03 * float(np.max(hi - lo))
-    ax.set_xlim(lo[axes[0]] - pad, hi[axes[0]] + pad)
-    ax.set_ylim(lo[axes[1]] - pad, hi[axes[1]] + pad)
+    (x_lo, x_hi), (y_lo, y_hi) = limits * scale
+    pad = 0.03 * max(x_hi - x_lo, y_hi - y_lo)
+    ax.set_xlim(x_lo - pad, x_hi + pad)
+    ax.set_ylim(y_lo - pad, y_hi + pad)
     ax.set_aspect("equal")
     return collection
 
 
-def state_picture(path, positions, radii, temperature, time=None, title="sintercond run: final state"):
-    """Write a PNG of the particles coloured by temperature: a top view and a side view.
+def state_picture(path, positions, radii, temperature, time=None, section_y=None,
+                  title="sintercond run: final state"):
+    """Write a PNG of the particles coloured by temperature: a top view and a vertical section.
 
     The top view projects along z (seen from above, the highest particles in
-    front), the side view along y (seen from -y, the front row in front);
-    each sphere is a disc of its radius. One colour scale for both, with a
-    colour bar in K.
+    front; each sphere a disc of its radius); the side view is the section by
+    the plane y = ``section_y`` (default: through the hottest particle, so a
+    beam's track is cut), each sphere it cuts shown as the disc of the cut.
+    One colour scale for both, with a colour bar in K.
 
     Args:
       path: the PNG file to write.
@@ -74,6 +71,7 @@ def state_picture(path, positions, radii, temperature, time=None, title="sinterc
       radii: ``[n]`` radii (m).
       temperature: ``[n]`` temperatures (K).
       time: the simulated time of the state (s), shown in the title when given.
+      section_y: y of the vertical section (m); default the hottest particle's.
       title: the figure title.
 
     Returns:
@@ -93,12 +91,22 @@ def state_picture(path, positions, radii, temperature, time=None, title="sinterc
     if t_hi - t_lo < 1e-9 * max(1.0, abs(t_hi)):
         t_lo, t_hi = t_lo - 0.5, t_hi + 0.5
     norm = Normalize(t_lo, t_hi)
+    lo, hi = (positions - radii[:, None]).min(axis=0), (positions + radii[:, None]).max(axis=0)
     fig = _figure(figsize=(11, 4.6), layout="constrained")
-    top, side = fig.subplots(1, 2, width_ratios=[1, 1])
-    mappable = _project(top, positions, radii, temperature, norm, "inferno", (0, 1), 2, "max", scale)
-    _project(side, positions, radii, temperature, norm, "inferno", (0, 2), 1, "min", scale)
+    top, side = fig.subplots(1, 2)
+    # top view: every sphere projected along z, drawn from the lowest up
+    order = np.argsort(positions[:, 2], kind="stable")
+    mappable = _discs(top, positions[order][:, :2], radii[order], temperature[order], norm, "inferno",
+                      np.stack([lo[:2], hi[:2]], axis=1), scale)
+    # side view: the section y = y of the hottest particle; each cut sphere is the disc of its cut
+    y_cut = positions[int(np.argmax(temperature)), 1] if section_y is None else float(section_y)
+    cut = np.abs(positions[:, 1] - y_cut) < radii
+    _discs(side, positions[cut][:, [0, 2]], np.sqrt(radii[cut] ** 2 - (positions[cut, 1] - y_cut) ** 2),
+           temperature[cut], norm, "inferno", np.stack([lo[[0, 2]], hi[[0, 2]]], axis=1), scale)
     top.set(xlabel=f"x [{unit}]", ylabel=f"y [{unit}]", title="top view (projection along z)")
-    side.set(xlabel=f"x [{unit}]", ylabel=f"z [{unit}]", title="side view (projection along y)")
+    side.set(xlabel=f"x [{unit}]", ylabel=f"z [{unit}]",
+             title=f"section y = {y_cut * scale:.4g} {unit}" + (" (through the hottest particle)"
+                                                               if section_y is None else ""))
     fig.colorbar(mappable, ax=[top, side], label="T [K]", shrink=0.9)
     fig.suptitle(title if time is None else f"{title} at t = {time_label(time)}"
                  f"  (T from {float(temperature.min()):.1f} K to {float(temperature.max()):.1f} K)")
