@@ -75,3 +75,17 @@ def test_sintercond_run_writes_the_picture(tmp_path):
     image = _image(tmp_path / plots.STATE_PICTURE)
     assert summary["T_max_K"] > 310.0  # the beam heated something: the hottest colour is on the picture
     assert _hot_pixel_columns(image).size > 20
+
+
+def test_every_figure_linked_from_the_docs_exists_and_decodes():
+    """Every PNG embedded in benchmarks/RESULTS.md and README.md is there, non-empty, and not blank."""
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    links = [(root / "benchmarks" / m) for m in re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)",
+                                                           (root / "benchmarks" / "RESULTS.md").read_text())]
+    links += [(root / m) for m in re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", (root / "README.md").read_text())]
+    assert root / "docs" / "default_scene.png" in links
+    for path in links:
+        _image(path)
