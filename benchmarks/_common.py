@@ -17,6 +17,7 @@ import sintercond  # noqa: F401  (float64 on)
 from sintercond.neck import max_overlap
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "RESULTS.md"
+FIGURES = RESULTS.parent / "figures"
 
 
 def random_pairs(n, seed=0, max_ratio=1e3, frac_low=0.0, frac_high=1.0):
@@ -138,5 +139,24 @@ def write_section(name: str, command: str, body: str) -> None:
 
 def markdown_table(header, rows) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in rows]  # "|" in a cell
     return "\n".join(lines)
+
+
+def new_figure(width=6.4, height=4.2):
+    """A matplotlib Figure of the object API (no pyplot: no backend or global state), laid out tightly."""
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), layout="constrained")
+
+
+def save_figure(name: str, fig, caption: str) -> str:
+    """Write ``fig`` to ``benchmarks/figures/<name>.png``; returns the markdown that shows it in RESULTS.md."""
+    FIGURES.mkdir(exist_ok=True)
+    fig.savefig(FIGURES / f"{name}.png", dpi=110)
+    return f"![{caption}](figures/{name}.png)"
+
+
+def number(cell) -> float:
+    """A table cell as written by the scripts ("1,000", "2.5e+06", "3.1x stable") read back as a float."""
+    return float(re.match(r"\s*([-+0-9.,eE]+)", str(cell)).group(1).replace(",", ""))

@@ -20,7 +20,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import best_time, command_line, markdown_table, write_section
+from _common import best_time, command_line, markdown_table, new_figure, number, save_figure, write_section
 
 from sintercond import dryden_zok as dz
 
@@ -38,6 +38,28 @@ def midpoint_sigma(alpha, n):
     matrix = h * direct + np.diag(np.full(n, diagonal)) + h * np.asarray(dz.kernel(t[:, None] + t[None, :]))
     j = np.linalg.solve(np.eye(n) - matrix / np.pi, np.cos(1.5 * t))
     return 6 / np.pi * h * np.sum(j * np.cos(1.5 * t))
+
+
+def plot(rows):
+    """Max error against time per sigma: sintercond's graded panels (single call and batched) and plain midpoint."""
+    fig = new_figure()
+    ax = fig.subplots()
+    ours = [r for r in rows if r[0].startswith("sintercond")]
+    plain = [r for r in rows if not r[0].startswith("sintercond")]
+    curves = [(ours, 3, "o-", "sintercond, graded panels: one alpha per call"),
+              (ours, 4, "s--", "sintercond, graded panels: per alpha in a batch of 40"),
+              (plain, 3, "^-", "plain midpoint Nystrom (NumPy)")]
+    for k, (mine, column, style, label) in enumerate(curves):
+        times, errors = [number(r[column]) for r in mine], [max(number(r[2]), 1e-17) for r in mine]
+        ax.plot(times, errors, style, color=f"C{k}", label=label)
+        for r, x, y in zip(mine, times, errors):
+            if column == 3:
+                ax.annotate(str(r[1]), (x, y), textcoords="offset points", xytext=(4, 3), fontsize=7, color=f"C{k}")
+    ax.set(xscale="log", yscale="log", xlabel="time per σ [ms]", ylabel="max |σ − σ_ref| over 40 α [-]",
+           title="Dryden–Zok σ(α): node count (labels) against error")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return save_figure("dryden_zok", fig, "Dryden-Zok sigma: time per sigma against error, per node count")
 
 
 def main():
@@ -72,6 +94,7 @@ def main():
         "product weights (cached per node count).\n\n"
         + markdown_table(("method", "nodes", "max error", "ms / sigma (single)", "ms / sigma (batch of 40)",
                           "mesh build (s)"), rows)
+        + "\n\n" + plot(rows)
     )
     write_section("dryden_zok", command_line(), body)
 

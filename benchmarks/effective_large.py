@@ -14,7 +14,7 @@ import json
 import subprocess
 import sys
 
-from _common import markdown_table, write_section
+from _common import markdown_table, new_figure, number, save_figure, write_section
 
 CHILD = r"""
 import json, resource, sys, time
@@ -35,6 +35,20 @@ print(json.dumps({"n": len(radii), "seconds": elapsed, "peak_gb": resource.getru
 """
 
 
+def plot(rows):
+    """Time and peak memory of k* against the particle count."""
+    fig = new_figure(6.4, 3.8)
+    ax = fig.subplots()
+    n = [number(r[0]) for r in rows]
+    ax.plot(n, [number(r[1]) for r in rows], "o-", label="time [s]")
+    ax.plot(n, [number(r[2]) for r in rows], "s--", label="peak RSS [GB]")
+    ax.set(xscale="log", yscale="log", xlabel="particles [-]", ylabel="time [s], peak memory [GB]",
+           title="Effective conductivity k* end to end")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return save_figure("effective_large", fig, "Effective conductivity of large packings: time and memory")
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", type=int, nargs="+", default=[100_000, 1_000_000])
@@ -52,6 +66,7 @@ def main():
         "one CG solve to 1e-10), fresh process per size; targets: 1e5 particles under 10 s, 1e6 under 5 min "
         "and 8 GB on this 2-core, 24 GB machine.\n\n"
         + markdown_table(("particles", "time (s)", "peak RSS (GB)", "k* (W/(m K))", "K_pair/a, unjittered"), rows)
+        + "\n\n" + plot(rows)
     )
     write_section("effective_large", "python benchmarks/effective_large.py", body)
 

@@ -21,7 +21,7 @@ import time
 import jax
 import numpy as np
 import scipy.optimize
-from _common import markdown_table, write_section
+from _common import markdown_table, new_figure, number, save_figure, write_section
 
 from fitting import inverse, neck_law
 from fitting import phi as phi_fit
@@ -36,6 +36,24 @@ def timed(fn):
     t0 = time.perf_counter()
     result = fn()
     return result, first, time.perf_counter() - t0
+
+
+def plot(rows):
+    """Seconds of every fit, first call (compilation included) and second call, as grouped bars."""
+    fig = new_figure(8, 4.2)
+    ax = fig.subplots()
+    y = np.arange(len(rows))[::-1]
+    for offset, column, label in ((0.2, 3, "first call (compiles)"), (-0.2, 4, "second call (compiled)")):
+        seconds = [max(number(r[column]), 5e-3) for r in rows]  # printed to 0.01 s: "0.00" drawn at 5 ms
+        ax.barh(y + offset, seconds, height=0.38, label=label)
+        for yy, r, x in zip(y + offset, rows, seconds):
+            ax.annotate(f" {r[column]} s", (x, yy), va="center", fontsize=6)
+    ax.set_yticks(y, [r[0] for r in rows], fontsize=7)
+    ax.set(xscale="log", xlabel="time to fit [s]", title="Time to fit each parameter")
+    ax.set_xlim(right=4 * max(number(r[3]) for r in rows))  # room for the labels
+    ax.grid(alpha=0.3, which="both", axis="x")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2)
+    return save_figure("fit_times", fig, "Time to fit each parameter, first and second call")
 
 
 def main():
@@ -88,7 +106,7 @@ def main():
                  f"{first:.2f}", f"{again:.2f}"])
 
     header = ["fit", "result", "optimiser steps", "seconds (first call)", "seconds (second call)"]
-    body = markdown_table(header, rows)
+    body = markdown_table(header, rows) + "\n\n" + plot(rows)
     print(body)
     write_section("fit_times", "python benchmarks/fit_times.py", body)
 

@@ -116,6 +116,29 @@ def run_one(path, variant, steps, max_gb):
     return out
 
 
+def plot(rows):
+    """Gradient cost against the number of steps: seconds of each variant, and its ratio to the forward run."""
+    from _common import new_figure, number, save_figure
+
+    fig = new_figure(10, 3.8)
+    seconds_ax, ratio_ax = fig.subplots(1, 2)
+    for k, variant in enumerate(dict.fromkeys(r[1] for r in rows)):
+        done = [r for r in rows if r[1] == variant and r[2][:1].isdigit()]
+        steps = [number(r[0]) for r in done]
+        seconds_ax.plot(steps, [number(r[2]) for r in done], "o-", color=f"C{k}", label=variant)
+        ratios = [(s, number(r[3])) for s, r in zip(steps, done) if r[3][:1].isdigit()]
+        if ratios:
+            ratio_ax.plot(*zip(*ratios), "o-", color=f"C{k}", label=variant)
+    seconds_ax.set(xscale="log", yscale="log", xlabel="time steps [-]", ylabel="wall time [s]",
+                   title="forward run and gradient")
+    ratio_ax.set(xscale="log", xlabel="time steps [-]", ylabel="gradient time / forward time [-]",
+                 title="gradient cost relative to the forward run")
+    for ax in (seconds_ax, ratio_ax):
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    return save_figure("inverse_gradient", fig, "Gradient cost against time steps: adjoint and JAX reverse mode")
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--particles", type=int, default=100_000)
@@ -161,7 +184,7 @@ def main():
               "grad rel. diff to adjoint"]
     body = (f"{n:,} particles (sintered SC lattice, 6 contacts each), float64, 8 probes read every 10 steps, "
             f"loss = sum of squared readings, gradient d/d(kappa, c).\n\n" + markdown_table(header, rows) +
-            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.")
+            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\n" + plot(rows))
     print(body)
     write_section("inverse_gradient", "python benchmarks/inverse_gradient.py " + " ".join(sys.argv[1:]), body)
 

@@ -15,11 +15,42 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import best_time, command_line, markdown_table, random_pairs, reference_neck_radius, write_section
+from _common import (
+    best_time,
+    command_line,
+    markdown_table,
+    new_figure,
+    number,
+    random_pairs,
+    reference_neck_radius,
+    save_figure,
+    write_section,
+)
 
 from sintercond.neck import neck_radius
 
 ITERATIONS = (0, 1, 2, 3, 4, 5, 6, None)
+
+
+def plot(rows):
+    """Time per pair against max and median error, one curve per dtype, points labelled by iterations."""
+    fig = new_figure()
+    ax = fig.subplots()
+    for k, dtype in enumerate(("float64", "float32")):
+        mine = [r for r in rows if r[0] == dtype]
+        ns = [number(r[5]) for r in mine]
+        worst = [max(number(r[2]), 1e-17) for r in mine]
+        ax.plot(ns, worst, "o-", color=f"C{k}", label=f"{dtype}: max rel. error")
+        ax.plot(ns, [max(number(r[3]), 1e-17) for r in mine], "s:", color=f"C{k}", ms=4,
+                label=f"{dtype}: median rel. error (0 drawn at 1e-17)")
+        for r, x, y in zip(mine, ns, worst):
+            ax.annotate(r[1].split(" ")[0].replace("converged", "while"), (x, y), textcoords="offset points",
+                        xytext=(4, 4), fontsize=7, color=f"C{k}")
+    ax.set(xscale="log", yscale="log", xlabel="time per pair [ns] (batched, jitted)",
+           ylabel="relative error of a [-]", title="neck_radius: Newton iterations (labels) against error")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return save_figure("neck_convergence", fig, "Neck solve: time per pair against error, per Newton iteration count")
 
 
 def main():
@@ -56,7 +87,7 @@ def main():
         "reference: bisection of Rojek Eq. 27 in 80-bit precision. Iteration 0 is Coble's start clipped to "
         "min(r_i, r_j). Float32 errors are against the reference for the float32-rounded inputs; its floor is "
         "float32 round-off (eps 1.2e-7). Times exclude compilation (a warm-up call first) and are the minimum "
-        "over up to 25 repeats or 10 s.\n\n" + table + "\n\n"
+        "over up to 25 repeats or 10 s.\n\n" + table + "\n\n" + plot(rows) + "\n\n"
         + "\n".join(f"- {name}: every pair within {'1e-14' if name == 'float64' else '1e-6'} after {k} iterations"
                     for name, k in converged_at.items())
     )

@@ -11,7 +11,7 @@ Prints the table and rewrites its section of benchmarks/RESULTS.md.
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import command_line, markdown_table, reference_neck_radius, write_section
+from _common import command_line, markdown_table, new_figure, number, reference_neck_radius, save_figure, write_section
 
 from sintercond.neck import max_overlap, neck_radius
 
@@ -47,6 +47,29 @@ def regime_inputs(ratio_range, frac_range, log_frac, seed):
     return r_i, r_j, np.maximum(frac * h_max, np.finfo(np.float64).tiny)
 
 
+def plot(rows):
+    """Max and median relative error per regime and dtype (log bars); NaN/inf counts written beside them."""
+    fig = new_figure(8.5, 4.4)
+    ax = fig.subplots()
+    regimes = list(dict.fromkeys(r[0] for r in rows))
+    y = np.arange(len(regimes))[::-1]
+    for k, dtype in enumerate(("float64", "float32")):
+        mine = {r[0]: r for r in rows if r[1] == dtype}
+        worst = [max(number(mine[g][2]), 1e-17) if mine[g][2] != "n/a" else np.nan for g in regimes]
+        offset = 0.2 - 0.4 * k
+        ax.barh(y + offset, worst, height=0.38, color=f"C{k}", label=f"{dtype}: max rel. error (0 drawn at 1e-17)")
+        for yy, g, w in zip(y + offset, regimes, worst):
+            bad = int(mine[g][4]) + int(mine[g][5])
+            ax.annotate(f" NaN/inf: {bad}" if np.isfinite(w) else " n/a (h rounds to 0)", (w if np.isfinite(w) else 1e-17, yy),
+                        va="center", fontsize=6)
+    ax.set_yticks(y, [g.replace(": ", ":\n", 1) for g in regimes], fontsize=7)
+    ax.set(xscale="log", xlabel="max relative error of a against the 80-bit reference [-]",
+           title="neck_radius under stress (20,000 pairs per regime)")
+    ax.set_xlim(1e-17, 1e-2)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
+    return save_figure("neck_stress", fig, "Neck solve under stress: max relative error per regime, float64 and float32")
+
+
 def main():
     value_and_grad = jax.jit(jax.vmap(jax.value_and_grad(neck_radius, argnums=(0, 1, 2))))
     rows = []
@@ -74,6 +97,7 @@ def main():
         "the error).\n\n"
         + markdown_table(("regime", "dtype", "max rel. error", "median rel. error", "NaN/inf in a",
                           "NaN/inf in gradient", "h -> 0 in float32"), rows)
+        + "\n\n" + plot(rows)
     )
     write_section("neck_stress", command_line(), body)
 

@@ -27,11 +27,14 @@ from _common import (
     command_line,
     lens_radius,
     markdown_table,
+    new_figure,
+    number,
     numpy_neck_radius,
     random_pairs,
     reference_neck_gradient,
     reference_neck_radius,
     rojek_residual,
+    save_figure,
     write_section,
 )
 from scipy.optimize import brentq
@@ -51,6 +54,23 @@ def brentq_neck_radius(r_i, r_j, h):
         lo, hi = lens[k], min(r_i[k], r_j[k])
         out[k] = brentq(rojek_residual, lo, hi, args=(r_i[k], r_j[k], h[k]), xtol=1e-300, rtol=8.9e-16)
     return out
+
+
+def plot(rows):
+    """Pairs per second of every implementation (bars, log scale), each labelled with its max error."""
+    fig = new_figure(7.5, 3.6)
+    ax = fig.subplots()
+    names = [r[0] for r in rows][::-1]
+    rates = [number(r[2]) for r in rows][::-1]
+    colours = ["C0" if n.startswith("JAX") else "C1" if n.startswith("NumPy") else "C2" for n in names]
+    ax.barh(names, rates, color=colours)
+    for k, r in enumerate(rows[::-1]):
+        ax.annotate(f" max rel. error {r[3]}", (rates[k], k), va="center", fontsize=7)
+    ax.set(xscale="log", xlabel="neck radii per second [pairs/s] (CPU of this machine)",
+           title="neck_radius throughput: JAX against NumPy and SciPy brentq")
+    ax.set_xlim(min(rates) / 30, max(rates) * 60)
+    ax.tick_params(axis="y", labelsize=8)
+    return save_figure("neck_throughput", fig, "Neck solve throughput: pairs per second, JAX against NumPy and SciPy")
 
 
 def main():
@@ -124,7 +144,7 @@ def main():
         "no JAX call inside (the bracket's lens radius in NumPy).\n\n"
         + markdown_table(("implementation", "ns / pair", "pairs / s", "max rel. error of a",
                           "max rel. error of the gradient"), rows)
-        + "\n\n" + "\n".join(f"- {s}" for s in summary)
+        + "\n\n" + "\n".join(f"- {s}" for s in summary) + "\n\n" + plot(rows)
     )
     write_section("neck_throughput", command_line(), body)
 

@@ -242,6 +242,24 @@ def timed(command, env=None, cwd=None):
 # --------------------------------------------------------------------------
 
 
+def plot(rows):
+    """Whole-process time of every code against the particle count."""
+    from _common import new_figure, number, save_figure
+
+    fig = new_figure(7, 4.2)
+    ax = fig.subplots()
+    styles = {"LAMMPS": "s-", "LIGGGHTS": "^-"}
+    for k, code in enumerate(dict.fromkeys(r[1] for r in rows)):
+        mine = [r for r in rows if r[1] == code]
+        ax.plot([number(r[0]) for r in mine], [number(r[2]) for r in mine], styles.get(code, "o--"), color=f"C{k}",
+                label=code)
+    ax.set(xscale="log", yscale="log", xlabel="particles [-]", ylabel="whole-process time [s]",
+           title="Conduction run: sintercond against LAMMPS and LIGGGHTS")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return save_figure("peers_thermal", fig, "Whole-process time of a conduction run: sintercond, LAMMPS, LIGGGHTS")
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000])
@@ -341,7 +359,7 @@ def main():
         "codes: their loop also evaluates the (here zero-stiffness) contact forces of every pair and checks "
         "their neighbour lists each step; sintercond's static run evaluates the heat flow only.\n\n"
         + markdown_table(("particles", "code", "whole process (s)", "phases (s)", "max abs(dT) (K) against"), rows)
-        + ("\n\n" + "; ".join(notes) if notes else "")
+        + ("\n\n" + "; ".join(notes) if notes else "") + "\n\n" + plot(rows)
     )
     write_section("peers_thermal", " ".join(["python benchmarks/peers_thermal.py", *sys.argv[1:]]), body)
 

@@ -20,11 +20,28 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _common import best_time, markdown_table, write_section
+from _common import best_time, markdown_table, new_figure, number, save_figure, write_section
 from thermal_step import jittered_packing
 
 from sintercond import network, thermal
 from sintercond.conductance import pair_conductance
+
+
+def plot_transient(transient_rows):
+    """Run time against max error for the explicit and implicit integrators, points labelled by dt / stable step."""
+    fig = new_figure()
+    ax = fig.subplots()
+    for k, method in enumerate(("explicit", "implicit")):
+        mine = [r for r in transient_rows if r[0] == method]
+        times, errors = [number(r[4]) for r in mine], [max(number(r[3]), 1e-17) for r in mine]
+        ax.plot(times, errors, "o-", color=f"C{k}", label=f"{method} Euler" + (" (CG per step)" if k else ""))
+        for r, x, y in zip(mine, times, errors):
+            ax.annotate(f"dt = {r[1]} x stable", (x, y), textcoords="offset points", xytext=(4, 3), fontsize=7)
+    ax.set(xscale="log", yscale="log", xlabel="run time to t_end [ms]", ylabel="max error against the exact solution [K]",
+           title="Transient conduction: time step and integrator against error")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return save_figure("thermal_solvers", fig, "Transient conduction: run time against error per time step and integrator")
 
 
 def transient_error_table():
@@ -156,6 +173,7 @@ def main():
         "Transient accuracy against the exact solution (eigen-decomposition of the 10^3-particle network, "
         "faces held, t_end = 3 slowest decay times): step size against max error and time.\n\n"
         + markdown_table(("integrator", "dt / stable step", "steps", "max error (K)", "time (ms)"), transient_rows)
+        + "\n\n" + plot_transient(transient_rows)
     )
     print(body)
     write_section("thermal_solvers", "python benchmarks/thermal_solvers.py", body)

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
-from _common import markdown_table, write_section
+from _common import markdown_table, new_figure, number, save_figure, write_section
 
 from sintercond import network, thermal
 
@@ -58,6 +58,23 @@ def best_alternating(functions, argument, repeats):
             jax.block_until_ready(f(argument))
             best[k] = min(best[k], time.perf_counter() - s)
     return best
+
+
+def plot(rows):
+    """Particle-steps per second against the particle count: JAX and SciPy CSR, random and Morton order."""
+    fig = new_figure()
+    ax = fig.subplots()
+    for k, order in enumerate(("Morton", "random")):
+        mine = [r for r in rows if r[1] == order]
+        n = [number(r[0]) for r in mine]
+        ax.plot(n, [number(r[2]) for r in mine], "o-", color=f"C{k}", label=f"sintercond (JAX), {order} order")
+        ax.plot(n, [number(r[3]) for r in mine], "^:", color=f"C{k}", label=f"previous step (43fe49a), {order} order")
+        ax.plot(n, [number(r[4]) for r in mine], "s--", color=f"C{k}", label=f"SciPy CSR mat-vec, {order} order")
+    ax.set(xscale="log", yscale="log", xlabel="particles [-]", ylabel="throughput [particle-steps/s]",
+           title="Conduction step: sintercond against SciPy")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    return save_figure("thermal_step", fig, "Conduction step throughput against particle count, JAX and SciPy CSR")
 
 
 def main():
@@ -116,6 +133,7 @@ def main():
         + markdown_table(("particles", "order", "JAX particle-steps/s", "previous step particle-steps/s",
                           "SciPy CSR particle-steps/s", "JAX / SciPy", "max |T_jax - T_scipy| (K)", "build (s)",
                           "peak RSS so far (GB)"), rows)
+        + "\n\n" + plot(rows)
     )
     write_section("thermal_step", "python benchmarks/thermal_step.py", body)
 

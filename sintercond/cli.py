@@ -135,7 +135,8 @@ def _run(args) -> int:
         _, summary = runner.run_scene(scene, args.out, progress=not args.no_progress)
         out = args.out
     print(runner.summary_table(summary))
-    print(f"outputs in {out}/ (vtp/*.vtp for ParaView, dump.lammpstrj for OVITO, checkpoint.npz)")
+    print(f"outputs in {out}/ (final_state.png: a picture of the last state; vtp/*.vtp for ParaView, "
+          "dump.lammpstrj for OVITO, checkpoint.npz)")
     return 0
 
 

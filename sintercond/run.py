@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import heat_sources, network, packing, simulate, thermal, walls
+from sintercond import heat_sources, network, packing, plots, simulate, thermal, walls
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
 from sintercond.scene import SceneError, validate_scene
 from sintercond.state import particle_state
@@ -317,6 +317,12 @@ def _history_row(state) -> str:
     return f"{int(state.step)},{float(state.time)!r},{t.mean()!r},{t.min()!r},{t.max()!r}\n"
 
 
+def read_history(out) -> dict:
+    """``history.csv`` of a run as a dict of arrays; ``time`` (s) and the temperatures (K), for the history plot."""
+    data = np.genfromtxt(Path(out) / "history.csv", delimiter=",", names=True, ndmin=1)
+    return {"time": data["time_s"], **{name: data[name] for name in HISTORY_COLUMNS[2:]}}
+
+
 def _log(message):
     print(f"sintercond: {message}", file=sys.stderr, flush=True)
 
@@ -385,6 +391,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         "T_max_K": float(temperature.max()),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    plots.write_run_pictures(out, model.centres, model.radii, temperature, summary, history=read_history(out))
     return temperature, summary
 
 
