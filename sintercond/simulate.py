@@ -60,10 +60,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import thermal
+from sintercond import mechanics, thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
+from sintercond.mechanics import MechanicalParams, MechanicalState
 from sintercond.neck import NECK_MODELS
-from sintercond.neighbors import did_buffer_overflow
+from sintercond.neighbors import did_buffer_overflow, did_rebuild
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -99,7 +100,26 @@ class Physics:
       motion: prescribed positions ``fn(t) -> [n, 3]`` (m) for dynamic
         contacts, or None (positions stay).
       implicit_tol: relative residual of the implicit CG solve.
-      mechanics: reserved for the thermo-mechanical model (not yet built).
+      mechanics: the coupled thermo-mechanical step (Quintana-Ruiz & Campello
+        2020, Eqs. 43-46; :mod:`sintercond.mechanics`): particles move under
+        contact forces, gravity and walls, and heat flows through the contacts
+        the motion opens, closes and grows. Needs ``contacts="dynamic"``,
+        ``conductance="lifted"``, the explicit integrator, no prescribed
+        ``motion`` and ``conducting_walls=0`` (walls are ``walls``), and
+        ``Params.mechanics``. The fields below matter only with it.
+      walls: :class:`sintercond.walls.PlaneWall` s that push, rub and (mode
+        ``"conducting"``) exchange heat at their fixed temperature. Static:
+        the number of walls decides what is traced and their geometry is
+        rarely a fitting target (wall temperatures and positions are
+        therefore not differentiable; give them as state if that changes).
+      gravity: ``[3]`` acceleration (m/s^2).
+      friction: Mindlin stick-slip friction with a spring (Eqs. 7-14).
+      rolling: rolling resistance (Eqs. 15-20).
+      softening: Young's modulus from the temperature, Eq. 42 (erratum 6).
+      damping_clamp: no tensile normal force (LAMMPS ``limit_damping``).
+      shear: ``"paper"`` (Eq. 9) or ``"mindlin"`` effective shear modulus.
+      slip_direction: ``"trial"`` or ``"velocity"`` (erratum 3).
+      rolling_projection: roll on the tangential part of the relative spin only (erratum 5).
     """
 
     law: str = "rojek"
@@ -117,6 +137,15 @@ class Physics:
     motion: Callable | None = None
     implicit_tol: float = 1e-13
     mechanics: bool = False
+    walls: tuple = ()
+    gravity: tuple = (0.0, 0.0, -9.81)
+    friction: bool = False
+    rolling: bool = False
+    softening: bool = False
+    damping_clamp: bool = False
+    shear: str = "paper"
+    slip_direction: str = "trial"
+    rolling_projection: bool = False
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
@@ -128,7 +157,9 @@ class Physics:
         if self.neck_model is not None and self.neck_model not in NECK_MODELS:
             raise ValueError(f"Physics.neck_model must be one of {sorted(NECK_MODELS)} or None; got {self.neck_model!r}")
         if self.mechanics:
-            raise NotImplementedError("Physics.mechanics: the thermo-mechanical model is not built yet")
+            self._check_mechanics()
+        elif self.walls:
+            raise ValueError("Physics.walls are mechanical walls (mechanics=True); for heat alone use conducting_walls")
         if self.contacts == "dynamic" and self.conductance != "lifted":
             raise ValueError("Physics.contacts='dynamic' needs conductance='lifted' (conductances follow the motion)")
         if self.integrator == "implicit" and (self.beam or self.convection or self.radiation or self.pulse
@@ -137,6 +168,39 @@ class Physics:
                              "only; use 'explicit' with sources or motion")
         if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
             raise ValueError(f"Physics.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
+
+    def _check_mechanics(self):
+        from sintercond.forces import SHEAR_CONVENTIONS, SLIP_DIRECTIONS
+        from sintercond.walls import PlaneWall
+
+        needs = {"contacts": ("dynamic", self.contacts), "conductance": ("lifted", self.conductance),
+                 "integrator": ("explicit", self.integrator)}
+        for name, (want, got) in needs.items():
+            if got != want:
+                raise ValueError(f"Physics.mechanics needs {name}={want!r}; got {got!r}")
+        if self.motion is not None:
+            raise ValueError("Physics.mechanics moves the particles itself; motion must be None")
+        if self.conducting_walls:
+            raise ValueError("Physics.mechanics takes its walls as Physics.walls (PlaneWall, mode 'conducting' "
+                             "for heat); conducting_walls must be 0")
+        if self.shear not in SHEAR_CONVENTIONS:
+            raise ValueError(f"Physics.shear must be one of {list(SHEAR_CONVENTIONS)}; got {self.shear!r}")
+        if self.slip_direction not in SLIP_DIRECTIONS:
+            raise ValueError(f"Physics.slip_direction must be one of {list(SLIP_DIRECTIONS)}; got {self.slip_direction!r}")
+        gravity = tuple(float(g) for g in self.gravity)
+        if len(gravity) != 3:
+            raise ValueError(f"Physics.gravity must be 3 numbers (m/s^2); got {self.gravity!r}")
+        walls = []
+        for k, w in enumerate(self.walls):
+            if not isinstance(w, PlaneWall):
+                raise ValueError(f"Physics.walls[{k}] must be a PlaneWall; got {type(w).__name__}")
+            if w.mode == "held":
+                raise ValueError(f"Physics.walls[{k}]: mode 'held' is not supported with mechanics; use 'conducting'")
+            # tuples of floats: the spec stays hashable whatever sequences the wall was given
+            walls.append(dataclasses.replace(w, point=tuple(map(float, w.point)), normal=tuple(map(float, w.normal)),
+                                             velocity=tuple(map(float, w.velocity))))
+        object.__setattr__(self, "walls", tuple(walls))
+        object.__setattr__(self, "gravity", gravity)
 
     @property
     def neck(self) -> str:
@@ -205,6 +269,8 @@ class Params:
         merged over the law's defaults; ``{}`` for the defaults.
       beam, convection, radiation, pulse: source parameters, or None where
         the physics has no such source.
+      mechanics: :class:`sintercond.mechanics.MechanicalParams` (moduli,
+        damping, friction, softening) with ``Physics.mechanics``, else None.
     """
 
     conductivity: Any
@@ -214,6 +280,7 @@ class Params:
     convection: ConvectionParams | None = None
     radiation: RadiationParams | None = None
     pulse: PulseParams | None = None
+    mechanics: MechanicalParams | None = None
 
 
 @_dataclass
@@ -257,6 +324,9 @@ class SimState:
       dt: the time step (s), scalar.
       overflow: bool scalar, set when a dynamic neighbour list overflowed
         since the last host check (the results after it are invalid).
+      mechanics: velocities, spins and contact springs
+        (:class:`sintercond.mechanics.MechanicalState`) with
+        ``Physics.mechanics``, else None (nothing traced).
     """
 
     particles: ParticleState
@@ -264,6 +334,7 @@ class SimState:
     step: Any
     dt: Any
     overflow: Any
+    mechanics: MechanicalState | None = None
 
     @property
     def temperature(self):
@@ -337,20 +408,13 @@ def _wall_lift(physics, particles, contacts, conductivity, law_params):
 
 def _dynamic_geometry(physics, positions, radii, neighbors):
     """Overlaps and necks ``[n, m]`` of a jax-md table (padding ``n``) at the current positions."""
-    n = radii.shape[0]
-    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
-    valid = (neighbors < n) & (neighbors != rows)
-    j = jnp.where(valid, neighbors, rows)
-    lo, hi = jnp.minimum(rows, j), jnp.maximum(rows, j)
-    # the distance from the pair in index order: bitwise the same on both rows
-    delta = positions[hi] - positions[lo]
-    distance_sq = jnp.sum(delta * delta, axis=-1)
-    contact_range = (radii[lo] + radii[hi]) ** 2
-    touching = valid & (distance_sq < contact_range)
-    distance = jnp.sqrt(jnp.where(touching, distance_sq, contact_range))
-    overlap = jnp.where(touching, radii[lo] + radii[hi] - distance, 0.0)
-    neck = jnp.where(touching, NECK_MODELS[physics.neck](radii[lo], radii[hi], overlap), 0.0)
-    return j, neck, overlap
+    g = mechanics.pair_geometry(positions, radii, neighbors)  # the pair in index order: bitwise equal on both rows
+    return g.j, _pair_neck(physics, radii, g), g.overlap
+
+
+def _pair_neck(physics, radii, g):
+    """Neck radii ``[n, m]`` (m) of the touching slots of a :class:`sintercond.mechanics.PairGeometry`."""
+    return jnp.where(g.touching, NECK_MODELS[physics.neck](radii[g.lo], radii[g.hi], g.overlap), 0.0)
 
 
 # --------------------------------------------------------------------------
@@ -421,7 +485,47 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         power = conduction_power(state, prep, temperature, conductance, neighbors)
         return power + thermal.source_power(physics, state, prep.params)
 
+    def mechanical_advance(state: SimState, prep: Prepared) -> SimState:
+        """The coupled step (Eqs. 43-46): forces and heat powers at ``t`` from one state, then symplectic Euler."""
+        particles, contacts, params = state.particles, state.contacts, prep.params
+        mp = params.mechanics
+        positions, radii, mass, t = particles.positions, particles.radii, particles.mass, state.time
+        nbrs = neighbor_fn.update(positions, contacts.neighbor_list)
+        motion = mechanics.remap_history(state.mechanics, contacts.neighbors, nbrs.idx,
+                                         did_rebuild(contacts.neighbor_list, nbrs))
+        state = dataclasses.replace(state, overflow=state.overflow | did_buffer_overflow(nbrs),
+                                    contacts=dataclasses.replace(contacts, neighbor_list=nbrs, neighbors=nbrs.idx))
+        geometry = mechanics.pair_geometry(positions, radii, nbrs.idx)
+        modulus = mechanics.particle_modulus(physics, mp, particles.temperature, particles.material)
+        nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, positions.dtype))[particles.material], radii.shape)
+        loads = mechanics.contact_loads(physics, mp, geometry, positions, radii, mass, modulus, nu, motion, t,
+                                        state.dt)
+        # heat through the contacts of this geometry (Eqs. 32-36; walls as neighbours of infinite radius)
+        kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
+        law_params = merged_law_params(physics, params)
+        conductance = conductance_lift(physics, radii, particles.material, geometry.j,
+                                       _pair_neck(physics, radii, geometry), geometry.overlap, kappa, law_params)
+        power = -network_laplacian(conductance, geometry.j, particles.temperature)
+        for w, wall in enumerate(physics.walls):
+            if wall.mode == "conducting":
+                h = loads.wall_penetration[w]
+                k = kappa[particles.material]
+                k_w = wall_conductance_from_neck(physics.law, wall_neck_radius(physics.neck, radii, h), radii, h, k, k,
+                                                 law_params)
+                power = power + k_w * (jnp.asarray(wall.temperature, power.dtype) - particles.temperature)
+        power = power + thermal.source_power(physics, state, params)
+        fixed = particles.fixed if physics.held else None
+        temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
+                                              particles.fixed_temperature)
+        positions, velocity, spin = mechanics.integrate(positions, loads.mechanics, loads.force, loads.torque, mass,
+                                                        radii, state.dt)
+        particles = dataclasses.replace(particles, positions=positions, temperature=temperature)
+        motion = dataclasses.replace(loads.mechanics, velocity=velocity, spin=spin)
+        return dataclasses.replace(state, particles=particles, mechanics=motion, step=state.step + 1)
+
     def advance_fn(state: SimState, prep: Prepared) -> SimState:
+        if physics.mechanics:
+            return mechanical_advance(state, prep)
         state, conductance, neighbors = current_network(state, prep)
         particles = state.particles
         fixed = particles.fixed if physics.held else None
@@ -469,12 +573,16 @@ def stable_time_step(sim: Simulator, state: SimState, params: Params, source_con
 # building states
 
 
-def init_state(particles: ParticleState, contacts: Contacts, dt, step=0) -> SimState:
-    """A :class:`SimState` at ``step`` (default 0) with time step ``dt`` (s)."""
+def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechanics=None) -> SimState:
+    """A :class:`SimState` at ``step`` (default 0) with time step ``dt`` (s).
+
+    ``mechanics``: a :class:`sintercond.mechanics.MechanicalState` for
+    ``Physics.mechanics`` (:func:`sintercond.mechanics.mechanical_state`).
+    """
     dtype = particles.temperature.dtype
     return SimState(particles=particles, contacts=contacts, step=jnp.asarray(step, jnp.int64 if jax.config.jax_enable_x64
                                                                             else jnp.int32),
-                    dt=jnp.asarray(dt, dtype), overflow=jnp.zeros((), bool))
+                    dt=jnp.asarray(dt, dtype), overflow=jnp.zeros((), bool), mechanics=mechanics)
 
 
 def table_contacts(table, wall_conductance=None, wall_temperature=None) -> Contacts:
@@ -534,12 +642,17 @@ def reallocate_neighbors(neighbor_fns):
     The redone chunk starts from ``start`` with the larger list; its first
     update rebuilds it at the start positions (they moved more than the skin
     from the end positions it was sized at, or it was already valid).
+    Contact springs of a mechanical state are remapped onto the new table
+    (pairs absent from it start at zero after the rebuild's own remap).
     """
     def reallocate(start: SimState, end: SimState) -> SimState:
         nbrs = neighbor_fns.allocate(end.particles.positions)
         nbrs = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
         contacts = dataclasses.replace(start.contacts, neighbor_list=nbrs, neighbors=nbrs.idx)
-        return dataclasses.replace(start, contacts=contacts)
+        motion = start.mechanics
+        if motion is not None:  # the springs follow their pairs onto the wider table
+            motion = mechanics.remap_history(motion, start.contacts.neighbors, nbrs.idx, True)
+        return dataclasses.replace(start, contacts=contacts, mechanics=motion)
 
     return reallocate
 

@@ -1,0 +1,362 @@
+"""The thermo-mechanical lift: contact forces and torques of a packing, the translation + rotation update, the step.
+
+Quintana-Ruiz & Campello (2020), Sects. 2 and 4, with the readings of
+``MECHANICS.md`` (cited as "erratum N"). The contact laws of one contact are
+:mod:`sintercond.forces`; this module lifts them to a jax-md Dense neighbour
+table (``[n, m]``, padding ``n``) and to plane walls, and integrates the
+motion. :mod:`sintercond.simulate` builds the coupled step from it
+(``Physics(mechanics=True)``).
+
+Pairs
+-----
+Every pair appears on both rows of the Dense table and is evaluated on both
+(a half list, each pair once with a ``segment_sum`` to both ends, is faster:
+MECHANICS.md, "Contacts and history"; left for later). Each slot evaluates
+the laws with the pair in index order (``lo = min(i, j)`` first, normal from
+``lo`` to ``hi``), so both rows compute bitwise the same force, which row
+``lo`` adds and row ``hi`` subtracts: momentum is conserved to round-off, and
+the springs stored on both rows stay bitwise equal (the spring of ``lo``
+relative to ``hi``).
+
+Walls (Remark 1)
+----------------
+A :class:`sintercond.walls.PlaneWall` is the partner ``j`` of every particle
+with infinite radius, mass and modulus: ``r* = r_i``, ``m* = m_i``,
+``E* = E_i/(1 - nu_i^2)``, ``G* = G_i``, ``j* = I_i + m_i r_i^2``; its surface
+velocity enters the relative velocity and its point moves with it
+(``point + velocity t``). (LAMMPS' ``fix wall/gran`` gives the wall the
+particle's material, ``E* = E/(2(1 - nu^2))``.) Wall springs are stored per
+(wall, particle).
+
+Integration (Eqs. 43-46)
+------------------------
+Forces, torques and heat powers at ``t`` from the same state, then
+symplectic Euler: ``v(t+dt) = v + dt F/m``, ``x(t+dt) = x + dt v(t+dt)``,
+``omega(t+dt) = omega + dt T/I`` with ``I = (2/5) m r^2`` (solid spheres).
+Orientations are not tracked (no law here needs them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from sintercond import forces
+from sintercond.materials import softened_modulus
+from sintercond.neighbors import remap_pair_history
+
+
+def _dataclass(cls):
+    return jax.tree_util.register_dataclass(dataclasses.dataclass(frozen=True)(cls))
+
+
+@_dataclass
+class MechanicalParams:
+    """Differentiable parameters of the contact laws (SI units).
+
+    Per-material entries (``E0``, ``nu``, ``theta_star``, ``rate``, ``E_min``)
+    are scalars or ``[n_materials]`` indexed by the particles' material.
+
+    Attributes:
+      E0: Young's modulus below the softening onset (Pa).
+      nu: Poisson ratio.
+      xi_con: normal damping ratio (Eq. 6; 1: critical).
+      xi_fric: tangential damping ratio (Eq. 11).
+      xi_rol: rolling damping ratio (Eq. 18).
+      mu: friction coefficient between particles (static = dynamic, Eq. 8).
+      mu_r: rolling resistance coefficient between particles (Eq. 16).
+      mu_wall, mu_r_wall: the same against walls (None: ``mu``, ``mu_r``).
+      theta_star: onset of thermal softening (K), Eq. 42.
+      rate: softening rate (erratum 6; 1 is the printed law).
+      E_min: floor of the softened modulus (Pa).
+    """
+
+    E0: Any
+    nu: Any
+    xi_con: Any = 1.0
+    xi_fric: Any = 1.0
+    xi_rol: Any = 0.0
+    mu: Any = 0.0
+    mu_r: Any = 0.0
+    mu_wall: Any = None
+    mu_r_wall: Any = None
+    theta_star: Any = 400.0
+    rate: Any = 1.0
+    E_min: Any = 0.0
+
+
+@_dataclass
+class MechanicalState:
+    """Motion and contact history (SI units); fields of laws that are off are None (nothing traced).
+
+    Attributes:
+      velocity: ``[n, 3]`` (m/s).
+      spin: ``[n, 3]`` angular velocities (rad/s).
+      spring: ``[n, m, 3]`` tangential springs per neighbour slot (m), the
+        spring of ``min(i, j)`` relative to ``max(i, j)`` on both rows; None without friction.
+      rolling: ``[n, m, 3]`` rolling springs per slot (rad); None without rolling.
+      wall_spring, wall_rolling: ``[n_walls, n, 3]`` the same against each wall.
+    """
+
+    velocity: Any
+    spin: Any
+    spring: Any = None
+    rolling: Any = None
+    wall_spring: Any = None
+    wall_rolling: Any = None
+
+
+def mechanical_state(physics, positions, neighbors, velocity=None, spin=None) -> MechanicalState:
+    """A :class:`MechanicalState` at rest (or with ``velocity``/``spin`` ``[n, 3]``), springs zero.
+
+    Args:
+      physics: the :class:`sintercond.simulate.Physics` (which springs exist).
+      positions: ``[n, 3]`` (m), for shapes and dtype.
+      neighbors: ``[n, m]`` the neighbour table the springs are laid on.
+    """
+    positions = jnp.asarray(positions)
+    n, m, w = positions.shape[0], neighbors.shape[1], len(physics.walls)
+    zeros = jnp.zeros_like(positions)
+    velocity = zeros if velocity is None else jnp.asarray(velocity, positions.dtype)
+    spin = zeros if spin is None else jnp.asarray(spin, positions.dtype)
+    pair = jnp.zeros((n, m, 3), positions.dtype)
+    wall = jnp.zeros((w, n, 3), positions.dtype)
+    return MechanicalState(velocity, spin, pair if physics.friction else None, pair if physics.rolling else None,
+                           wall if physics.friction else None, wall if physics.rolling else None)
+
+
+# --------------------------------------------------------------------------
+# geometry
+
+
+class PairGeometry(NamedTuple):
+    """Pairs of a Dense table ``[n, m]`` evaluated in index order (``lo -> hi``).
+
+    ``j``: neighbours, padding replaced by the row; ``lo``, ``hi``; ``valid``
+    (a real pair); ``touching`` (overlap > 0); ``normal`` ``[n, m, 3]`` unit
+    vector from ``lo`` to ``hi`` (``e_z`` for padding); ``overlap`` (m, 0
+    where not touching).
+    """
+
+    j: Any
+    lo: Any
+    hi: Any
+    valid: Any
+    touching: Any
+    normal: Any
+    overlap: Any
+
+
+def pair_geometry(positions, radii, neighbors) -> PairGeometry:
+    """Overlaps ``delta = r_lo + r_hi - |x_hi - x_lo|`` (Eq. 4) and normals (Eq. 5) of every slot, bitwise equal on both rows."""
+    n = radii.shape[0]
+    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
+    valid = (neighbors < n) & (neighbors != rows)
+    j = jnp.where(valid, neighbors, rows)
+    lo, hi = jnp.minimum(rows, j), jnp.maximum(rows, j)
+    delta = positions[hi] - positions[lo]
+    distance_sq = jnp.sum(delta * delta, axis=-1)
+    contact_range = (radii[lo] + radii[hi]) ** 2
+    touching = valid & (distance_sq < contact_range)
+    apart = valid & (distance_sq > 0)
+    distance = jnp.sqrt(jnp.where(apart, distance_sq, contact_range))
+    overlap = jnp.where(touching, radii[lo] + radii[hi] - distance, 0.0)
+    e_z = jnp.zeros_like(delta).at[..., 2].set(1.0)
+    normal = jnp.where(apart[..., None], delta / distance[..., None], e_z)
+    return PairGeometry(j, lo, hi, valid, touching, normal, overlap)
+
+
+def wall_penetration(walls, positions, radii, t):
+    """``[n_walls, n]`` penetrations ``r - (x - p(t)) . n_w`` (m) of the walls at time ``t`` (``p(t) = p + v t``)."""
+    dtype = positions.dtype
+    return jnp.stack([radii - jnp.sum((positions - (jnp.asarray(w.point, dtype) + t * jnp.asarray(w.velocity, dtype)))
+                                      * jnp.asarray(w.normal, dtype), axis=-1) for w in walls])
+
+
+def particle_modulus(physics, params: MechanicalParams, temperature, material):
+    """Young's modulus ``[n]`` (Pa) per particle: ``E0``, or the softened Eq. 42 (erratum 6) when ``physics.softening``."""
+    pick = lambda x: jnp.atleast_1d(jnp.asarray(x))[material]  # noqa: E731
+    e0 = pick(params.E0).astype(temperature.dtype)
+    if not physics.softening:
+        return e0
+    return softened_modulus(temperature, e0, pick(params.theta_star), pick(params.rate), pick(params.E_min))
+
+
+# --------------------------------------------------------------------------
+# forces
+
+
+def _contact_laws(physics, params, dt, normal, delta, r_i, r_j, m_i, m_j, E_i, nu_i, E_j, nu_j, v_i, v_j,
+                  omega_i, omega_j, arm_j, spring, rolling, mu, mu_r):
+    """Force on ``i``, torques on ``i`` and ``j`` and the new springs of contacts ``(i, j)`` (Eqs. 2-20).
+
+    Normal Hertz with damping (Eqs. 2-6; ``physics.damping_clamp``: no
+    tension), Mindlin friction with the spring (Eqs. 7-13) when
+    ``physics.friction`` and its torques (Eq. 14, erratum 2), rolling
+    resistance (Eqs. 15-20) when ``physics.rolling``. ``arm_j``: the lever
+    arm of ``j`` (its radius; 0 for a wall, whose ``r_j`` is ``inf``).
+    """
+    r_star = forces.effective_radius(r_i, r_j)
+    m_star = forces.effective_mass(m_i, m_j)
+    e_star = forces.effective_modulus(E_i, nu_i, E_j, nu_j)
+    delta_dot, v_t = forces.relative_contact_velocity(v_i, v_j, omega_i, omega_j, normal, r_i, arm_j)
+    f_n = forces.hertz_normal_force(delta, delta_dot, r_star, m_star, e_star, params.xi_con,
+                                    no_tension=physics.damping_clamp)
+    force = -f_n[..., None] * normal
+    torque_i = torque_j = jnp.zeros_like(force)
+    if physics.friction or physics.rolling:
+        g_star = forces.effective_shear_modulus(E_i, nu_i, E_j, nu_j, physics.shear)
+    if physics.friction:
+        f_t, spring, _ = forces.mindlin_tangential_force(spring, v_t, normal, dt, delta, f_n, r_star, m_star, g_star,
+                                                         params.xi_fric, mu, slip_direction=physics.slip_direction)
+        force = force + f_t
+        torque_i, torque_j = forces.friction_torque(f_t, normal, r_i, arm_j)
+    if physics.rolling:
+        j_star = forces.effective_rolling_inertia(m_i, r_i, m_j, r_j)
+        m_r, rolling, _ = forces.rolling_resistance_torque(
+            rolling, omega_i, omega_j, normal, dt, delta, f_n, r_star, j_star, g_star, params.xi_rol, mu_r,
+            projection=physics.rolling_projection, slip_direction=physics.slip_direction)
+        torque_i, torque_j = torque_i + m_r, torque_j - m_r
+    return force, torque_i, torque_j, spring, rolling, f_n
+
+
+class Loads(NamedTuple):
+    """Forces and torques ``[n, 3]`` (N, N m) at ``t``, the springs to store, and the wall contacts' state."""
+
+    force: Any
+    torque: Any
+    mechanics: MechanicalState
+    wall_penetration: Any  # [n_walls, n] (m)
+    wall_normal_force: Any  # [n_walls, n] (N)
+
+
+def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, positions, radii, mass, modulus, nu,
+                  state: MechanicalState, t, dt) -> Loads:
+    """Forces and torques on every particle from its pair and wall contacts and gravity, at time ``t``.
+
+    Args:
+      physics: the spec (which laws, walls, gravity; static).
+      params: :class:`MechanicalParams`.
+      geometry: :func:`pair_geometry` of the current table.
+      positions, radii, mass: ``[n, 3]``, ``[n]``, ``[n]`` (m, m, kg).
+      modulus, nu: ``[n]`` Young's modulus (Pa, softened or not) and Poisson ratio.
+      state: velocities, spins and springs at ``t`` (springs on ``geometry``'s table).
+      t, dt: time and step (s).
+    """
+    dtype = positions.dtype
+    n = radii.shape[0]
+    v, omega = state.velocity, state.spin
+    lo, hi = geometry.lo, geometry.hi
+    f, t_lo, t_hi, spring, rolling, _ = _contact_laws(
+        physics, params, dt, geometry.normal, geometry.overlap, radii[lo], radii[hi], mass[lo], mass[hi],
+        modulus[lo], nu[lo], modulus[hi], nu[hi], v[lo], v[hi], omega[lo], omega[hi], radii[hi], state.spring,
+        state.rolling, params.mu, params.mu_r)
+    is_lo = (jnp.arange(n, dtype=lo.dtype)[:, None] == lo)[..., None]
+    force = jnp.sum(jnp.where(is_lo, f, -f), axis=1)
+    torque = jnp.sum(jnp.where(is_lo, t_lo, t_hi), axis=1)
+    force = force + mass[:, None] * jnp.asarray(physics.gravity, dtype)
+    new = dataclasses.replace(state, spring=spring, rolling=rolling)
+    h = wall_n = None
+    if physics.walls:
+        h = wall_penetration(physics.walls, positions, radii, t)
+        inward = jnp.stack([jnp.asarray(w.normal, dtype) for w in physics.walls])[:, None, :]
+        wall_v = jnp.stack([jnp.asarray(w.velocity, dtype) for w in physics.walls])[:, None, :]
+        inf = jnp.asarray(jnp.inf, dtype)
+        mu_w = params.mu if params.mu_wall is None else params.mu_wall
+        mu_r_w = params.mu_r if params.mu_r_wall is None else params.mu_r_wall
+        # the wall is j: the normal from the particle to the wall is -n_w
+        f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
+            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h, radii, inf, mass, inf,
+            modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
+            jnp.zeros_like(omega), jnp.zeros((), dtype), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
+        force = force + jnp.sum(f_w, axis=0)
+        torque = torque + jnp.sum(t_w, axis=0)
+        new = dataclasses.replace(new, wall_spring=wall_spring, wall_rolling=wall_rolling)
+    return Loads(force, torque, new, h, wall_n)
+
+
+def remap_history(state: MechanicalState, old_idx, new_idx, rebuilt) -> MechanicalState:
+    """Carry the pair springs from ``old_idx`` to ``new_idx`` (:func:`remap_pair_history`) when the list ``rebuilt``.
+
+    Under ``lax.cond``: the remap (a sort per row) runs only on rebuild
+    steps. Tables of different widths (a reallocation) are remapped directly.
+    """
+    fields = [f for f in ("spring", "rolling") if getattr(state, f) is not None]
+    if not fields:
+        return state
+    values = tuple(getattr(state, f) for f in fields)
+    if old_idx.shape != new_idx.shape:
+        remapped = tuple(remap_pair_history(old_idx, new_idx, x) for x in values)
+    else:
+        remapped = jax.lax.cond(rebuilt, lambda xs: tuple(remap_pair_history(old_idx, new_idx, x) for x in xs),
+                                lambda xs: xs, values)
+    return dataclasses.replace(state, **dict(zip(fields, remapped)))
+
+
+def integrate(positions, state: MechanicalState, force, torque, mass, radii, dt):
+    """Symplectic Euler (Eqs. 43-44): ``v += dt F/m``, ``x += dt v``, ``omega += dt T/I``, ``I = (2/5) m r^2``.
+
+    Returns ``(positions, velocity, spin)`` at ``t + dt``.
+    """
+    velocity = state.velocity + dt * force / mass[:, None]
+    inertia = forces.SOLID_SPHERE_INERTIA * mass * radii**2
+    spin = state.spin + dt * torque / inertia[:, None]
+    return positions + dt * velocity, velocity, spin
+
+
+# --------------------------------------------------------------------------
+# time step
+
+
+def stable_time_step(physics, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
+    """Time step of the packing: :func:`sintercond.forces.stable_time_step` for its stiffest contact (s).
+
+    Evaluated for every pair of the neighbour table (touching or not) and
+    every particle against every wall, at the unsoftened modulus ``E0``
+    (softening only lowers the stiffness at a given overlap; pass ``delta``
+    for the static overlap under a load if that exceeds the collision's),
+    approach speed ``v_rel`` (m/s), and the damping ratios of ``params``.
+    The tangential and rolling modes count only when friction or rolling is
+    on. ``kwargs`` go to :func:`sintercond.forces.stable_time_step`
+    (``fraction``, ``safety``).
+    """
+    radii, mass = particles.radii, particles.mass
+    n = radii.shape[0]
+    modulus = jnp.atleast_1d(jnp.asarray(params.E0, radii.dtype))[particles.material]
+    nu = jnp.atleast_1d(jnp.asarray(params.nu, radii.dtype))[particles.material]
+    shear = physics.friction or physics.rolling
+    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
+    valid = (neighbors < n) & (neighbors != rows)
+    j = jnp.where(valid, neighbors, rows)
+    inf = jnp.asarray(jnp.inf, radii.dtype)
+    candidates = [(radii[:, None], mass[:, None], modulus[:, None], nu[:, None], jnp.where(valid, radii[j], inf),
+                   jnp.where(valid, mass[j], inf), jnp.where(valid, modulus[j], inf), nu[j], valid)]
+    steps = []
+    if physics.walls:
+        wall = jnp.full((n,), jnp.inf, radii.dtype)
+        candidates.append((radii, mass, modulus, nu, wall, wall, wall, nu, jnp.ones((n,), bool)))
+    for ri, mi, ei, nui, rj, mj, ej, nuj, real in candidates:
+        g_star = forces.effective_shear_modulus(ei, nui, ej, nuj, physics.shear) if shear else 0.0 * ei
+        dt = forces.stable_time_step(forces.effective_radius(ri, rj), forces.effective_mass(mi, mj),
+                                     forces.effective_modulus(ei, nui, ej, nuj), g_star, v_rel, delta=delta,
+                                     xi_con=params.xi_con, xi_fric=params.xi_fric if physics.friction else 0.0,
+                                     xi_rol=params.xi_rol if physics.rolling else 0.0, **kwargs)
+        steps.append(jnp.min(jnp.where(real, dt, jnp.inf), initial=jnp.inf))
+    return jnp.min(jnp.stack(steps))
+
+
+def check_time_step(dt, physics, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs) -> float:
+    """Raise ``ValueError`` naming the limit if ``dt`` exceeds :func:`stable_time_step`; returns the limit (s)."""
+    limit = float(stable_time_step(physics, particles, neighbors, params, v_rel, delta, **kwargs))
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be finite and > 0 s; got {dt!r}")
+    if dt > limit:
+        raise ValueError(f"dt = {dt:.6g} s exceeds the mechanical time step {limit:.6g} s (Eq. 47 and the "
+                         f"symplectic-Euler bounds of the stiffest contact at v_rel = {float(v_rel):.3g} m/s); "
+                         f"use dt <= {limit:.6g} s")
+    return limit
+
