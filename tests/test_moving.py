@@ -71,3 +71,12 @@ def test_static_motion_equals_the_static_solver():
     static, _ = thermal.simulate(t0, table, capacity, dt, n_steps=200, save_every=200)
     still, _ = _moving_run(t0, simulate.affine_shrinkage(centres, 0.0), radii, capacity, dt, 200, 50, 1.25, 0.0)
     np.testing.assert_allclose(np.asarray(still.temperature), np.asarray(static), rtol=1e-12)
+
+
+def test_affine_shrinkage_is_a_linear_strain_toward_the_centroid():
+    """Bug caught (mutation 'shrinkage rate'): a motion at half the rate passed every test above, which compare
+    runs of the same motion. Closed form: c0 + (1 - rate t)(c - c0), c0 the centroid."""
+    centres = np.random.default_rng(4).uniform(size=(7, 3))
+    c0 = centres.mean(axis=0)
+    at = simulate.affine_shrinkage(centres, 40.0)(2.5e-3)
+    np.testing.assert_allclose(np.asarray(at), c0 + 0.9 * (centres - c0), rtol=1e-14)

@@ -212,30 +212,43 @@ def test_touching_within_the_tolerance_is_a_contact():
 
 
 def test_auto_time_step_is_nine_tenths_of_the_stable_step():
-    """``dt = "auto"`` is 0.9 x min_i C_i / sum_j K_ij (sintercond.scene), computed here from the table and
-    the capacities C_i = rho c 4/3 pi r^3 directly. Mutant "dt auto factor" (1.9x, unstable) passed: the
-    small scene's radiation and floor kept the run finite."""
-    model = runner.build_model(validate_scene(copy.deepcopy(SMALL)))
+    """``dt = "auto"``: 0.9 x the stable step min_i C_i / (sum_j K_ij + G_i), computed here from the table, the
+    capacities C_i = rho c 4/3 pi r^3 and the linearised radiation G_i = 16 pi eps sigma T^3 r^2 (the small
+    scene radiates; T the highest temperature the scene names), then shortened to duration / n_steps so that
+    the run ends at its duration (issue 10). Mutant "dt auto factor" (1.9x, unstable) passed: the small
+    scene's radiation and floor kept the run finite."""
+    scene = validate_scene(copy.deepcopy(SMALL))
+    model = runner.build_model(scene)
     capacity = 4430.0 * 560.0 * 4 / 3 * np.pi * model.radii**3
-    total = np.asarray(model.table.conductance).sum(axis=1)
-    assert model.dt == pytest.approx(0.9 * np.min(capacity[total > 0] / total[total > 0]), rel=1e-12)
+    total = 12.6 * np.asarray(model.state.contacts.conductance).sum(axis=1)  # the table is at unit conductivity
+    radiation = 16 * np.pi * 0.4 * 5.670367e-8 * 300.0**3 * model.radii**2
+    stable = np.min(capacity / (total + radiation))
+    assert model.stable_step == pytest.approx(stable, rel=1e-12)
+    n_steps = int(np.ceil(scene["run"]["duration"] / (0.9 * stable)))
+    assert model.n_steps == n_steps and model.dt == pytest.approx(scene["run"]["duration"] / n_steps, rel=1e-14)
 
 
 def test_conducting_wall_penetration_sets_the_overlap():
     """A conducting wall lies ``penetration`` mean radii inside the packing's extreme (sintercond.scene), so
-    the outermost particles overlap it by exactly that: K_w = 1.064 kappa pi a / 2 with a from Eq. 27 for
-    (r, 1e3 r, penetration r). Mutant "wall penetration" (twice the depth) passed the scene tests, which only
-    counted the touching particles."""
+    the outermost particles overlap it by exactly that: K_w = 1.064 kappa pi a / 2 with a the neck of a
+    sphere on a plane (the wall as a neighbour of infinite radius): the one-cap residual of Eq. 27, solved
+    here by brentq. Mutant "wall penetration" (twice the depth) passed the scene tests, which only counted
+    the touching particles."""
     scene = copy.deepcopy(SMALL)
     scene.pop("beam"), scene.pop("radiation"), scene.pop("boundary")
     r = scene["packing"]["radius"]
     for penetration in (0.02, 0.1):
         scene["walls"] = [{"axis": 0, "side": "max", "mode": "conducting", "temperature": 300.0,
                            "penetration": penetration}]
-        k_w = np.asarray(runner.build_model(validate_scene(copy.deepcopy(scene))).table.wall_conductance)
+        model = runner.build_model(validate_scene(copy.deepcopy(scene)))
+        k_w = 12.6 * np.asarray(model.state.contacts.wall_conductance)  # at unit conductivity in the table
         depth = penetration * r
-        a = brentq(lambda a: _rojek_residual(a, r, 1e3 * r, depth), _lens(r, 1e3 * r, depth) * (1 + 1e-12), r,
-                   xtol=1e-20, rtol=1e-15)
+
+        def one_cap(a):
+            s = np.sqrt((r - a) * (r + a))
+            return a**2 * (r + 2 * s) / (3 * (r + s) ** 2) - depth
+
+        a = brentq(one_cap, 1e-3 * r, r, xtol=1e-20, rtol=1e-15)
         np.testing.assert_allclose(k_w[k_w > 0], 1.064 * 12.6 * np.pi * a / 2, rtol=1e-10)
         assert np.sum(k_w > 0) == 9  # the x = max face of the 6 x 3 x 3 lattice
 
