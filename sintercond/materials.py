@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays
+from sintercond.state import pytree_dataclass
 
 
 def softened_modulus(theta, E0, theta_star, rate=1.0, E_min=0.0):
@@ -104,11 +105,7 @@ class Property(Protocol):
     def __call__(self, theta) -> jax.Array: ...
 
 
-def _dataclass(cls):
-    return jax.tree_util.register_dataclass(dataclasses.dataclass(frozen=True)(cls))
-
-
-@_dataclass
+@pytree_dataclass
 class Constant:
     """The same value at every temperature.
 
@@ -123,7 +120,7 @@ class Constant:
         return value
 
 
-@_dataclass
+@pytree_dataclass
 class Law:
     """A closed-form law ``fn(theta, **params)``.
 
@@ -139,7 +136,7 @@ class Law:
         return self.fn(theta, **self.params)
 
 
-@_dataclass
+@pytree_dataclass
 class Table:
     """Piecewise-linear in a table (:func:`interpolate_table`).
 

@@ -48,13 +48,10 @@ import jax.numpy as jnp
 from sintercond import forces
 from sintercond.materials import softened_modulus
 from sintercond.neighbors import remap_pair_history
+from sintercond.state import pytree_dataclass
 
 
-def _dataclass(cls):
-    return jax.tree_util.register_dataclass(dataclasses.dataclass(frozen=True)(cls))
-
-
-@_dataclass
+@pytree_dataclass
 class MechanicalParams:
     """Differentiable parameters of the contact laws (SI units).
 
@@ -89,7 +86,7 @@ class MechanicalParams:
     E_min: Any = 0.0
 
 
-@_dataclass
+@pytree_dataclass
 class MechanicalState:
     """Motion and contact history (SI units); fields of laws that are off are None (nothing traced).
 

@@ -66,7 +66,7 @@ from sintercond.mechanics import MechanicalParams, MechanicalState
 from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow, did_rebuild
 from sintercond.network import network_laplacian
-from sintercond.state import ParticleState, heat_capacity
+from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
 
 _INTEGRATORS = ("explicit", "implicit")
@@ -208,11 +208,7 @@ class Physics:
         return CONDUCTANCE_LAWS[self.law].neck_model if self.neck_model is None else self.neck_model
 
 
-def _dataclass(cls):
-    return jax.tree_util.register_dataclass(dataclasses.dataclass(frozen=True)(cls))
-
-
-@_dataclass
+@pytree_dataclass
 class BeamParams:
     """A vertical beam moving along a polyline (Quintana-Ruiz & Campello 2020, Eqs. 29-31).
 
@@ -233,7 +229,7 @@ class BeamParams:
     path: Any
 
 
-@_dataclass
+@pytree_dataclass
 class ConvectionParams:
     """Newton cooling (Eqs. 37-39): environment temperature (K), conductivity (W/(m K)), Nusselt number."""
 
@@ -242,7 +238,7 @@ class ConvectionParams:
     nusselt: Any
 
 
-@_dataclass
+@pytree_dataclass
 class RadiationParams:
     """Stefan-Boltzmann exchange (Eq. 41): environment temperature (K) and emissivity."""
 
@@ -250,7 +246,7 @@ class RadiationParams:
     emissivity: Any
 
 
-@_dataclass
+@pytree_dataclass
 class PulseParams:
     """A prescribed heat input: ``power`` ``[n]`` (W) while ``t < duration`` (s)."""
 
@@ -258,7 +254,7 @@ class PulseParams:
     duration: Any
 
 
-@_dataclass
+@pytree_dataclass
 class Params:
     """The differentiable inputs of a simulation (SI units).
 
@@ -283,7 +279,7 @@ class Params:
     mechanics: MechanicalParams | None = None
 
 
-@_dataclass
+@pytree_dataclass
 class Contacts:
     """The contact network of a state.
 
@@ -313,7 +309,7 @@ class Contacts:
     neighbor_list: Any = None
 
 
-@_dataclass
+@pytree_dataclass
 class SimState:
     """The whole state of a simulation.
 

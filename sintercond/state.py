@@ -19,8 +19,13 @@ import numpy as np
 from sintercond._validation import concrete_arrays, fail_where, require_positive
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+def pytree_dataclass(cls):
+    """A frozen dataclass registered as a JAX PyTree: the one container style of the package's states and
+    parameters (every field a leaf or a sub-tree; None fields are empty)."""
+    return jax.tree_util.register_dataclass(dataclasses.dataclass(frozen=True)(cls))
+
+
+@pytree_dataclass
 class ParticleState:
     """Per-particle state (SI units).
 
