@@ -37,6 +37,8 @@ EXPLAINED = {
     "safe_sqrt grad": "equivalent: the inner where's safe argument 0 makes d sqrt = inf * 0 = NaN on the entries "
                       "not taken, but the same where then selects 0 for them, in reverse and forward mode; the "
                       "safe value matters only where no inner where guards it (see the mutant 'no inner where')",
+    "finite check": "equivalent: every float key of the scene schema has a bounded range (_within, TEMPERATURE, "
+                    "FRACTION), and inf or NaN fails a bounded comparison, so the range check refuses them anyway",
     "beam clip": "equivalent: jnp.interp already clamps to the first and last waypoints, so the beam stops at the "
                  "end of its path (and waits at the start for t < 0) with or without the clip",
 }

@@ -210,3 +210,23 @@ def test_steady_state_conductivity_is_differentiable():
     g = jax.grad(with_resistance)(200.0)
     fd = _central_difference(lambda r: float(with_resistance(r)), 200.0)
     assert float(g) == pytest.approx(fd, rel=1e-6) and float(g) < 0
+
+
+def test_lifted_two_material_pair_is_the_series_of_its_halves():
+    """Mutation 'lift two materials' (the lift used the first particle's conductivity for both halves)
+    survived: no lifted network had two materials with a closed-form check. Rojek Eqs. 8-9, 43: halves
+    s kappa_k pi a in series, s pi a kappa_1 kappa_2 / (kappa_1 + kappa_2), whatever the numbering."""
+    centres = np.array([[0.0, 0.0, 0.0], [A, 0.0, 0.0]])
+    radii = np.full(2, R)
+    physics = simulate.Physics(conductance="lifted")
+    contacts = simulate.lifted_contacts(physics, centres, radii)
+    kappa = jnp.array([7.0, 390.0])
+    for material in ([0, 1], [1, 0]):
+        particles = ParticleState(jnp.asarray(centres), jnp.asarray(radii), jnp.full(2, 300.0), jnp.ones(2),
+                                  jnp.asarray(material, jnp.int32), jnp.zeros(2, bool), jnp.full(2, 300.0))
+        prep = simulate.simulator(physics).prepare_fn(simulate.init_state(particles, contacts, 1.0),
+                                                       simulate.Params(kappa, jnp.ones(2)))
+        k = np.asarray(prep.conductance)
+        expected = float(rojek_pair_conductance(R, R, 2 * R - A, 7.0, kappa_j=390.0))
+        assert k[0][np.asarray(contacts.neighbors)[0] == 1][0] == pytest.approx(expected, rel=1e-14)
+        assert k[1][np.asarray(contacts.neighbors)[1] == 0][0] == pytest.approx(expected, rel=1e-14)
