@@ -5,7 +5,14 @@ physics (law, time step, which sources), never on the packing's values,
 which are arguments; so a later process running a packing of the same size
 finds its executables on disk instead of compiling them (seconds at 1e5
 particles). ``sintercond run`` turns it on (:func:`enable_compilation_cache`
-from :func:`sintercond.cli.main`); importing the package does not.
+from :func:`sintercond.cli.main`) on accelerators, and on the CPU only when
+``SINTERCOND_COMPILATION_CACHE=1``: jaxlib 0.10.1 logs a false "machine type
+doesn't match ... SIGILL" error for every CPU executable it loads from the
+cache (XLA's own tuning flags ``+prefer-no-gather``/``+prefer-no-scatter``
+are compared as if they were CPU features), which a user should not see on
+the main job, and on the CPU the cache saves about 0.1 s per run
+(benchmarks/RESULTS.md, ``peers_thermal``). Importing the package does not
+touch it.
 """
 
 from __future__ import annotations
@@ -20,6 +27,17 @@ DEFAULT_CACHE_DIR = "~/.cache/sintercond/jax"
 
 MIN_COMPILE_TIME_S = 0.05
 """Compiles shorter than this are not written (JAX's default, 1 s, would skip our steps at 1e4 particles)."""
+
+
+def cache_by_default() -> bool:
+    """Whether the CLI turns the cache on: ``SINTERCOND_COMPILATION_CACHE=1`` forces it, ``0`` refuses it,
+    otherwise on for accelerators and off on the CPU (see the module docstring)."""
+    setting = os.environ.get("SINTERCOND_COMPILATION_CACHE", "").strip().lower()
+    if setting in ("1", "true", "yes", "on"):
+        return True
+    if setting in ("0", "false", "no", "off"):
+        return False
+    return jax.default_backend() != "cpu"
 
 
 def enable_compilation_cache(path=None) -> Path | None:

@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 
-from sintercond._cache import enable_compilation_cache
+from sintercond._cache import cache_by_default, enable_compilation_cache
 
 # (r_i, r_j, h) in mm: the unequal pairs of Rojek et al. 2022, Sects. 4.3 and 6,
 # and the equal-size overlaps h/r of their Figs. 13-14.
@@ -92,7 +92,8 @@ def main(argv=None) -> int:
     effective.add_argument("scene", nargs="?", default=None, help="scene TOML file (default: built-in default scene)")
     effective.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="heat-flow axis (default 2, z)")
     args = parser.parse_args(argv)
-    enable_compilation_cache()  # a second run of the same scene compiles nothing
+    if cache_by_default():
+        enable_compilation_cache()  # a second run of the same scene compiles nothing
     if args.command in ("run", "effective"):
         return _scene_command(parser, args)
     kappa = getattr(args, "kappa", COPPER_CONDUCTIVITY)

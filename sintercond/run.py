@@ -314,7 +314,8 @@ HISTORY_COLUMNS = ("step", "time_s", "T_mean_K", "T_min_K", "T_max_K")
 
 def _history_row(state) -> str:
     t = np.asarray(state.particles.temperature)
-    return f"{int(state.step)},{float(state.time)!r},{t.mean()!r},{t.min()!r},{t.max()!r}\n"
+    values = (float(state.time), float(t.mean()), float(t.min()), float(t.max()))  # Python floats: plain repr
+    return f"{int(state.step)}," + ",".join(repr(v) for v in values) + "\n"
 
 
 def read_history(out) -> dict:

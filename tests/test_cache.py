@@ -34,3 +34,16 @@ def test_opt_out(tmp_path, monkeypatch, restore_config, off):
     before = jax.config.jax_compilation_cache_dir
     assert enable_compilation_cache(tmp_path) is None
     assert jax.config.jax_compilation_cache_dir == before and not any(tmp_path.iterdir())
+
+
+def test_cli_default_is_off_on_the_cpu_and_forced_by_the_environment(monkeypatch):
+    """On the CPU jaxlib 0.10.1 logs a false SIGILL warning per cached executable: the CLI leaves the cache off
+    there unless asked."""
+    from sintercond._cache import cache_by_default
+
+    monkeypatch.delenv("SINTERCOND_COMPILATION_CACHE", raising=False)
+    assert cache_by_default() == (jax.default_backend() != "cpu")
+    monkeypatch.setenv("SINTERCOND_COMPILATION_CACHE", "1")
+    assert cache_by_default()
+    monkeypatch.setenv("SINTERCOND_COMPILATION_CACHE", "0")
+    assert not cache_by_default()

@@ -169,3 +169,15 @@ def test_nozzle_and_whitaker_convection():
 
 
 # test_run_killed_mid_way_resumes_identically: now deterministic, in tests/test_teeth_thermal.py
+
+
+def test_history_csv_reads_back_as_numbers(tmp_path):
+    """history.csv (one row per output step) must parse as plain numbers: NumPy 2's repr wrote
+    'np.float64(...)' into it, which every CSV reader takes as text, and the history plot came out empty."""
+    scene = validate_scene(copy.deepcopy(SMALL))
+    final, summary = runner.run_scene(scene, tmp_path, progress=False)
+    history = runner.read_history(tmp_path)
+    assert np.all(np.isfinite(history["T_max_K"])) and len(history["time"]) == -(-summary["steps"] // 5) + 1
+    assert history["time"][-1] == pytest.approx(summary["simulated_s"], rel=1e-12)
+    assert history["T_max_K"][-1] == float(np.max(np.asarray(final)))
+    assert (tmp_path / "history.png").stat().st_size > 0
