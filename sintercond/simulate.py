@@ -562,7 +562,7 @@ def stable_time_step(sim: Simulator, state: SimState, params: Params, source_con
         total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
     if source_conductance is not None:
         total = total + source_conductance
-    return jnp.min(jnp.where(total > 0, prep.capacity / jnp.where(total > 0, total, 1.0), jnp.inf))
+    return thermal.explicit_stability_limit(prep.capacity, total)
 
 
 # --------------------------------------------------------------------------
@@ -588,18 +588,20 @@ def table_contacts(table, wall_conductance=None, wall_temperature=None) -> Conta
                     wall_temperature=None if wall_temperature is None else jnp.asarray(wall_temperature))
 
 
-def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=None, tolerance=1e-9) -> Contacts:
+def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=None, tolerance=1e-9,
+                    pairs=None) -> Contacts:
     """Contacts of ``conductance="lifted"``: the neck of every pair and of every conducting wall (host, once).
 
     Pairs as :func:`sintercond.network.contact_pairs` finds them, necks by
     ``physics.neck``, laid out with :func:`sintercond.network.ell_table`.
     ``walls``: ``(penetration [n], temperature)`` per conducting wall (m, K),
-    penetration <= 0 where a particle does not touch it.
+    penetration <= 0 where a particle does not touch it. ``pairs``: the
+    :class:`~sintercond.network.ContactPairs` if the caller already searched.
     """
     from sintercond.network import contact_pairs, ell_table
 
     radii = np.asarray(radii, np.float64)
-    p = contact_pairs(centres, radii, tolerance, periodic_box)
+    p = contact_pairs(centres, radii, tolerance, periodic_box) if pairs is None else pairs
     a = np.where(p.overlap > 0, np.asarray(NECK_MODELS[physics.neck](p.r_i, p.r_j, p.overlap)), 0.0)
     neighbors, neck, overlap = ell_table(p.n_particles, p.i, p.j, a, p.overlap)
     contacts = Contacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=jnp.asarray(neck),

@@ -43,7 +43,12 @@ def stable_time_step(capacity, table: ContactTable):
       capacity: ``[n]`` heat capacities ``C_i`` (J/K), or a scalar.
       table: the network.
     """
-    total = total_conductance(table)
+    return explicit_stability_limit(capacity, total_conductance(table))
+
+
+def explicit_stability_limit(capacity, total):
+    """``min_i C_i / G_i`` (s) over particles with ``G_i > 0`` (inf if none): ``G_i`` the diagonal of the
+    linear operator (conductances to neighbours and walls, linearised sources), ``C_i`` in J/K."""
     capacity = jnp.broadcast_to(jnp.asarray(capacity, total.dtype), total.shape)
     return jnp.min(jnp.where(total > 0, capacity / jnp.where(total > 0, total, 1.0), jnp.inf))
 
@@ -340,7 +345,7 @@ def _conductivity_setup(centres, radii, axis, law, neck_model, box):
         raise ValueError(f"no particle reaches the box faces along axis {axis}; check box")
     if np.any(hot & cold):
         raise ValueError("a particle reaches both faces: the packing is too thin along the axis")
-    contacts = sim_module.lifted_contacts(physics, centres, radii)
+    contacts = sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)
     length = float(np.mean(centres[cold, axis]) - np.mean(centres[hot, axis]))
     area = float(np.prod(np.delete(hi - lo, axis)))
     return _ConductivitySetup(physics, radii, pairs, contacts, hot, cold, length, area)
