@@ -17,6 +17,21 @@ A powder bed is built in two steps:
    not settled within the step budget raises :class:`PackingError`; it is
    never returned half-fallen.
 
+With ``method="dem"`` (:func:`pour`, :func:`dem_settle`) step 2 is the real
+thermo-mechanical DEM of :mod:`sintercond.mechanics` instead: Hertz contacts
+with damping, Mindlin friction with history, rolling resistance, gravity and
+the plane walls of the box (:func:`box_walls`), stepped by
+:mod:`sintercond.simulate` at the automatic time step of
+:func:`sintercond.mechanics.stable_time_step`, until the kinetic energy and
+the largest net force over a sphere's weight are below stated thresholds
+(:data:`KINETIC_TOL`, :data:`FORCE_TOL`), reported in a :class:`SettleReport`
+(``packing.settle``). The contact material is a :class:`DemMaterial`
+(default: Quintana-Ruiz & Campello 2020, Example 5.3, E = 1 MPa: soft
+contacts keep the step large and the pour cheap; nothing is stiffened or
+softened behind the user's back). It costs ~1e3-1e4 DEM steps from a
+relaxed pile, ~1e5 from the loose deposit, so ``"relax"`` stays the default
+of :func:`powder_bed` and scenes.
+
 Everything here runs in float64 (NumPy, and JAX inside ``jax.enable_x64``)
 whatever precision the thermal model uses: the packing of a scene does not
 depend on ``SINTERCOND_ENABLE_X64``.
@@ -31,6 +46,7 @@ as Rizza & Galati (2024, Sect. 3.3) did for their 150 um PB cube with
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 import typing
@@ -453,8 +469,12 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     The coupled step of :mod:`sintercond.simulate` (``Physics(mechanics=True)``,
     :func:`dem_physics`): Hertz normal force with damping, Mindlin friction
     with history, rolling resistance, gravity ``g = 9.81 m/s^2 (-z)`` and the
-    plane ``walls``, symplectic Euler, driven by :func:`sintercond.run.advance`
-    (neighbour lists reallocated on overflow). Every particle is held at
+    plane ``walls``, symplectic Euler, in compiled chunks of ``check_every``
+    steps (the loop of :func:`sintercond.run.advance`, with the settled
+    figures computed in the same compiled chunk: one compilation per settle;
+    a neighbour list that overflowed is reallocated with
+    :func:`sintercond.simulate.reallocate_neighbors` and the chunk redone).
+    Every particle is held at
     ``temperature`` (K, scalar or ``[n]``): no heat moves; with
     ``softening`` the moduli follow Eq. 42 at those temperatures.
 
@@ -483,7 +503,6 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         (naming the quantity that missed its threshold and its value).
     """
     from sintercond import mechanics, simulate
-    from sintercond import run as run_module
     from sintercond.state import particle_state
 
     if not isinstance(material, DemMaterial):
@@ -519,30 +538,42 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         collision = float(hertz_collision_overlap(r_max, effective_mass(m_max, jnp.inf), material.E / (1 - material.nu**2),
                                                   v_rel))
         step_overlap = max(static, collision)
-        dt = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, mp, v_rel, delta=step_overlap))
-        dt = min(dt, float(mechanics.stable_time_step(physics, particles, contacts.neighbors, mp, v_rel)))
+        step_fn = _jitted_stable_time_step()
+        dt = float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, step_overlap))
+        dt = min(dt, float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, None)))
         params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
         state = simulate.init_state(particles, contacts, dt,
                                     mechanics=mechanics.mechanical_state(physics, centres, contacts.neighbors))
         sim = simulate.simulator(physics, fns)
-        probe = jax.jit(sim.step_fn)
         mass, inertia = particles.mass, 0.4 * particles.mass * particles.radii**2
         weight = mass * GRAVITY
-        energy_scale = float(jnp.sum(weight * particles.radii))
-        figures = {}
+        energy_scale = jnp.sum(weight * particles.radii)
 
-        def settled(s):
+        def chunk(s, p):
+            """``check_every`` steps, then the settled figures of the end state from one probe step (one compilation)."""
+            s = simulate.rollout(sim, s, p, check_every, simulate.SaveAt(check_every, _nothing), checkpoint=False)[0]
+            probe = sim.step_fn(s, p)
             v, w = s.mechanics.velocity, s.mechanics.spin
             kinetic = 0.5 * jnp.sum(mass[:, None] * v**2) + 0.5 * jnp.sum(inertia[:, None] * w**2)
-            force = mass[:, None] * (probe(s, params).mechanics.velocity - v) / dt
-            figures["kinetic"] = float(kinetic) / energy_scale
-            figures["force"] = float(jnp.max(jnp.linalg.norm(force, axis=1) / weight))
-            return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
+            force = mass[:, None] * (probe.mechanics.velocity - v) / s.dt
+            return s, kinetic / energy_scale, jnp.max(jnp.linalg.norm(force, axis=1) / weight), probe.overflow
 
-        max_steps = int(math.ceil(max_time / dt))
-        state, info = run_module.advance(sim, state, params, max_steps, check_every, on_chunk=settled,
-                                         reallocate=simulate.reallocate_neighbors(fns),
-                                         check=_finite_positions)
+        compiled = jax.jit(chunk)
+        reallocate = simulate.reallocate_neighbors(fns)
+        max_steps = check_every * int(math.ceil(max_time / dt / check_every))
+        reallocations, kinetic, force = 0, math.inf, math.inf
+        while int(state.step) < max_steps and not (kinetic < kinetic_tol and force < force_tol):
+            new, kinetic_new, force_new, probe_overflow = compiled(state, params)
+            if bool(new.overflow) or bool(probe_overflow):  # a list ran out of room: a wider one, the chunk redone
+                state = reallocate(state, new)
+                reallocations += 1
+                if reallocations > 100:
+                    raise PackingError("the DEM neighbour list keeps overflowing")
+                continue
+            _finite_positions(new)
+            state, kinetic, force = new, float(kinetic_new), float(force_new)
+        figures = {"kinetic": kinetic, "force": force}
+        info = {"reallocations": reallocations}
         final = np.asarray(state.particles.positions)
     if not (figures["kinetic"] < kinetic_tol and figures["force"] < force_tol):
         missed = []
@@ -556,6 +587,18 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
                           figures["force"], float(force_tol), _overlaps(final, radii, physics.walls), step_overlap,
                           float(v_rel), info["reallocations"], time.perf_counter() - start)
     return DemSettled(final, state, sim, params, fns, report)
+
+
+@functools.cache
+def _jitted_stable_time_step():
+    """:func:`sintercond.mechanics.stable_time_step` compiled once per process (eagerly it compiles ~100 operations)."""
+    from sintercond import mechanics
+
+    return jax.jit(mechanics.stable_time_step, static_argnums=(0,))
+
+
+def _nothing(state):
+    return ()
 
 
 def _finite_positions(state):
