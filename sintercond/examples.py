@@ -100,6 +100,21 @@ def example_5_3_radii(n, seed=0):
     return radii
 
 
+def example_5_3_bed(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_size"], seed=0, start="relaxed",
+                    **settle):
+    """The settled bed of Example 5.3: :func:`example_5_3_radii` poured by :func:`sintercond.packing.pour`.
+
+    Example 5.3's contact material (:class:`sintercond.packing.DemMaterial`'s
+    default) in an open box of side ``lateral_size`` (m); ``settle``: the
+    keyword arguments of :func:`sintercond.packing.dem_settle`. Returns a
+    :class:`sintercond.packing.Packing` with its ``settle`` report.
+    """
+    from sintercond import packing
+
+    return packing.pour(example_5_3_radii(n, seed), lateral_size, packing.DemMaterial(), seed=seed, start=start,
+                        **settle)
+
+
 @dataclasses.dataclass(frozen=True)
 class ConductivityEstimate:
     """Three readings of ``k*`` along ``x`` (W/(m K)) of one packing, and the heat of the run (J), MECHANICS.md erratum 9.
@@ -245,8 +260,8 @@ def example_5_3(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_si
     d = EXAMPLE_5_3
     seconds = {}
     t0 = time.perf_counter()
-    radii = example_5_3_radii(n, seed)
-    bed = packing.pour(radii, lateral_size, packing.DemMaterial(), seed=seed, start=start, **settle)
+    bed = example_5_3_bed(n, lateral_size, seed, start, **settle)
+    radii = bed.radii
     seconds["pour"] = time.perf_counter() - t0
     bounds = tuple(float(b) for b in effective.hashin_shtrikman_bounds(0.0, d["conductivity"], bed.packing_fraction))
     t0 = time.perf_counter()

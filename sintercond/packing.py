@@ -405,7 +405,11 @@ class SettleReport:
 
 
 class DemSettled(typing.NamedTuple):
-    """A settled DEM state and what continues it (``sim``, ``params``, ``neighbor_fns`` for :func:`sintercond.run.advance`)."""
+    """A settled DEM state and what continues it (``sim``, ``params``, ``neighbor_fns`` for :func:`sintercond.run.advance`).
+
+    The state is float64 (the settle runs under ``jax.enable_x64`` whatever
+    the default); continue it with 64-bit floats on.
+    """
 
     centres: np.ndarray
     state: typing.Any
