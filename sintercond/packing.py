@@ -17,6 +17,21 @@ A powder bed is built in two steps:
    not settled within the step budget raises :class:`PackingError`; it is
    never returned half-fallen.
 
+With ``method="dem"`` (:func:`pour`, :func:`dem_settle`) step 2 is the real
+thermo-mechanical DEM of :mod:`sintercond.mechanics` instead: Hertz contacts
+with damping, Mindlin friction with history, rolling resistance, gravity and
+the plane walls of the box (:func:`box_walls`), stepped by
+:mod:`sintercond.simulate` at the automatic time step of
+:func:`sintercond.mechanics.stable_time_step`, until the kinetic energy and
+the largest net force over a sphere's weight are below stated thresholds
+(:data:`KINETIC_TOL`, :data:`FORCE_TOL`), reported in a :class:`SettleReport`
+(``packing.settle``). The contact material is a :class:`DemMaterial`
+(default: Quintana-Ruiz & Campello 2020, Example 5.3, E = 1 MPa: soft
+contacts keep the step large and the pour cheap; nothing is stiffened or
+softened behind the user's back). It costs ~1e3-1e4 DEM steps from a
+relaxed pile, ~1e5 from the loose deposit, so ``"relax"`` stays the default
+of :func:`powder_bed` and scenes.
+
 Everything here runs in float64 (NumPy, and JAX inside ``jax.enable_x64``)
 whatever precision the thermal model uses: the packing of a scene does not
 depend on ``SINTERCOND_ENABLE_X64``.
@@ -31,7 +46,10 @@ as Rizza & Galati (2024, Sect. 3.3) did for their 150 um PB cube with
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import time
+import typing
 
 import jax
 import jax.numpy as jnp
@@ -64,6 +82,7 @@ class Packing:
       coordination: mean number of sphere-sphere contacts per sphere.
       isolated: spheres touching neither another sphere nor the floor or a wall (0 when settled).
       residual_force: largest net force on a sphere over its weight at the end of the settling.
+      settle: the :class:`SettleReport` of a DEM settle (``method="dem"``), else None.
     """
 
     centres: np.ndarray
@@ -75,12 +94,14 @@ class Packing:
     coordination: float = math.nan
     isolated: int = 0
     residual_force: float = math.nan
+    settle: SettleReport | None = None
 
     def summary(self) -> dict:
-        """The bed's figures as a flat dict (for a run summary)."""
-        return {"particles": len(self.radii), "bed_height_m": self.height, "bed_top_m": float(self.container[1][2]),
-                "packing_fraction": self.packing_fraction, "coordination": self.coordination,
-                "isolated_particles": self.isolated}
+        """The bed's figures as a flat dict (for a run summary); a DEM bed adds its :class:`SettleReport`'s."""
+        figures = {"particles": len(self.radii), "bed_height_m": self.height, "bed_top_m": float(self.container[1][2]),
+                   "packing_fraction": self.packing_fraction, "coordination": self.coordination,
+                   "isolated_particles": self.isolated}
+        return figures if self.settle is None else {**figures, **self.settle.summary()}
 
 
 def sample_diameters(n, low, high, rng):
@@ -277,6 +298,318 @@ def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=
     return settled, residual
 
 
+# --------------------------------------------------------------------------
+# settling with the thermo-mechanical DEM (Quintana-Ruiz & Campello 2020)
+
+
+@dataclasses.dataclass(frozen=True)
+class DemMaterial:
+    """Contact material of a DEM pour (SI units); the defaults are Example 5.3's.
+
+    Quintana-Ruiz & Campello (2020), Sect. 5.3: rho = 1000 kg/m^3, E = 1 MPa,
+    nu = 0.3, mu = 0.05 and mu_r = 0.2 between particles, 0 against the walls,
+    xi_con = xi_fric = 1, xi_rol = 0.2. The laws are those of
+    :mod:`sintercond.mechanics` (Hertz with damping, Eqs. 2-6; Mindlin
+    stick-slip with its spring, Eqs. 7-13; rolling resistance, Eqs. 15-20;
+    rigid walls of Remark 1).
+
+    Attributes:
+      density: kg/m^3, > 0.
+      E: Young's modulus (Pa), > 0; with ``theta_star`` the modulus below the
+        softening onset (Eq. 42, erratum 6 of MECHANICS.md: rate 1, no floor).
+      nu: Poisson ratio, in [0, 0.5).
+      mu, mu_r: friction and rolling-resistance coefficients between particles, >= 0.
+      mu_wall, mu_r_wall: the same against the walls, >= 0.
+      xi_con, xi_fric, xi_rol: damping ratios of Eqs. 6, 11, 18, >= 0.
+      theta_star: softening onset (K), > 0; used only when settling with ``softening=True``.
+    """
+
+    density: float = 1000.0
+    E: float = 1e6
+    nu: float = 0.3
+    mu: float = 0.05
+    mu_r: float = 0.2
+    mu_wall: float = 0.0
+    mu_r_wall: float = 0.0
+    xi_con: float = 1.0
+    xi_fric: float = 1.0
+    xi_rol: float = 0.2
+    theta_star: float = 400.0
+
+    def __post_init__(self):
+        ranges = {"density": (0.0, False), "E": (0.0, False), "theta_star": (0.0, False)}
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                    or not math.isfinite(value):
+                raise PackingError(f"DemMaterial.{field.name} must be a finite number; got {value!r}")
+            low, closed = ranges.get(field.name, (0.0, True))
+            if value < low or (value == low and not closed):
+                raise PackingError(f"DemMaterial.{field.name} must be {'>=' if closed else '>'} {low:g}; got {value!r}")
+        if not self.nu < 0.5:
+            raise PackingError(f"DemMaterial.nu must be in [0, 0.5); got {self.nu!r}")
+
+    def mechanical_params(self):
+        """The :class:`sintercond.mechanics.MechanicalParams` of this material (float64 scalars)."""
+        from sintercond.mechanics import MechanicalParams
+
+        f = lambda x: jnp.asarray(float(x), jnp.float64)  # noqa: E731
+        return MechanicalParams(E0=f(self.E), nu=f(self.nu), xi_con=f(self.xi_con), xi_fric=f(self.xi_fric),
+                                xi_rol=f(self.xi_rol), mu=f(self.mu), mu_r=f(self.mu_r), mu_wall=f(self.mu_wall),
+                                mu_r_wall=f(self.mu_r_wall), theta_star=f(self.theta_star), rate=f(1.0), E_min=f(0.0))
+
+
+KINETIC_TOL = 1e-5
+"""Default settled threshold on kinetic energy (translation + rotation) over ``sum_i m_i g r_i``."""
+
+FORCE_TOL = 0.05
+"""Default settled threshold on ``max_i |F_i| / (m_i g)``, the net force on a sphere over its weight."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SettleReport:
+    """How a DEM settle ended; returned with every packing it builds (all SI).
+
+    Attributes:
+      steps: DEM steps taken; time: simulated time (s); dt: the step (s).
+      kinetic_ratio: kinetic energy (translation + rotation) over ``sum_i m_i g r_i``
+        at the end; ``kinetic_tol`` the threshold it met.
+      force_ratio: ``max_i |F_i| / (m_i g)`` at the end, ``F_i`` the net force
+        (contacts, walls, gravity) taken from one probe step as ``m_i dv_i / dt``
+        (exact for symplectic Euler); ``force_tol`` the threshold it met.
+      max_overlap: largest sphere-sphere or sphere-wall overlap over the radius.
+      step_overlap: overlap (m) the time step was sized for (:func:`sintercond.mechanics.stable_time_step`).
+      v_rel: approach speed (m/s) the time step was sized for.
+      reallocations: neighbour-list reallocations; wall_seconds: run time (s).
+    """
+
+    steps: int
+    time: float
+    dt: float
+    kinetic_ratio: float
+    kinetic_tol: float
+    force_ratio: float
+    force_tol: float
+    max_overlap: float
+    step_overlap: float
+    v_rel: float
+    reallocations: int
+    wall_seconds: float
+
+    def summary(self) -> dict:
+        """The figures as a flat dict with units in the keys."""
+        return {"settle_steps": self.steps, "settle_time_s": self.time, "settle_dt_s": self.dt,
+                "settle_kinetic_ratio": self.kinetic_ratio, "settle_kinetic_tol": self.kinetic_tol,
+                "settle_force_ratio": self.force_ratio, "settle_force_tol": self.force_tol,
+                "settle_max_overlap": self.max_overlap, "settle_wall_s": self.wall_seconds}
+
+
+class DemSettled(typing.NamedTuple):
+    """A settled DEM state and what continues it (``sim``, ``params``, ``neighbor_fns`` for :func:`sintercond.run.advance`).
+
+    The state is float64 (the settle runs under ``jax.enable_x64`` whatever
+    the default); continue it with 64-bit floats on.
+    """
+
+    centres: np.ndarray
+    state: typing.Any
+    sim: typing.Any
+    params: typing.Any
+    neighbor_fns: typing.Any
+    report: SettleReport
+
+
+def box_walls(lateral_size):
+    """The five insulated walls of an open square box ``[0, L]^2`` with its floor at ``z = 0``.
+
+    Order: floor, ``x = 0``, ``x = L``, ``y = 0``, ``y = L``
+    (:class:`sintercond.walls.PlaneWall`, normals into the box).
+    """
+    from sintercond.walls import PlaneWall
+
+    L = float(lateral_size)
+    return (PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), PlaneWall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),
+            PlaneWall((L, 0.0, 0.0), (-1.0, 0.0, 0.0)), PlaneWall((0.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+            PlaneWall((0.0, L, 0.0), (0.0, -1.0, 0.0)))
+
+
+def dem_physics(walls, softening=False):
+    """The :class:`sintercond.simulate.Physics` of a DEM settle: Hertz, Mindlin, rolling, gravity ``-9.81 e_z``, ``walls``.
+
+    Conduction is the paper's (``law="conductivity"``, Hertz contact radius,
+    Eqs. 32-35); while settling every particle is held at its temperature, so
+    no heat moves.
+    """
+    from sintercond import simulate
+
+    return simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                            mechanics=True, walls=tuple(walls), gravity=(0.0, 0.0, -GRAVITY), friction=True,
+                            rolling=True, softening=softening, held=True)
+
+
+GRAVITY = 9.81
+"""m/s^2."""
+
+
+def _hertz_plane_overlap(load, radius, modulus, nu):
+    """Overlap (m) of a sphere pressed on a rigid plane by ``load`` (N), ``(3 F / (4 E* sqrt(r)))^(2/3)``, E* = E/(1-nu^2)."""
+    return (3.0 * load / (4.0 * modulus / (1.0 - nu**2) * math.sqrt(radius))) ** (2.0 / 3.0)
+
+
+def _overlaps(centres, radii, walls):
+    """Largest sphere-sphere and sphere-wall overlap over the (smaller) radius."""
+    i, j, real = _pair_list(centres, radii, 0.0)
+    i, j = i[real], j[real]
+    pair = (radii[i] + radii[j] - np.linalg.norm(centres[i] - centres[j], axis=1)) / np.minimum(radii[i], radii[j])
+    wall = [np.asarray(w.penetration(centres, radii)) / radii for w in walls]
+    return float(max(np.max(pair, initial=0.0), *(np.max(w, initial=0.0) for w in wall)))
+
+
+def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0, softening=False, *,
+               kinetic_tol=KINETIC_TOL, force_tol=FORCE_TOL, max_time=2.0, check_every=1000, skin_fraction=0.1,
+               v_rel=None) -> DemSettled:
+    """Let spheres fall and settle under gravity with the real contact laws; returns a :class:`DemSettled`.
+
+    The coupled step of :mod:`sintercond.simulate` (``Physics(mechanics=True)``,
+    :func:`dem_physics`): Hertz normal force with damping, Mindlin friction
+    with history, rolling resistance, gravity ``g = 9.81 m/s^2 (-z)`` and the
+    plane ``walls``, symplectic Euler, in compiled chunks of ``check_every``
+    steps (the loop of :func:`sintercond.run.advance`, with the settled
+    figures computed in the same compiled chunk: one compilation per settle;
+    a neighbour list that overflowed is reallocated with
+    :func:`sintercond.simulate.reallocate_neighbors` and the chunk redone).
+    Every particle is held at
+    ``temperature`` (K, scalar or ``[n]``): no heat moves; with
+    ``softening`` the moduli follow Eq. 42 at those temperatures.
+
+    The time step is automatic: :func:`sintercond.mechanics.stable_time_step`
+    (Eq. 47 and the tangential and rolling bounds, erratum 8) at the approach
+    speed ``v_rel`` (default: free fall from the highest sphere to the floor,
+    at least over one mean diameter) and at the larger of that collision's
+    overlap and the Hertz overlap of the largest sphere on a plane under the
+    weight of a solid column of the pile's height on its cross-section
+    ``(2 r_max)^2`` (the static load at the bottom).
+
+    Settled means, checked every ``check_every`` steps: kinetic energy
+    (translation and rotation) below ``kinetic_tol * sum_i m_i g r_i`` and
+    every net force below ``force_tol`` of that sphere's weight (the net
+    force is read off one probe step, ``m dv/dt``).
+
+    Args:
+      centres: ``[n, 3]`` start positions (m), at rest, no sphere below the floor.
+      radii: ``[n]`` (m).
+      walls: :class:`sintercond.walls.PlaneWall` s (e.g. :func:`box_walls`).
+      material: :class:`DemMaterial`.
+      max_time: simulated time (s) allowed to settle.
+
+    Raises:
+      PackingError: bad input (naming it), or not settled within ``max_time``
+        (naming the quantity that missed its threshold and its value).
+    """
+    from sintercond import mechanics, simulate
+    from sintercond.state import particle_state
+
+    if not isinstance(material, DemMaterial):
+        raise PackingError(f"material must be a DemMaterial; got {type(material).__name__}")
+    for name, value in (("kinetic_tol", kinetic_tol), ("force_tol", force_tol), ("max_time", max_time),
+                        ("skin_fraction", skin_fraction)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise PackingError(f"{name} must be a finite number > 0; got {value!r}")
+    if not (isinstance(check_every, int) and check_every >= 1):
+        raise PackingError(f"check_every must be an int >= 1; got {check_every!r}")
+    start = time.perf_counter()
+    centres = np.asarray(centres, np.float64)
+    radii = np.broadcast_to(np.asarray(radii, np.float64), (len(centres),))
+    with jax.enable_x64(True):
+        temperature = np.broadcast_to(np.asarray(temperature, np.float64), radii.shape)
+        try:
+            particles = particle_state(centres, radii, temperature, material.density, fixed=True)
+        except ValueError as err:
+            raise PackingError(str(err)) from None
+        physics = dem_physics(walls, softening)
+        mp = material.mechanical_params()
+        r_max = float(radii.max())
+        contacts, fns = simulate.dynamic_contacts(centres, radii, skin_fraction * float(radii.mean()),
+                                                  capacity_multiplier=1.5, margin=np.full(3, 2.0 * r_max))
+        top = float(np.max(centres[:, 2] + radii))
+        if v_rel is None:
+            v_rel = math.sqrt(2.0 * GRAVITY * max(top - float(np.min(centres[:, 2] - radii)), 4.0 * float(radii.mean())))
+        column = material.density * GRAVITY * top * (2.0 * r_max) ** 2
+        static = _hertz_plane_overlap(column, r_max, material.E, material.nu)
+        from sintercond.forces import effective_mass, hertz_collision_overlap
+
+        m_max = 4.0 / 3.0 * math.pi * r_max**3 * material.density
+        collision = float(hertz_collision_overlap(r_max, effective_mass(m_max, jnp.inf), material.E / (1 - material.nu**2),
+                                                  v_rel))
+        step_overlap = max(static, collision)
+        step_fn = _jitted_stable_time_step()
+        dt = float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, step_overlap))
+        dt = min(dt, float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, None)))
+        params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
+        state = simulate.init_state(particles, contacts, dt,
+                                    mechanics=mechanics.mechanical_state(physics, centres, contacts.neighbors))
+        sim = simulate.simulator(physics, fns)
+        mass, inertia = particles.mass, 0.4 * particles.mass * particles.radii**2
+        weight = mass * GRAVITY
+        energy_scale = jnp.sum(weight * particles.radii)
+
+        def chunk(s, p):
+            """``check_every`` steps, then the settled figures of the end state from one probe step (one compilation)."""
+            s = simulate.rollout(sim, s, p, check_every, simulate.SaveAt(check_every, _nothing), checkpoint=False)[0]
+            probe = sim.step_fn(s, p)
+            v, w = s.mechanics.velocity, s.mechanics.spin
+            kinetic = 0.5 * jnp.sum(mass[:, None] * v**2) + 0.5 * jnp.sum(inertia[:, None] * w**2)
+            force = mass[:, None] * (probe.mechanics.velocity - v) / s.dt
+            return s, kinetic / energy_scale, jnp.max(jnp.linalg.norm(force, axis=1) / weight), probe.overflow
+
+        compiled = jax.jit(chunk)
+        reallocate = simulate.reallocate_neighbors(fns)
+        max_steps = check_every * int(math.ceil(max_time / dt / check_every))
+        reallocations, kinetic, force = 0, math.inf, math.inf
+        while int(state.step) < max_steps and not (kinetic < kinetic_tol and force < force_tol):
+            new, kinetic_new, force_new, probe_overflow = compiled(state, params)
+            if bool(new.overflow) or bool(probe_overflow):  # a list ran out of room: a wider one, the chunk redone
+                state = reallocate(state, new)
+                reallocations += 1
+                if reallocations > 100:
+                    raise PackingError("the DEM neighbour list keeps overflowing")
+                continue
+            _finite_positions(new)
+            state, kinetic, force = new, float(kinetic_new), float(force_new)
+        figures = {"kinetic": kinetic, "force": force}
+        info = {"reallocations": reallocations}
+        final = np.asarray(state.particles.positions)
+    if not (figures["kinetic"] < kinetic_tol and figures["force"] < force_tol):
+        missed = []
+        if not figures["kinetic"] < kinetic_tol:
+            missed.append(f"kinetic energy {figures['kinetic']:.3g} of sum m g r (allowed < {kinetic_tol:g})")
+        if not figures["force"] < force_tol:
+            missed.append(f"largest net force {figures['force']:.3g} of a sphere's weight (allowed < {force_tol:g})")
+        raise PackingError(f"the DEM bed did not settle within {max_time:g} s ({int(state.step)} steps of "
+                           f"{dt:.3g} s): " + " and ".join(missed))
+    report = SettleReport(int(state.step), float(state.time), dt, figures["kinetic"], float(kinetic_tol),
+                          figures["force"], float(force_tol), _overlaps(final, radii, physics.walls), step_overlap,
+                          float(v_rel), info["reallocations"], time.perf_counter() - start)
+    return DemSettled(final, state, sim, params, fns, report)
+
+
+@functools.cache
+def _jitted_stable_time_step():
+    """:func:`sintercond.mechanics.stable_time_step` compiled once per process (eagerly it compiles ~100 operations)."""
+    from sintercond import mechanics
+
+    return jax.jit(mechanics.stable_time_step, static_argnums=(0,))
+
+
+def _nothing(state):
+    return ()
+
+
+def _finite_positions(state):
+    if not bool(jnp.all(jnp.isfinite(state.particles.positions))):
+        raise PackingError(f"non-finite positions at DEM step {int(state.step)}")
+
+
 def _surface_height(centres, radii, lateral_size, points=64):
     """Mean over a lateral grid of the highest sphere surface above each point (0 where none)."""
     g = (np.arange(points) + 0.5) * lateral_size / points
@@ -290,31 +623,72 @@ def _surface_height(centres, radii, lateral_size, points=64):
     return float(best.mean())
 
 
-def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_particles=MAX_PARTICLES,
-               height_tolerance=0.25):
-    """A settled random bed of polydisperse spheres filling a square container to about ``height``.
+METHODS = ("relax", "dem")
+"""How :func:`powder_bed` settles: the harmonic relaxation (fast, the default) or the thermo-mechanical DEM."""
+
+STARTS = ("relaxed", "deposit")
+"""Where a DEM pour starts: the harmonically relaxed pile, or the loose ballistic deposit itself."""
+
+
+def pour(radii, lateral_size, material=DemMaterial(), seed=0, start="relaxed", temperature=300.0, walls=None,
+         **settle) -> Packing:
+    """Pour spheres into an open square box ``[0, L]^2`` and settle them with the DEM (:func:`dem_settle`).
+
+    The spheres are first dropped one by one (:func:`deposit_spheres`, a loose
+    pile several times the bed's height). ``start="deposit"``: the DEM settles
+    that pile itself (a real pour: the pile collapses under gravity with
+    Hertz, Mindlin friction, rolling resistance and the walls; it takes
+    ~0.3 s of simulated time, ~1e4-1e5 steps). ``start="relaxed"`` (cheaper):
+    the pile is first collapsed by :func:`relax_under_gravity` (frictionless
+    harmonic contacts), then the DEM settles it from there under the real
+    laws; the result meets the same thresholds, but its structure comes from
+    a frictionless collapse (denser than a frictional pour would give).
 
     Args:
-      lateral_size: side of the square container (length).
-      height: bed height to fill (length), at least the largest diameter; the
-        bed gets ``FILL_FRACTION * lateral_size^2 * height`` of solid volume.
-      diameter_range: ``(low, high)`` diameters, uniform by volume.
-      seed: random seed (the result is reproducible, and the same in float32 and float64 JAX).
-      max_particles: refuse beds needing more spheres.
-      height_tolerance: refuse a settled bed whose mean surface height is off
-        ``height`` by more than this fraction.
+      radii: ``[n]`` (m), ``2 max(radii) < lateral_size``.
+      lateral_size: box side (m).
+      material: :class:`DemMaterial` (default: Example 5.3's).
+      seed: random seed of the deposit (reproducible).
+      start: one of :data:`STARTS`.
+      temperature: K, while settling (no heat moves).
+      walls: the box's :class:`~sintercond.walls.PlaneWall` s (default :func:`box_walls`).
+      settle: keyword arguments of :func:`dem_settle` (``kinetic_tol``, ``force_tol``, ``max_time``, ...).
 
     Returns:
-      :class:`Packing`, with its height, packing fraction, coordination and isolated spheres.
+      :class:`Packing` with its :class:`SettleReport` (``packing.settle``).
 
     Raises:
-      PackingError: invalid sizes (:func:`check_bed`), or a bed that did not settle.
+      PackingError: bad input, or a bed that did not settle (naming what missed its threshold).
     """
-    n = check_bed(lateral_size, height, diameter_range, max_particles)
-    low, high = (float(v) for v in diameter_range)
+    return _pour(radii, lateral_size, material, seed, start, temperature, walls, **settle)[0]
+
+
+def _pour(radii, lateral_size, material, seed, start, temperature, walls, **settle):
+    """:func:`pour`, also returning the :class:`DemSettled` state."""
+    if start not in STARTS:
+        raise PackingError(f"start must be one of {list(STARTS)}; got {start!r}")
+    radii = np.asarray(radii, np.float64)
+    if radii.ndim != 1 or len(radii) == 0 or not np.all(np.isfinite(radii) & (radii > 0)):
+        raise PackingError("radii must be a non-empty [n] array of finite values > 0 (m)")
+    if not (math.isfinite(lateral_size) and 2 * radii.max() < lateral_size):
+        raise PackingError(f"lateral_size must exceed the largest diameter {2 * radii.max():g} m; got {lateral_size!r}")
     rng = np.random.default_rng(seed)
-    radii = sample_diameters(n, low, high, rng) / 2
-    centres, residual = relax_under_gravity(deposit_spheres(radii, lateral_size, rng), radii, lateral_size)
+    centres = deposit_spheres(radii, lateral_size, rng)
+    if start == "relaxed":
+        centres, _ = relax_under_gravity(centres, radii, lateral_size)
+        centres[:, 2] = np.maximum(centres[:, 2], radii)  # start off the floor: no sphere inside a wall
+        centres[:, :2] = np.clip(centres[:, :2], radii[:, None], lateral_size - radii[:, None])
+    walls = box_walls(lateral_size) if walls is None else tuple(walls)
+    if start == "relaxed" and "v_rel" not in settle:  # a sphere may drop into a gap: one mean diameter
+        settle = {**settle, "v_rel": math.sqrt(2.0 * GRAVITY * 2.0 * float(np.mean(radii)))}
+    settled = dem_settle(centres, radii, walls, material, temperature, **settle)
+    bed = _bed(settled.centres, radii, lateral_size)
+    return dataclasses.replace(bed, residual_force=settled.report.force_ratio, settle=settled.report), settled
+
+
+def _bed(centres, radii, lateral_size) -> Packing:
+    """A :class:`Packing` of settled spheres in ``[0, L]^2`` with its figures (height, fraction, coordination)."""
+    n = len(radii)
     i, j, real = _pair_list(centres, radii, 0.0)
     i, j = i[real], j[real]
     d = np.linalg.norm(centres[i] - centres[j], axis=1)
@@ -327,19 +701,61 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
     surface = _surface_height(centres, radii, lateral_size)
     top = float(np.max(centres[:, 2] + radii))
     fraction = float(np.sum(4.0 / 3.0 * np.pi * radii**3) / (lateral_size**2 * surface))
-    if isolated or abs(surface / height - 1.0) > height_tolerance:
-        raise PackingError(f"the bed settled to a mean height {surface:.4g} for height {height:.4g} "
-                           f"(allowed within {height_tolerance:.0%}) with {isolated} isolated particles")
     container = (np.zeros(3), np.array([lateral_size, lateral_size, top]))
     return Packing(centres, radii, container, float(np.max(overlap, initial=0.0)), surface, fraction,
-                   float(2 * np.sum(touching) / n), isolated, residual)
+                   float(2 * np.sum(touching) / n), isolated)
+
+
+def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_particles=MAX_PARTICLES,
+               height_tolerance=0.25, method="relax", material=None, **settle):
+    """A settled random bed of polydisperse spheres filling a square container to about ``height``.
+
+    Args:
+      lateral_size: side of the square container (length).
+      height: bed height to fill (length), at least the largest diameter; the
+        bed gets ``FILL_FRACTION * lateral_size^2 * height`` of solid volume.
+      diameter_range: ``(low, high)`` diameters, uniform by volume.
+      seed: random seed (the result is reproducible, and the same in float32 and float64 JAX).
+      max_particles: refuse beds needing more spheres.
+      height_tolerance: refuse a settled bed whose mean surface height is off
+        ``height`` by more than this fraction.
+      method: ``"relax"`` (:func:`relax_under_gravity`, any unit of length) or
+        ``"dem"`` (:func:`pour` with ``material``, SI units: metres).
+      material: :class:`DemMaterial` for ``method="dem"`` (default: Example 5.3's).
+      settle: keyword arguments of :func:`pour` for ``method="dem"`` (``start``, ``kinetic_tol``, ...).
+
+    Returns:
+      :class:`Packing`, with its height, packing fraction, coordination and
+      isolated spheres (and the :class:`SettleReport` for ``"dem"``).
+
+    Raises:
+      PackingError: invalid sizes (:func:`check_bed`) or method, or a bed that did not settle.
+    """
+    if method not in METHODS:
+        raise PackingError(f"method must be one of {list(METHODS)}; got {method!r}")
+    if settle and method != "dem":
+        raise PackingError(f"{sorted(settle)} apply to method='dem' only")
+    n = check_bed(lateral_size, height, diameter_range, max_particles)
+    low, high = (float(v) for v in diameter_range)
+    rng = np.random.default_rng(seed)
+    radii = sample_diameters(n, low, high, rng) / 2
+    if method == "dem":
+        bed = pour(radii, lateral_size, DemMaterial() if material is None else material, seed=rng, **settle)
+    else:
+        centres, residual = relax_under_gravity(deposit_spheres(radii, lateral_size, rng), radii, lateral_size)
+        bed = dataclasses.replace(_bed(centres, radii, lateral_size), residual_force=residual)
+    if bed.isolated or abs(bed.height / height - 1.0) > height_tolerance:
+        raise PackingError(f"the bed settled to a mean height {bed.height:.4g} for height {height:.4g} "
+                           f"(allowed within {height_tolerance:.0%}) with {bed.isolated} isolated particles")
+    return bed
 
 
 def from_scene(p) -> Packing:
     """The packing of a validated scene's ``[packing]`` table (radii after ``sinter_swelling``).
 
-    ``powder_bed``: :func:`powder_bed`, radii then grown by ``sinter_swelling``
-    (settled contacts become necks). ``simple_cubic``: centres
+    ``powder_bed``: :func:`powder_bed` with ``method`` (``"relax"`` by default,
+    or ``"dem"`` with the :class:`DemMaterial` keys of an optional ``dem``
+    table), radii then grown by ``sinter_swelling`` (settled contacts become necks). ``simple_cubic``: centres
     ``radius + spacing * (i, j, k)``, container ``[0, (counts - 1) spacing + 2 radius]``.
     """
     if p["kind"] == "simple_cubic":
@@ -350,7 +766,10 @@ def from_scene(p) -> Packing:
         hi = (counts - 1) * p["spacing"] + 2 * p["radius"]
         overlap = max(2 * p["radius"] - p["spacing"], 0.0) / (2 * p["radius"])
         return Packing(centres, radii, (np.zeros(3), hi), overlap, float(hi[2]))
-    bed = powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0))
+    method = p.get("method", "relax")
+    material = DemMaterial(**p["dem"]) if method == "dem" and "dem" in p else None
+    bed = powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0), method=method,
+                     material=material)
     return dataclasses.replace(bed, radii=bed.radii * (1.0 + p.get("sinter_swelling", 0.0)))
 
 

@@ -116,3 +116,81 @@ def test_the_packing_does_not_depend_on_the_jax_precision():
         os.remove(name)
     # before the fix the float32 run settled a different bed (T_max 761 vs 1125 K on the default scene)
     np.testing.assert_array_equal(results[0], results[1])
+
+
+# --------------------------------------------------------------------------
+# settling with the thermo-mechanical DEM (Hertz, Mindlin, rolling, gravity, box walls)
+
+DEM_BOX = 0.025  # m: Example 5.3's material and sizes, ~50 spheres
+
+
+@pytest.fixture(scope="module")
+def dem_bed():
+    return packing.powder_bed(DEM_BOX, 0.015, (4e-3, 8e-3), seed=1, method="dem", check_every=250)
+
+
+def test_dem_bed_meets_the_stated_thresholds(dem_bed):
+    report = dem_bed.settle
+    assert report.kinetic_tol == packing.KINETIC_TOL and report.force_tol == packing.FORCE_TOL
+    assert report.kinetic_ratio < packing.KINETIC_TOL and report.force_ratio < packing.FORCE_TOL
+    assert dem_bed.residual_force == report.force_ratio
+    assert report.steps * report.dt == pytest.approx(report.time)
+    summary = dem_bed.summary()
+    assert summary["settle_force_ratio"] == report.force_ratio and summary["settle_steps"] == report.steps
+    # the step was sized for overlaps at least as large as the bed's
+    assert report.max_overlap * np.max(dem_bed.radii) < report.step_overlap
+
+
+def _hertz_wall_force(penetration, radius, material):
+    """Static Hertz force (N) of a sphere on a rigid plane, (4/3) E/(1 - nu^2) sqrt(r) h^(3/2) (Remark 1)."""
+    h = np.maximum(penetration, 0.0)
+    return 4.0 / 3.0 * material.E / (1.0 - material.nu**2) * np.sqrt(radius) * h**1.5
+
+
+def test_dem_bed_is_in_static_equilibrium_with_its_walls(dem_bed):
+    # frictionless side walls (Example 5.3: mu = mu_r = 0 at the walls) carry no vertical load: the floor's Hertz
+    # reactions, from the penetrations alone, must carry the whole weight; the x walls push equally
+    material = packing.DemMaterial()
+    c, r = dem_bed.centres, dem_bed.radii
+    weight = np.sum(4.0 / 3.0 * np.pi * r**3 * material.density) * packing.GRAVITY
+    floor, x_lo, x_hi = packing.box_walls(DEM_BOX)[:3]
+    reaction = np.sum(_hertz_wall_force(np.asarray(floor.penetration(c, r)), r, material))
+    assert reaction == pytest.approx(weight, rel=packing.FORCE_TOL)
+    push_lo = np.sum(_hertz_wall_force(np.asarray(x_lo.penetration(c, r)), r, material))
+    push_hi = np.sum(_hertz_wall_force(np.asarray(x_hi.penetration(c, r)), r, material))
+    assert abs(push_lo - push_hi) < packing.FORCE_TOL * weight
+    assert push_lo > 0  # the pile leans on its walls
+
+
+def test_dem_bed_is_a_random_packing(dem_bed):
+    isolated, surface, coordination = _settled_figures(dem_bed, DEM_BOX)
+    assert isolated == 0 and dem_bed.isolated == 0
+    assert dem_bed.height == pytest.approx(surface, rel=0.02)
+    assert 0.5 < dem_bed.packing_fraction < 0.7  # between random loose packing and the densest random packings
+    assert dem_bed.coordination == pytest.approx(coordination)
+    assert 0 < dem_bed.max_overlap < 0.05  # E = 1 MPa: soft contacts, small overlaps
+
+
+def test_dem_bed_that_does_not_settle_says_what_missed():
+    radii = np.full(30, 3e-3)
+    with pytest.raises(packing.PackingError, match=r"did not settle within 0.002 s .*(kinetic energy|net force)"):
+        packing.pour(radii, DEM_BOX, start="deposit", max_time=2e-3, check_every=100)
+
+
+def test_dem_inputs_are_checked_before_compiling():
+    with pytest.raises(packing.PackingError, match=r"DemMaterial.E must be > 0"):
+        packing.DemMaterial(E=0.0)
+    with pytest.raises(packing.PackingError, match=r"DemMaterial.nu must be in \[0, 0.5\)"):
+        packing.DemMaterial(nu=0.5)
+    with pytest.raises(packing.PackingError, match=r"DemMaterial.mu must be >= 0"):
+        packing.DemMaterial(mu=-0.1)
+    with pytest.raises(packing.PackingError, match=r"start must be one of"):
+        packing.pour(np.full(5, 1e-3), 0.01, start="shaken")
+    with pytest.raises(packing.PackingError, match=r"lateral_size must exceed the largest diameter"):
+        packing.pour(np.full(5, 1e-2), 0.01)
+    with pytest.raises(packing.PackingError, match=r"method must be one of \['relax', 'dem'\]"):
+        packing.powder_bed(0.025, 0.015, (4e-3, 8e-3), method="pour")
+    with pytest.raises(packing.PackingError, match=r"apply to method='dem' only"):
+        packing.powder_bed(0.025, 0.015, (4e-3, 8e-3), force_tol=0.1)
+    with pytest.raises(packing.PackingError, match=r"force_tol must be a finite number > 0"):
+        packing.pour(np.full(5, 1e-3), 0.01, force_tol=0.0)
