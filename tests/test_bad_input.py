@@ -106,7 +106,7 @@ def _range_cases():
 
 
 STRUCTURAL = [
-    ("unknown section", lambda s: s.update(mechanics={}), r"unknown section \[mechanics\]", "allowed sections"),
+    ("unknown section", lambda s: s.update(magnetism={}), r"unknown section \[magnetism\]", "allowed sections"),
     ("misspelled section", lambda s: s.update(materal={}), r"unknown section \[materal\]", "did you mean 'material'"),
     ("unknown key", _set("material.colour", "red"), r"unknown key material\.colour", "allowed keys"),
     ("misspelled key", _set("material.conductivty", 1.0), r"material\.conductivty", "did you mean 'conductivity'"),
