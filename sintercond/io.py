@@ -125,17 +125,19 @@ def atomic_write_text(path, text):
     os.replace(tmp, path)
 
 
-def save_checkpoint(directory, state):
+def save_checkpoint(directory, state, **extra):
     """Write the whole :class:`~sintercond.simulate.SimState` to ``directory/checkpoint.npz`` atomically.
 
     Every leaf is stored under its path in the state (plus ``temperature`` and
-    ``step`` for a quick look), written to a temporary file and renamed, so
-    a killed run leaves the last complete checkpoint.
+    ``step`` for a quick look, and the arrays ``extra``), written to a
+    temporary file and renamed, so a killed run leaves the last complete
+    checkpoint. With mechanics the leaves include velocities, spins, the
+    pair and wall springs and the neighbour list.
     """
     leaves = {jax.tree_util.keystr(path): np.asarray(leaf)
               for path, leaf in jax.tree_util.tree_flatten_with_path(state)[0]}
     tmp = Path(directory) / "checkpoint.tmp.npz"
-    np.savez(tmp, temperature=np.asarray(state.particles.temperature), step=int(state.step), **leaves)
+    np.savez(tmp, temperature=np.asarray(state.particles.temperature), step=int(state.step), **extra, **leaves)
     os.replace(tmp, Path(directory) / "checkpoint.npz")
 
 

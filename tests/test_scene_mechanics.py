@@ -6,6 +6,7 @@ interrupted-and-resumed run with an uninterrupted one.
 """
 
 import copy
+import dataclasses
 import math
 import xml.etree.ElementTree as ET
 
@@ -34,6 +35,21 @@ def test_builtin_scenes_are_listed_valid_and_within_limits(capsys):
         scene = load_scene(name)
         assert scene["physics"]["mechanics"] is True
     assert load_scene("quintana2020_5_1", duration=0.25)["run"]["duration"] == 0.25
+
+
+def test_the_5_1_scene_builds_examples_example_5_1():
+    """The scene file and the Python builder are one model: the same physics spec, parameters and initial state."""
+    import jax
+
+    model = runner.build_model(load_scene("quintana2020_5_1"))
+    sim, state, params, n = examples.example_5_1()
+    assert model.physics == sim.physics and model.dt == float(state.dt) and model.n_steps == n
+    mine, theirs = model.params.mechanics, params.mechanics
+    for field in ("E0", "nu", "xi_con", "xi_fric", "xi_rol", "mu", "mu_r", "theta_star", "rate", "E_min"):
+        assert float(getattr(mine, field)) == float(getattr(theirs, field)), field
+    assert theirs.mu_wall is None and float(mine.mu_wall) == float(mine.mu) == 0.0  # None: the pairs' mu
+    np.testing.assert_array_equal(model.state.particles.positions, state.particles.positions)
+    np.testing.assert_array_equal(model.state.particles.mass, state.particles.mass)
 
 
 def test_example_5_1_by_name_settles_to_the_closed_forms(tmp_path, capsys):
@@ -143,3 +159,28 @@ def test_wall_velocity_needs_mechanics():
         scene.pop(key)
     with pytest.raises(SceneError, match=r"walls\[1\]\.velocity needs physics\.mechanics = true"):
         validate_scene(scene)
+
+
+def test_checkpoint_of_a_reallocated_list_loads_with_its_capacity(tmp_path):
+    """A list reallocated during a run (wider than the one the scene builds) comes back from the checkpoint with
+    its own capacities (static fields of jax-md's list, not leaves: a list whose max_occupancy is not its width
+    fails at its next update), and its leaves bit for bit."""
+    import jax
+
+    from sintercond.io import save_checkpoint
+
+    scene = copy.deepcopy(PILE)
+    scene["packing"]["centres"] = [[x, y, z] for x in (1e-3, 3.05e-3) for y in (1e-3, 3.05e-3) for z in (1e-3, 3.05e-3)]
+    model = runner.build_model(validate_scene(scene))
+    squeezed = model.state.particles.positions * 0.6  # closer spheres: more candidates than the list holds
+    end = dataclasses.replace(model.state, particles=dataclasses.replace(model.state.particles, positions=squeezed))
+    wider = model.reallocate(end, end)
+    assert wider.contacts.neighbors.shape[1] > model.state.contacts.neighbors.shape[1]
+    save_checkpoint(tmp_path, wider, **runner.list_capacity(wider))
+    loaded = runner.load_state(tmp_path / "checkpoint.npz", model.state)
+    got, want = loaded.contacts.neighbor_list, wider.contacts.neighbor_list
+    assert (got.max_occupancy, got.cell_list_capacity) == (want.max_occupancy, want.cell_list_capacity)
+    assert got.max_occupancy == got.idx.shape[1] > model.state.contacts.neighbor_list.max_occupancy
+    assert len(jax.tree.leaves(loaded)) == len(jax.tree.leaves(wider))
+    for a, b in zip(jax.tree.leaves(loaded), jax.tree.leaves(wider)):
+        np.testing.assert_array_equal(a, b)
