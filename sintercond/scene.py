@@ -626,7 +626,9 @@ def scene_reference() -> str:
         f"`{name}`: {', '.join(law.default_params) or 'none'}" for name, law in sorted(CONDUCTANCE_LAWS.items())))
     for section in ("initial", "boundary"):
         table(f"[{section}]", _SCHEMA[section])
-    table("[[walls]]", _WALL, "Any number of walls; a face without one is insulated.")
+    table("[[walls]]", _WALL, "Any number of walls; a face without one is insulated. `history.csv` reports the "
+          "heat power into the packing through each held or conducting wall as `heat_wall{k}_W`, `k` its index "
+          "among the `[[walls]]` (the `[boundary]` floor comes last).")
     for section in ("beam", "convection", "radiation"):
         table(f"[{section}]", _SCHEMA[section])
     table("[physics]", _SCHEMA["physics"],
