@@ -387,6 +387,10 @@ def _check_mechanics(scene):
     if "gravity" in physics:
         physics["gravity"] = _numbers("physics.gravity", physics["gravity"], 3, _within(-1e3, 1e3, "m/s^2"))
     if not on:
+        for key in physics:
+            if key != "mechanics":
+                raise SceneError(f"physics.{key} needs physics.mechanics = true (without it nothing moves and "
+                                 f"physics.{key} would be ignored)")
         return
     if "mechanics" not in scene:
         raise SceneError("physics.mechanics = true needs a [mechanics] section (the contact material: at least "

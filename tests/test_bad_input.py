@@ -222,6 +222,8 @@ STRUCTURAL = [
     ("gravity two numbers", _set("physics.gravity", [0.0, -9.81]), r"physics\.gravity must be a list of 3",
      r"\[-1000, 1000\] m/s\^2"),
     ("gravity huge", _set("physics.gravity", [0.0, 0.0, -1e4]), r"physics\.gravity", r"\[-1000, 1000\]"),
+    ("gravity without mechanics", _set("physics.gravity", [0.0, 0.0, -9.81]),
+     r"physics\.gravity needs physics\.mechanics = true", "ignored"),
     ("shear convention", _set("physics.shear", "voigt"), r"physics\.shear must be one of", '"mindlin"'),
     ("slip direction", _set("physics.slip_direction", "force"), r"physics\.slip_direction must be one of", '"trial"'),
     ("wall velocity without mechanics", _set("walls.0.velocity", [0.0, 0.0, 1e-3]),
