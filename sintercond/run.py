@@ -212,8 +212,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         sim = simulate.simulator(physics, fns)
         reallocate = simulate.reallocate_neighbors(fns)
         v_rel = scene["physics"].get("impact_velocity", 0.05)
-        mechanical_limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics,
-                                                            v_rel))
+        mechanical_limit = float(_mechanical_stable_step(physics, particles, contacts.neighbors, params.mechanics,
+                                                         v_rel))
         names["mechanical"] = (f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and the symplectic-Euler "
                                f"bounds of the stiffest contact at physics.impact_velocity = {v_rel:g} m/s)")
         motion = mechanics.mechanical_state(physics, centres, contacts.neighbors)
@@ -232,6 +232,10 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
                  _wall_heat_specs(scene, centres, radii, physics),
                  {"thermal": thermal_limit, "mechanical": mechanical_limit})
+
+
+_mechanical_stable_step = jax.jit(mechanics.stable_time_step, static_argnums=0)
+""":func:`sintercond.mechanics.stable_time_step` compiled once per spec and size (eager, it dispatches ~100 ops)."""
 
 
 def _highest_temperature(scene) -> float:
