@@ -451,13 +451,10 @@ def _probe_fn(model):
     return jax.jit(probe)
 
 
-def _wall_plane_conductance(scene, physics, plane, positions, radii, kappa, t):
-    """Conductance (W/K) of each particle to a plane wall at time ``t`` (its point moved by its velocity)."""
-    c = scene["conduction"]
+def _plane_penetration(plane, positions, radii, t):
+    """``r - (x - p(t)) . n`` (m) of each particle on a plane wall whose point moves at its velocity."""
     point = np.asarray(plane.point) + t * np.asarray(plane.velocity)
-    h = radii - (positions - point) @ np.asarray(plane.normal)
-    return np.asarray(walls.wall_conductance(c["law"], radii, h, kappa, params=c.get("params"),
-                                             neck_model=c.get("neck_model"))), h
+    return radii - (positions - point) @ np.asarray(plane.normal)
 
 
 def observe(scene, model, state, probe) -> Observation:
@@ -483,15 +480,15 @@ def observe(scene, model, state, probe) -> Observation:
         planes = list(model.physics.walls)
     t = float(state.time)
     conducting_power = np.zeros(len(radii))
-    wall_h = []
+    wall_h = [_plane_penetration(plane, positions, radii, t) for plane in planes]
     flows = {}
-    for k, plane in enumerate(planes):
-        k_w, h = _wall_plane_conductance(scene, model.physics, plane, positions, radii, kappa, t)
-        wall_h.append(h)
-        mode = _walls(scene)[k]["mode"]
-        if mode == "conducting":
-            q = k_w * (_walls(scene)[k]["temperature"] - temperature)
-            conducting_power += q if model.physics.mechanics else 0.0
+    c = scene["conduction"]
+    for k, wall in enumerate(_walls(scene)):
+        if wall["mode"] == "conducting":
+            k_w = np.asarray(walls.wall_conductance(c["law"], radii, wall_h[k], kappa, params=c.get("params"),
+                                                    neck_model=c.get("neck_model")))
+            q = k_w * (wall["temperature"] - temperature)
+            conducting_power += q if model.physics.mechanics else 0.0  # the thermal simulator's P_i holds it
             flows[k] = float(np.sum(q))
     for column, k, mode, mask in model.wall_heat:
         if mode == "held":
