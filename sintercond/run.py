@@ -63,7 +63,8 @@ class Model:
 
 
 def build_packing(scene):
-    """``(centres, radii, bed)`` of a validated scene: listed spheres as given, else :func:`sintercond.packing.from_scene`.
+    """``(centres, radii, bed)`` of a validated scene: listed spheres as given, else
+    :func:`sintercond.packing.from_scene`.
 
     ``bed``: the bed's figures for the summary (empty for listed spheres).
     """
@@ -111,8 +112,9 @@ def mechanical_params(scene) -> mechanics.MechanicalParams | None:
     xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m.get("damping", 1.0)
     mu, mu_r = m.get("friction", 0.0), m.get("rolling_friction", 0.0)
     return mechanics.MechanicalParams(
-        E0=f(m["young_modulus"]), nu=f(m["poisson_ratio"]), xi_con=f(xi_con), xi_fric=f(m.get("tangential_damping", 1.0)),
-        xi_rol=f(m.get("rolling_damping", 0.0)), mu=f(mu), mu_r=f(mu_r), mu_wall=f(m.get("wall_friction", mu)),
+        E0=f(m["young_modulus"]), nu=f(m["poisson_ratio"]), xi_con=f(xi_con),
+        xi_fric=f(m.get("tangential_damping", 1.0)), xi_rol=f(m.get("rolling_damping", 0.0)), mu=f(mu), mu_r=f(mu_r),
+        mu_wall=f(m.get("wall_friction", mu)),
         mu_r_wall=f(m.get("wall_rolling_friction", mu_r)), theta_star=f(soft.get("onset_temperature", 400.0)),
         rate=f(soft.get("rate", 1.0)), E_min=f(soft.get("min_modulus", 0.0)))
 
@@ -570,7 +572,8 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         (out / "bed.json").write_text(json.dumps(model.bed))
         probe = _probe_fn(model)
         obs = observe(scene, model, model.state, probe)
-        (out / "history.csv").write_text(",".join(history_columns(model)) + "\n" + _history_row(model, model.state, obs))
+        header = ",".join(history_columns(model)) + "\n"
+        (out / "history.csv").write_text(header + _history_row(model, model.state, obs))
         _write_outputs(scene, out, model, model.state, obs)
         state = model.state
     else:

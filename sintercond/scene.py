@@ -123,7 +123,8 @@ _SCHEMA = {
     "physics": {
         "mechanics": Key(bool, None, False, default=False,
                          doc="true: the coupled thermo-mechanical step (Quintana-Ruiz & Campello 2020, Eqs. 43-46): "
-                             "particles move under Hertz contacts, friction, rolling resistance, gravity and the walls, "
+                             "particles move under Hertz contacts, friction, rolling resistance, gravity and the "
+                             "walls, "
                              "and heat flows through the contacts the motion opens and grows; needs [mechanics]. "
                              "false: the packing stays put (the fast thermal path)"),
         "gravity": Key(list, ("a list of 3 numbers in [-1000, 1000] m/s^2", lambda v: True), False, "m/s^2",
