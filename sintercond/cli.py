@@ -1,9 +1,11 @@
 """Command-line entry point.
 
-* ``sintercond run [scene.toml] [--out DIR]`` runs a scene (the built-in
-  default scene without a file): progress bar, VTK/LAMMPS outputs,
-  checkpoints, a summary table. ``sintercond run --resume DIR`` continues an
-  interrupted run.
+* ``sintercond run [scene.toml | NAME] [--out DIR] [--duration S]`` runs a
+  scene file or a built-in example scene by name (the built-in default scene
+  without either): progress bar, VTK/LAMMPS outputs, ``history.csv``,
+  checkpoints, a summary table. ``--duration`` replaces ``run.duration``.
+  ``sintercond run --resume DIR`` continues an interrupted run.
+* ``sintercond scenes`` lists the built-in example scenes.
 * ``sintercond effective scene.toml [--axis k]``: the steady-state effective
   conductivity of the scene's packing.
 * ``sintercond demo`` (also the default with no arguments) prints the neck
@@ -84,10 +86,15 @@ def main(argv=None) -> int:
     demo.add_argument("--kappa", type=float, default=COPPER_CONDUCTIVITY,
                       help="conductivity in W/(m K), > 0 (default: copper, 394)")
     run = sub.add_parser("run", help="run a scene file (default: the built-in scene)")
-    run.add_argument("scene", nargs="?", default=None, help="scene TOML file (default: built-in default scene)")
+    run.add_argument("scene", nargs="?", default=None,
+                     help="scene TOML file, or the name of a built-in scene (`sintercond scenes` lists them; "
+                          "default: the built-in default scene)")
     run.add_argument("--out", default="sintercond-out", help="output directory (default: sintercond-out)")
+    run.add_argument("--duration", type=float, default=None, metavar="S",
+                     help="simulated time in s, replacing the scene's run.duration (e.g. a short look at a scene)")
     run.add_argument("--resume", metavar="DIR", default=None, help="continue the run in DIR from its checkpoint")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sub.add_parser("scenes", help="list the built-in example scenes (run one with `sintercond run NAME`)")
     effective = sub.add_parser("effective", help="steady-state effective conductivity of a scene's packing")
     effective.add_argument("scene", nargs="?", default=None, help="scene TOML file (default: built-in default scene)")
     effective.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="heat-flow axis (default 2, z)")
@@ -96,6 +103,8 @@ def main(argv=None) -> int:
         enable_compilation_cache()  # a second run of the same scene compiles nothing
     if args.command in ("run", "effective"):
         return _scene_command(parser, args)
+    if args.command == "scenes":
+        return _list_scenes()
     kappa = getattr(args, "kappa", COPPER_CONDUCTIVITY)
     if not (np.isfinite(kappa) and kappa > 0):
         parser.error(f"--kappa must be finite and > 0 W/(m K); got {kappa}")
@@ -124,15 +133,28 @@ def _scene_command(parser, args) -> int:
         parser.exit(130, "sintercond: interrupted; `sintercond run --resume DIR` continues from the last checkpoint\n")
 
 
+def _list_scenes() -> int:
+    from sintercond.scene import builtin_scenes
+
+    scenes = builtin_scenes()
+    width = max(len(name) for name in scenes)
+    print("built-in example scenes (run one with `sintercond run NAME [--duration S]`):")
+    for name, description in scenes.items():
+        print(f"  {name:<{width}}  {description}")
+    return 0
+
+
 def _run(args) -> int:
     from sintercond import run as runner
-    from sintercond.scene import load_scene
+    from sintercond.scene import SceneError, load_scene
 
     if args.resume is not None:
+        if args.duration is not None:
+            raise SceneError("--duration applies to a new run, not to --resume (which continues the saved scene)")
         _, summary = runner.resume(args.resume, progress=not args.no_progress)
         out = args.resume
     else:
-        scene = load_scene(args.scene)
+        scene = load_scene(args.scene, duration=args.duration)
         _, summary = runner.run_scene(scene, args.out, progress=not args.no_progress)
         out = args.out
     print(runner.summary_table(summary))
@@ -159,7 +181,12 @@ def _effective(args) -> int:
     from sintercond import packing, thermal
     from sintercond.scene import load_scene
 
+    from sintercond.scene import SceneError
+
     scene = load_scene(args.scene)
+    if scene["packing"]["kind"] == "spheres":
+        raise SceneError('sintercond effective needs a packing.kind = "powder_bed" or "simple_cubic" (a box to '
+                         'measure k* in); listed spheres have none')
     bed = packing.from_scene(scene["packing"])
     box = effective_box(scene, bed)
     c = scene["conduction"]

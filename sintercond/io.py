@@ -5,7 +5,8 @@ Both formats are checked by the readers people open them with, VTK's
 with the ``readers`` extra):
 
 * ``write_vtp``: one vertex per particle, point data ``temperature`` (K),
-  ``radius`` (m) and ``id``; field data ``TIME`` (s) and ``STEP`` with
+  ``radius`` (m) and ``id`` (and, from a run with mechanics, ``velocity``
+  (m/s), ``force`` (N, contact force) and ``coordination``); field data ``TIME`` (s) and ``STEP`` with
   ``NumberOfTuples="1"`` (without it VTK reads them back empty). Numbers are
   written with Python's shortest round-trip ``repr`` of a built-in float, so
   the file holds the exact float64 values.
@@ -30,9 +31,26 @@ def _number(value) -> str:
     return repr(float(value))
 
 
-def write_vtp(path, centres, radii, temperature, step, t):
-    """VTK XML PolyData (ASCII) with one vertex per particle: temperature, radius, id; TIME and STEP field data."""
+def _extra_fields(fields, n):
+    """``{name: [n] or [n, k] array}`` checked; integer arrays stay integers."""
+    out = {}
+    for name, values in (fields or {}).items():
+        values = np.asarray(values)
+        if values.shape[0] != n or values.ndim not in (1, 2):
+            raise ValueError(f"field {name!r} must be [n] or [n, k] with n = {n}; got shape {values.shape}")
+        out[name] = values
+    return out
+
+
+def write_vtp(path, centres, radii, temperature, step, t, fields=None):
+    """VTK XML PolyData (ASCII) with one vertex per particle: temperature, radius, id; TIME and STEP field data.
+
+    ``fields``: more point data, ``{name: [n] or [n, k]}`` (e.g. ``velocity``
+    ``[n, 3]`` m/s, ``force`` ``[n, 3]`` N, ``coordination`` ``[n]`` ints),
+    written as Float64 or, for integer arrays, Int64.
+    """
     n = len(radii)
+    fields = _extra_fields(fields, n)
 
     def array(name, values, kind="Float64", components=1, tuples=None):
         body = " ".join(_number(v) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
@@ -47,28 +65,49 @@ def write_vtp(path, centres, radii, temperature, step, t):
         f'<Points>{array("position", centres, components=3)}</Points>\n'
         f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
         f'<PointData Scalars="temperature">{array("temperature", temperature)}{array("radius", radii)}'
-        f'{array("id", np.arange(n), "Int64")}</PointData>\n</Piece>\n</PolyData>\n</VTKFile>\n'
+        f'{array("id", np.arange(n), "Int64")}'
+        + "".join(array(name, v, "Int64" if np.issubdtype(v.dtype, np.integer) else "Float64",
+                        1 if v.ndim == 1 else v.shape[1]) for name, v in fields.items())
+        + '</PointData>\n</Piece>\n</PolyData>\n</VTKFile>\n'
     )
     atomic_write_text(path, xml)
 
 
-def lammps_frame(centres, radii, temperature, step) -> str:
-    """One LAMMPS dump frame (text) of the particles."""
+def _lammps_columns(fields):
+    """Dump columns of extra fields: ``velocity`` -> ``vx vy vz``, ``force`` -> ``fx fy fz`` (LAMMPS' names,
+    which OVITO maps to Velocity and Force), any other ``[n, k]`` field ``name_0 ... name_k-1``."""
+    names = []
+    for name, values in fields.items():
+        if values.ndim == 1:
+            names.append(name)
+        elif name in ("velocity", "force") and values.shape[1] == 3:
+            names += [f"{name[0]}{axis}" for axis in "xyz"]
+        else:
+            names += [f"{name}_{k}" for k in range(values.shape[1])]
+    return names
+
+
+def lammps_frame(centres, radii, temperature, step, fields=None) -> str:
+    """One LAMMPS dump frame (text) of the particles; ``fields`` as :func:`write_vtp`'s, as more columns."""
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
+    fields = _extra_fields(fields, len(radii))
     lo, hi = centres.min(axis=0) - radii.max(), centres.max(axis=0) + radii.max()
     lines = [f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
     lines += [f"{_number(lo[k])} {_number(hi[k])}\n" for k in range(3)]
-    lines.append("ITEM: ATOMS id radius x y z temperature\n")
-    lines += [f"{i + 1} {r!r} {x!r} {y!r} {z!r} {t!r}\n" for i, (r, (x, y, z), t) in
-              enumerate(zip(radii.tolist(), centres.tolist(), np.asarray(temperature, dtype=np.float64).tolist()))]
+    lines.append(" ".join(["ITEM: ATOMS id radius x y z temperature"] + _lammps_columns(fields)) + "\n")
+    extra = [v.reshape(len(radii), -1).tolist() for v in fields.values()]
+    for i, (r, (x, y, z), t) in enumerate(zip(radii.tolist(), centres.tolist(),
+                                              np.asarray(temperature, dtype=np.float64).tolist())):
+        more = "".join(f" {v!r}" for row in extra for v in row[i])
+        lines.append(f"{i + 1} {r!r} {x!r} {y!r} {z!r} {t!r}{more}\n")
     return "".join(lines)
 
 
-def append_lammps(path, centres, radii, temperature, step):
+def append_lammps(path, centres, radii, temperature, step, fields=None):
     """Append one frame to the LAMMPS dump at ``path``."""
     with open(path, "a") as f:
-        f.write(lammps_frame(centres, radii, temperature, step))
+        f.write(lammps_frame(centres, radii, temperature, step, fields))
 
 
 def truncate_lammps(path, last_step):
@@ -86,17 +125,19 @@ def atomic_write_text(path, text):
     os.replace(tmp, path)
 
 
-def save_checkpoint(directory, state):
+def save_checkpoint(directory, state, **extra):
     """Write the whole :class:`~sintercond.simulate.SimState` to ``directory/checkpoint.npz`` atomically.
 
     Every leaf is stored under its path in the state (plus ``temperature`` and
-    ``step`` for a quick look), written to a temporary file and renamed, so
-    a killed run leaves the last complete checkpoint.
+    ``step`` for a quick look, and the arrays ``extra``), written to a
+    temporary file and renamed, so a killed run leaves the last complete
+    checkpoint. With mechanics the leaves include velocities, spins, the
+    pair and wall springs and the neighbour list.
     """
     leaves = {jax.tree_util.keystr(path): np.asarray(leaf)
               for path, leaf in jax.tree_util.tree_flatten_with_path(state)[0]}
     tmp = Path(directory) / "checkpoint.tmp.npz"
-    np.savez(tmp, temperature=np.asarray(state.particles.temperature), step=int(state.step), **leaves)
+    np.savez(tmp, temperature=np.asarray(state.particles.temperature), step=int(state.step), **extra, **leaves)
     os.replace(tmp, Path(directory) / "checkpoint.npz")
 
 

@@ -17,15 +17,16 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import heat_sources, network, packing, plots, simulate, thermal, walls
+from sintercond import forces, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
-from sintercond.scene import SceneError, validate_scene
+from sintercond.scene import SceneError, restitution_damping_ratio, validate_scene
 from sintercond.state import particle_state
 
 
@@ -40,6 +41,9 @@ class Model:
     contacts: int
     stable_step: float = float("inf")
     bed: dict = dataclasses.field(default_factory=dict)
+    reallocate: Any = None  # simulate.reallocate_neighbors of a dynamic contact list, for advance
+    wall_heat: tuple = ()  # (column, index of the scene wall, mode, held mask) of each held or conducting wall
+    limits: dict = dataclasses.field(default_factory=dict)  # {"thermal": s, "mechanical": s} stable steps
 
     @property
     def physics(self) -> simulate.Physics:
@@ -59,8 +63,16 @@ class Model:
 
 
 def build_packing(scene):
-    bed = packing.from_scene(scene["packing"])
-    return bed.centres, bed.radii
+    """``(centres, radii, bed)`` of a validated scene: listed spheres as given, else
+    :func:`sintercond.packing.from_scene`.
+
+    ``bed``: the bed's figures for the summary (empty for listed spheres).
+    """
+    p = scene["packing"]
+    if p["kind"] == "spheres":
+        return np.asarray(p["centres"], np.float64), np.asarray(p["radii"], np.float64), {}
+    packed = packing.from_scene(p)
+    return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}
 
 
 def _nusselt(convection):
@@ -82,11 +94,57 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
         radiation="radiation" in scene)
 
 
+def mechanics_on(scene) -> bool:
+    """Whether a validated scene runs the coupled thermo-mechanical step."""
+    return bool(scene.get("physics", {}).get("mechanics", False))
+
+
+def mechanical_params(scene) -> mechanics.MechanicalParams | None:
+    """The contact material of a validated scene (``[mechanics]``, ``[softening]``), or None without mechanics.
+
+    ``mechanics.restitution`` e becomes ``xi_con``
+    (:func:`sintercond.scene.restitution_damping_ratio`).
+    """
+    if not mechanics_on(scene):
+        return None
+    m, soft = scene["mechanics"], scene.get("softening", {})
+    f = lambda x: jnp.asarray(float(x))  # noqa: E731
+    xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m.get("damping", 1.0)
+    mu, mu_r = m.get("friction", 0.0), m.get("rolling_friction", 0.0)
+    return mechanics.MechanicalParams(
+        E0=f(m["young_modulus"]), nu=f(m["poisson_ratio"]), xi_con=f(xi_con),
+        xi_fric=f(m.get("tangential_damping", 1.0)), xi_rol=f(m.get("rolling_damping", 0.0)), mu=f(mu), mu_r=f(mu_r),
+        mu_wall=f(m.get("wall_friction", mu)),
+        mu_r_wall=f(m.get("wall_rolling_friction", mu_r)), theta_star=f(soft.get("onset_temperature", 400.0)),
+        rate=f(soft.get("rate", 1.0)), E_min=f(soft.get("min_modulus", 0.0)))
+
+
+def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
+    """The coupled spec of a validated scene with mechanics: ``thermal_physics`` made dynamic, the walls pushing.
+
+    Every wall of the scene is a :class:`~sintercond.walls.PlaneWall` of
+    ``Physics.walls``; a held wall pushes as an insulated one (its
+    particles are held by ``Physics.held``, :func:`_apply_walls`).
+    """
+    p, m = scene["physics"], scene["mechanics"]
+    mu, mu_r = m.get("friction", 0.0), m.get("rolling_friction", 0.0)
+    walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
+                   for w in planes)
+    return dataclasses.replace(
+        thermal_physics, conductance="lifted", contacts="dynamic", conducting_walls=0, mechanics=True, walls=walls_,
+        gravity=tuple(p.get("gravity", (0.0, 0.0, -9.81))), shear=p.get("shear", "paper"),
+        slip_direction=p.get("slip_direction", "trial"), rolling_projection=p.get("rolling_projection", False),
+        damping_clamp=p.get("damping_clamp", False), softening="softening" in scene,
+        friction=mu > 0 or m.get("wall_friction", mu) > 0,
+        rolling=mu_r > 0 or m.get("wall_rolling_friction", mu_r) > 0)
+
+
 def scene_params(scene) -> simulate.Params:
     """The differentiable parameters of a validated scene."""
     m, beam, conv, rad = scene["material"], scene.get("beam"), scene.get("convection"), scene.get("radiation")
     f = jnp.asarray
     return simulate.Params(
+        mechanics=mechanical_params(scene),
         conductivity=f([m["conductivity"]]), specific_heat=f([m["specific_heat"]]),
         law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
         beam=None if beam is None else simulate.BeamParams(
@@ -105,16 +163,18 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     The time step: ``run.dt`` or, for ``"auto"``, 0.9 of the stable step
     ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` where ``G_i`` linearises
     convection and radiation (:func:`sintercond.thermal.source_conductance`);
-    then shortened to ``duration / n_steps`` so that the run ends exactly at
-    ``run.duration``. ``log(message)`` reports each phase.
+    with mechanics, of the smaller of that (at the initial contacts) and the
+    mechanical step (:func:`sintercond.mechanics.stable_time_step`: Eq. 47
+    and the tangential and rotational bounds of MECHANICS.md erratum 8, at
+    ``physics.impact_velocity``). A ``run.dt`` above the limit is refused,
+    naming it. Then the step is shortened to ``duration / n_steps`` so that
+    the run ends exactly at ``run.duration``. ``log(message)`` reports each phase.
     """
     log = log or (lambda message: None)
     bed = {}
     if centres is None:
         log("packing: building the scene's packing")
-        packed = packing.from_scene(scene["packing"])
-        centres, radii = packed.centres, packed.radii
-        bed = {k: v for k, v in packed.summary().items() if k != "particles"}
+        centres, radii, bed = build_packing(scene)
     m, c = scene["material"], scene["conduction"]
     physics = scene_physics(scene)
     log(f"network: contacts and conductances of {len(radii)} particles")
@@ -140,17 +200,44 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     run = scene["run"]
     sources = thermal.source_conductance(physics, particles.radii, params, _highest_temperature(scene))
     limit = float(simulate.stable_time_step(sim, state, params, sources))
+    names = {"thermal": (f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = {limit:.6g} s (G_i: "
+                         "linearised convection and radiation)"), "mechanical": ""}
+    thermal_limit, mechanical_limit = limit, float("inf")
+    reallocate = None
+    motion = None
+    if mechanics_on(scene):
+        log("mechanics: contact list and the mechanical time step")
+        planes = scene_walls(scene, centres, radii)
+        physics = mechanical_physics(scene, physics, planes)
+        skin = scene["physics"].get("skin", 0.1) * float(np.max(radii))
+        contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
+        sim = simulate.simulator(physics, fns)
+        reallocate = simulate.reallocate_neighbors(fns)
+        v_rel = scene["physics"].get("impact_velocity", 0.05)
+        mechanical_limit = float(_mechanical_stable_step(physics, particles, contacts.neighbors, params.mechanics,
+                                                         v_rel))
+        names["mechanical"] = (f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and the symplectic-Euler "
+                               f"bounds of the stiffest contact at physics.impact_velocity = {v_rel:g} m/s)")
+        motion = mechanics.mechanical_state(physics, centres, contacts.neighbors)
+        limit = min(thermal_limit, mechanical_limit)
     if run["dt"] == "auto":
         dt = 0.9 * limit if np.isfinite(limit) else run["duration"]
     else:
         dt = run["dt"]
-        if dt > limit:
-            raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds the explicit stability limit "
-                             f"min(C_i / (sum_j K_ij + G_i)) = {limit:.6g} s (G_i: linearised convection and "
-                             f"radiation); use dt <= {limit:.6g} s or the implicit integrator")
+        for kind, bound in (("thermal", thermal_limit), ("mechanical", mechanical_limit)):
+            if dt > bound:
+                raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds {names[kind]}; use dt <= {limit:.6g} s"
+                                 + (" or the implicit integrator" if kind == "thermal" and motion is None else ""))
     n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
     dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
-    return Model(sim, params, simulate.init_state(particles, contacts, dt), n_steps, len(table.pairs()), limit, bed)
+    state = simulate.init_state(particles, contacts, dt, mechanics=motion)
+    return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
+                 _wall_heat_specs(scene, centres, radii, physics),
+                 {"thermal": thermal_limit, "mechanical": mechanical_limit})
+
+
+_mechanical_stable_step = jax.jit(mechanics.stable_time_step, static_argnums=0)
+""":func:`sintercond.mechanics.stable_time_step` compiled once per spec and size (eager, it dispatches ~100 ops)."""
 
 
 def _highest_temperature(scene) -> float:
@@ -187,6 +274,24 @@ def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
         point[axis] = position
         planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall["mode"], wall.get("temperature")))
     return planes
+
+
+def _wall_heat_specs(scene, centres, radii, physics):
+    """``(column, index of the scene wall, mode, held mask or None)`` of each held or conducting wall of a scene.
+
+    A particle held by several walls counts for the first (as in
+    :func:`_apply_walls`, where the last one sets its temperature, they are
+    only ever equal on an edge of two held faces).
+    """
+    specs, claimed = [], np.zeros(len(radii), bool)
+    for k, wall in enumerate(scene_walls(scene, centres, radii)):
+        if wall.mode == "held":
+            mask = (np.asarray(wall.penetration(centres, radii)) >= 0) & ~claimed
+            claimed |= mask
+            specs.append((f"heat_wall{k}_W", k, "held", mask))
+        elif wall.mode == "conducting":
+            specs.append((f"heat_wall{k}_W", k, "conducting", None))
+    return tuple(specs)
 
 
 def _apply_walls(scene, centres, radii):
@@ -309,19 +414,132 @@ def physical_range_check(scene):
 
 
 HISTORY_COLUMNS = ("step", "time_s", "T_mean_K", "T_min_K", "T_max_K")
-"""Columns of ``history.csv``, one row per output step (the LAMMPS "thermo" analogue)."""
+"""The columns of ``history.csv`` every run has, one row per output step (the LAMMPS "thermo" analogue)."""
+MECHANICS_COLUMNS = ("kinetic_energy_J", "contacts", "wall_contacts", "max_overlap_m")
+"""Columns a run with mechanics adds: translational plus rotational kinetic energy, touching particle pairs,
+particles touching a wall, and the largest overlap of a pair or a wall contact."""
 
 
-def _history_row(state) -> str:
+def history_columns(model) -> tuple:
+    """The columns of ``history.csv`` of ``model``: :data:`HISTORY_COLUMNS`, :data:`MECHANICS_COLUMNS` with
+    mechanics, and ``heat_wall{k}_W`` (the heat power into the packing through scene wall ``k``, W) for each
+    held or conducting wall."""
+    return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics else ())
+            + tuple(spec[0] for spec in model.wall_heat))
+
+
+class Observation(NamedTuple):
+    """What a run reports of a state besides temperatures (host arrays): see :func:`observe`."""
+
+    wall_heat: tuple  # W per held or conducting wall, in model.wall_heat order
+    kinetic_energy: float = float("nan")
+    pairs: Any = None  # [p, 2] touching particle pairs
+    pair_overlap: Any = None  # [p] (m)
+    wall_overlap: Any = None  # [n_walls, n] (m), > 0 touching
+    velocity: Any = None  # [n, 3] (m/s)
+    force: Any = None  # [n, 3] contact force (N), gravity excluded
+
+
+def _probe_fn(model):
+    """A jitted ``(state, params) -> (heat power [n] W, velocity after one step or None)`` for :func:`observe`."""
+    sim = model.sim
+
+    def probe(state, params):
+        prep = sim.prepare_fn(state, params)
+        power = sim.heat_power_fn(state, prep)
+        after = sim.advance_fn(state, prep).mechanics.velocity if model.physics.mechanics else None
+        return power, after
+
+    return jax.jit(probe)
+
+
+def _plane_penetration(plane, positions, radii, t):
+    """``r - (x - p(t)) . n`` (m) of each particle on a plane wall whose point moves at its velocity."""
+    point = np.asarray(plane.point) + t * np.asarray(plane.velocity)
+    return radii - (positions - point) @ np.asarray(plane.normal)
+
+
+def observe(scene, model, state, probe) -> Observation:
+    """Heat through each held or conducting wall, and with mechanics the motion and the contacts, of ``state``.
+
+    Heat into the packing through a conducting wall: ``sum_i K_iw (T_w - T_i)``
+    with ``K_iw`` the wall conductance of the scene's law at the current
+    penetration (:func:`sintercond.walls.wall_conductance`); through a held
+    wall: the power its held particles lose to the rest,
+    ``-sum_i P_i`` over them (what holds them at their temperature).
+    With mechanics: the contact force ``m (v(t + dt) - v(t)) / dt - m g``
+    (one symplectic-Euler step of the simulator, Eq. 43), kinetic energy
+    ``sum m v^2/2 + I omega^2/2`` (``I = (2/5) m r^2``), touching pairs and
+    wall contacts.
+    """
+    p = state.particles
+    positions, radii, temperature = (np.asarray(x) for x in (p.positions, p.radii, p.temperature))
+    kappa = np.asarray(model.params.conductivity)[np.asarray(p.material)]
+    needs_power = any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics
+    power, after = probe(state, model.params) if needs_power else (None, None)
+    planes = scene_walls(scene, np.asarray(model.state.particles.positions), radii)
+    if model.physics.mechanics:
+        planes = list(model.physics.walls)
+    t = float(state.time)
+    conducting_power = np.zeros(len(radii))
+    wall_h = [_plane_penetration(plane, positions, radii, t) for plane in planes]
+    flows = {}
+    c = scene["conduction"]
+    for k, wall in enumerate(_walls(scene)):
+        if wall["mode"] == "conducting":
+            k_w = np.asarray(walls.wall_conductance(c["law"], radii, wall_h[k], kappa, params=c.get("params"),
+                                                    neck_model=c.get("neck_model")))
+            q = k_w * (wall["temperature"] - temperature)
+            conducting_power += q if model.physics.mechanics else 0.0  # the thermal simulator's P_i holds it
+            flows[k] = float(np.sum(q))
+    for column, k, mode, mask in model.wall_heat:
+        if mode == "held":
+            flows[k] = -float(np.sum((np.asarray(power) + conducting_power)[mask]))
+    heat = tuple(flows[spec[1]] for spec in model.wall_heat)
+    if not model.physics.mechanics:
+        return Observation(heat)
+    m = np.asarray(p.mass)
+    v, omega = np.asarray(state.mechanics.velocity), np.asarray(state.mechanics.spin)
+    inertia = forces.SOLID_SPHERE_INERTIA * m * radii**2
+    kinetic = float(0.5 * np.sum(m * np.sum(v * v, axis=1)) + 0.5 * np.sum(inertia * np.sum(omega * omega, axis=1)))
+    force = m[:, None] * ((np.asarray(after) - v) / float(state.dt) - np.asarray(model.physics.gravity))
+    pairs, overlap = _touching_pairs(positions, radii, np.asarray(state.contacts.neighbors))
+    return Observation(heat, kinetic, pairs, overlap, np.stack(wall_h) if wall_h else np.zeros((0, len(radii))),
+                       v, force)
+
+
+def _touching_pairs(positions, radii, neighbors):
+    """Touching pairs ``[p, 2]`` (each once, ``i < j``) among the listed candidates, and their overlaps (m)."""
+    n = len(radii)
+    rows = np.broadcast_to(np.arange(n)[:, None], neighbors.shape)
+    listed = (neighbors < n) & (neighbors != rows)
+    i, j = rows[listed], neighbors[listed]
+    lo, hi = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1), axis=0).T if len(i) else (i, j)
+    overlap = radii[lo] + radii[hi] - np.linalg.norm(positions[hi] - positions[lo], axis=1)
+    touching = overlap > 0
+    return np.stack([lo[touching], hi[touching]], axis=1), overlap[touching]
+
+
+def coordination(n, pairs):
+    """Contacts per particle ``[n]`` (particle pairs only, walls not counted)."""
+    return np.bincount(np.ravel(pairs), minlength=n)
+
+
+def _history_row(model, state, obs: Observation) -> str:
     t = np.asarray(state.particles.temperature)
-    values = (float(state.time), float(t.mean()), float(t.min()), float(t.max()))  # Python floats: plain repr
-    return f"{int(state.step)}," + ",".join(repr(v) for v in values) + "\n"
+    values = [float(state.time), float(t.mean()), float(t.min()), float(t.max())]  # Python floats: plain repr
+    if model.physics.mechanics:
+        touching_walls = int(np.sum(np.any(obs.wall_overlap > 0, axis=0))) if len(obs.wall_overlap) else 0
+        largest = float(max(np.max(obs.pair_overlap, initial=0.0), np.max(obs.wall_overlap, initial=0.0)))
+        values += [obs.kinetic_energy, len(obs.pairs), touching_walls, largest]
+    values += list(obs.wall_heat)
+    return f"{int(state.step)}," + ",".join(repr(v) if isinstance(v, float) else str(v) for v in values) + "\n"
 
 
 def read_history(out) -> dict:
-    """``history.csv`` of a run as a dict of arrays; ``time`` (s) and the temperatures (K), for the history plot."""
+    """``history.csv`` of a run as a dict of arrays: ``time`` (s) and every other column by its name (for the plot)."""
     data = np.genfromtxt(Path(out) / "history.csv", delimiter=",", names=True, ndmin=1)
-    return {"time": data["time_s"], **{name: data[name] for name in HISTORY_COLUMNS[2:]}}
+    return {"time": data["time_s"], **{name: data[name] for name in data.dtype.names if name not in ("step", "time_s")}}
 
 
 def _log(message):
@@ -352,11 +570,15 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         model = build_model(scene, log=_log)
         np.savez(out / "packing.npz", centres=model.centres, radii=model.radii)
         (out / "bed.json").write_text(json.dumps(model.bed))
-        (out / "history.csv").write_text(",".join(HISTORY_COLUMNS) + "\n" + _history_row(model.state))
-        _write_outputs(scene, out, model, model.state)
+        probe = _probe_fn(model)
+        obs = observe(scene, model, model.state, probe)
+        header = ",".join(history_columns(model)) + "\n"
+        (out / "history.csv").write_text(header + _history_row(model, model.state, obs))
+        _write_outputs(scene, out, model, model.state, obs)
         state = model.state
     else:
         model, state = _start
+        probe = _probe_fn(model)
     run = scene["run"]
     chunk = run["output_every"]
     chunks_done = 0
@@ -366,11 +588,12 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     def on_chunk(s):
         nonlocal chunks_done
         step = int(s.step)
-        _write_outputs(scene, out, model, s)
+        obs = observe(scene, model, s, probe)
+        _write_outputs(scene, out, model, s, obs)
         with open(out / "history.csv", "a") as f:
-            f.write(_history_row(s))
+            f.write(_history_row(model, s, obs))
         if step % run["checkpoint_every"] == 0 or step >= model.n_steps:
-            save_checkpoint(out, s)
+            save_checkpoint(out, s, **list_capacity(s))
         chunks_done += 1
         return stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps
 
@@ -378,7 +601,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     bar = tqdm(total=model.n_steps, initial=int(state.step), unit="step", disable=not progress, desc="sintercond run")
     try:
         state, _ = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
-                           progress=bar.update, check=physical_range_check(scene))
+                           reallocate=model.reallocate, progress=bar.update, check=physical_range_check(scene))
     finally:
         bar.close()
     temperature = state.particles.temperature
@@ -391,21 +614,60 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         "wall_s": elapsed, "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()),
         "T_max_K": float(temperature.max()),
     }
+    if model.physics.mechanics:
+        history = read_history(out)
+        summary.update({"thermal_step_s": model.limits["thermal"], "mechanical_step_s": model.limits["mechanical"],
+                        "kinetic_energy_J": float(history["kinetic_energy_J"][-1]),
+                        "final_contacts": int(history["contacts"][-1]),
+                        "max_overlap_m": float(history["max_overlap_m"][-1])})
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    plots.write_run_pictures(out, model.centres, model.radii, temperature, summary, history=read_history(out))
+    plots.write_run_pictures(out, np.asarray(state.particles.positions), model.radii, temperature, summary,
+                             history=read_history(out))
     return temperature, summary
 
 
-def _write_outputs(scene, out, model, state):
+def _write_outputs(scene, out, model, state, obs: Observation):
+    """The frame of ``state``: positions, radii, temperatures, and with mechanics velocity, contact force and
+    coordination (contacts per particle)."""
     formats = scene["run"]["formats"]
     step = int(state.step)
     t = float(state.time)
     temperature = state.particles.temperature
+    positions = np.asarray(state.particles.positions)
+    fields = {}
+    if model.physics.mechanics:
+        fields = {"velocity": obs.velocity, "force": obs.force,
+                  "coordination": coordination(len(model.radii), obs.pairs)}
     if "vtp" in formats:
         (out / "vtp").mkdir(exist_ok=True)
-        write_vtp(out / "vtp" / f"step_{step:08d}.vtp", model.centres, model.radii, temperature, step, t)
+        write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields)
     if "lammps" in formats:
-        append_lammps(out / "dump.lammpstrj", model.centres, model.radii, temperature, step)
+        append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields)
+
+
+def list_capacity(state) -> dict:
+    """``{"neighbor_capacity": [max_occupancy, cell_list_capacity]}`` of a dynamic contact list, else ``{}``.
+
+    The capacities are static fields of jax-md's list (not leaves): a list
+    reallocated during a run has other ones than the list the scene builds,
+    and a checkpoint records them so that :func:`load_state` restores them.
+    """
+    nbrs = state.contacts.neighbor_list
+    if nbrs is None:
+        return {}
+    cells = -1 if nbrs.cell_list_capacity is None else int(nbrs.cell_list_capacity)
+    return {"neighbor_capacity": np.array([int(nbrs.max_occupancy), cells])}
+
+
+def load_state(path, like):
+    """The state in the checkpoint at ``path``, shaped as ``like`` but with the saved neighbour-list capacities."""
+    saved = np.load(path)
+    if "neighbor_capacity" in saved.files and like.contacts.neighbor_list is not None:
+        occupancy, cells = (int(v) for v in saved["neighbor_capacity"])
+        nbrs = dataclasses.replace(like.contacts.neighbor_list, max_occupancy=occupancy,
+                                   cell_list_capacity=None if cells < 0 else cells)
+        like = dataclasses.replace(like, contacts=dataclasses.replace(like.contacts, neighbor_list=nbrs))
+    return load_checkpoint(path, like)
 
 
 def resume(out_dir, progress=True, stop_after_chunks=None):
@@ -429,7 +691,7 @@ def resume(out_dir, progress=True, stop_after_chunks=None):
     model = build_model(scene, packed["centres"], packed["radii"], log=_log)
     if (out / "bed.json").exists():
         model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
-    state = load_checkpoint(out / "checkpoint.npz", model.state)
+    state = load_state(out / "checkpoint.npz", model.state)
     # outputs written after the checkpoint by the interrupted run are redone
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         if int(f.stem.split("_")[1]) > step:

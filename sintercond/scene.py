@@ -1,9 +1,13 @@
 """Scene files (TOML): what a thermal run simulates, validated before anything is built or compiled.
 
-A scene has the sections ``[packing]`` (``kind = "powder_bed"`` or
-``"simple_cubic"``), ``[material]``, ``[conduction]`` (with
+A scene has the sections ``[packing]`` (``kind = "powder_bed"``,
+``"simple_cubic"`` or ``"spheres"``), ``[material]``, ``[conduction]`` (with
 ``[conduction.params]``), ``[initial]``, optional ``[boundary]``,
-``[[walls]]``, ``[beam]``, ``[convection]``, ``[radiation]``, and ``[run]``.
+``[[walls]]``, ``[beam]``, ``[convection]``, ``[radiation]``, the
+thermo-mechanical ``[physics]`` (``mechanics = true``: particles move under
+contact forces, gravity and walls; Quintana-Ruiz & Campello 2020),
+``[mechanics]`` (the contact material) and ``[softening]`` (Eq. 42), and
+``[run]``.
 SI units throughout (m, s, K, W, kg). The reference of every key (type,
 range, unit, default, meaning) is ``docs/scenes.md``, generated from the
 schema below (:func:`scene_reference`); ``sintercond/data/default_scene.toml``
@@ -19,6 +23,7 @@ refused beyond the documented limits, all before a packing is built.
 from __future__ import annotations
 
 import difflib
+import functools
 import importlib.resources
 import math
 import tomllib
@@ -54,6 +59,11 @@ def _choice(*options):
 
 
 TEMPERATURE = _within(1.0, 1e4, "K")
+PACKING_KINDS = ("powder_bed", "simple_cubic", "spheres")
+PACKING_METHODS = ("relax",)
+"""How a ``powder_bed`` is made (``packing.method``); pouring with the real DEM joins as ``"pour"``."""
+MAX_LISTED_SPHERES = 10_000
+"""Most spheres of a ``kind = "spheres"`` packing (they are listed in the scene file)."""
 FRACTION = _within(0.0, 1.0)
 
 # Limits of a run, checked before anything is built (``run.override_limits = true`` lifts the last three).
@@ -110,6 +120,58 @@ _SCHEMA = {
         "environment_temperature": Key(float, TEMPERATURE, True, "K", doc="T_E of the surroundings"),
         "emissivity": Key(float, FRACTION, True, doc="epsilon"),
     },
+    "physics": {
+        "mechanics": Key(bool, None, False, default=False,
+                         doc="true: the coupled thermo-mechanical step (Quintana-Ruiz & Campello 2020, Eqs. 43-46): "
+                             "particles move under Hertz contacts, friction, rolling resistance, gravity and the "
+                             "walls, "
+                             "and heat flows through the contacts the motion opens and grows; needs [mechanics]. "
+                             "false: the packing stays put (the fast thermal path)"),
+        "gravity": Key(list, ("a list of 3 numbers in [-1000, 1000] m/s^2", lambda v: True), False, "m/s^2",
+                       default=[0.0, 0.0, -9.81], doc="acceleration of gravity (with mechanics)"),
+        "shear": Key(str, _choice("paper", "mindlin"), False, default="paper",
+                     doc="effective shear modulus G*: the paper's Eq. 9 or Mindlin's 1/G* = sum (2 - nu)/G"),
+        "slip_direction": Key(str, _choice("trial", "velocity"), False, default="trial",
+                              doc="direction of a slipping friction force: along the trial force (LAMMPS) or the "
+                                  "sliding velocity (MECHANICS.md erratum 3)"),
+        "rolling_projection": Key(bool, None, False, default=False,
+                                  doc="roll on the tangential part of the relative spin only (LAMMPS sds; erratum 5)"),
+        "damping_clamp": Key(bool, None, False, default=False,
+                             doc="no tensile normal force while a contact opens (LAMMPS limit_damping)"),
+        "skin": Key(float, _within(0.0, 10.0, low_open=True), False, "largest radii", default=0.1,
+                    doc="Verlet skin of the contact list; it is rebuilt once a particle moved half of it"),
+        "impact_velocity": Key(float, _within(0.0, 1e3, "m/s", low_open=True), False, "m/s", default=0.05,
+                               doc="largest approach speed of two particles (or a particle and a wall) the automatic "
+                                   "time step is sized for (Eq. 47 and MECHANICS.md erratum 8)"),
+    },
+    "mechanics": {
+        "young_modulus": Key(float, _within(1.0, 1e13, "Pa"), True, "Pa",
+                             doc="E0, Young's modulus (below the softening onset)"),
+        "poisson_ratio": Key(float, _within(0.0, 0.5), True, doc="nu"),
+        "friction": Key(float, _within(0.0, 10.0), False, default=0.0,
+                        doc="mu, Coulomb friction between particles (Eq. 8); > 0 turns Mindlin friction on"),
+        "rolling_friction": Key(float, _within(0.0, 10.0), False, default=0.0,
+                                doc="mu_r, rolling resistance between particles (Eq. 16); > 0 turns it on"),
+        "wall_friction": Key(float, _within(0.0, 10.0), False, default="friction",
+                             doc="mu against every wall"),
+        "wall_rolling_friction": Key(float, _within(0.0, 10.0), False, default="rolling_friction",
+                                     doc="mu_r against every wall"),
+        "damping": Key(float, _within(0.0, 10.0), False, default=1.0,
+                       doc="xi_con, normal damping ratio (Eq. 6; 1 critical for the linearised contact); or give "
+                           "restitution"),
+        "restitution": Key(float, _within(0.0, 1.0, low_open=True), False,
+                           doc="coefficient of restitution e instead of damping: xi_con = sqrt(5/6) beta, "
+                               "beta = -ln e / sqrt(pi^2 + ln^2 e) (Tsuji's form, as LAMMPS)"),
+        "tangential_damping": Key(float, _within(0.0, 10.0), False, default=1.0, doc="xi_fric (Eq. 11)"),
+        "rolling_damping": Key(float, _within(0.0, 10.0), False, default=0.0, doc="xi_rol (Eq. 18)"),
+    },
+    "softening": {
+        "onset_temperature": Key(float, TEMPERATURE, True, "K", doc="theta*, where softening starts (Eq. 42)"),
+        "rate": Key(float, _within(0.0, 1e3), False, default=1.0,
+                    doc="r of E = max(E_min, E0 exp(min(0, r (1 - theta/theta*)))) (MECHANICS.md erratum 6; "
+                        "1: the printed Eq. 42)"),
+        "min_modulus": Key(float, _within(0.0, 1e13, "Pa"), False, "Pa", default=0.0, doc="E_min, the floor"),
+    },
     "run": {
         "duration": Key(float, _within(0.0, 1e6, "s", low_open=True), True, "s",
                         doc="simulated time; the run ends exactly there"),
@@ -129,19 +191,22 @@ _SCHEMA = {
 }
 _PACKING = {
     "powder_bed": {
-        "kind": Key(str, _choice("powder_bed", "simple_cubic"), True, doc="the packing"),
+        "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
         "lateral_size": Key(float, _within(1e-7, 1.0, "m"), True, "m", doc="side of the square container"),
         "height": Key(float, _within(1e-7, 1.0, "m"), True, "m",
                       doc="bed height to fill, >= the largest diameter; the bed holds 0.62 of this volume"),
         "diameter_range": Key(list, ("a list [low, high] of numbers in [1e-08, 1] m", lambda v: True), True, "m",
                               doc="[low, high] diameters, uniform by volume, 1e-8 <= low <= high < lateral_size"),
         "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed"),
+        "method": Key(str, _choice(*PACKING_METHODS), False, default="relax",
+                      doc="how the bed is made: relax (spheres dropped and relaxed with harmonic repulsion, "
+                          "sintercond.packing.powder_bed)"),
         "sinter_swelling": Key(float, _within(0.0, 0.05), False, default=0.0,
                                doc="relative radius increase after settling that turns contacts into sintered "
                                    "necks (overlap h = 2 r s for equal spheres)"),
     },
     "simple_cubic": {
-        "kind": Key(str, _choice("powder_bed", "simple_cubic"), True, doc="the packing"),
+        "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
         "counts": Key(list, ("a list of 3 integers in [1, 10000]", lambda v: True), True, doc="[nx, ny, nz] spheres per axis, integers >= 1; at most "
                                              f"{MAX_LATTICE_PARTICLES} in all"),
         "spacing": Key(float, _within(1e-8, 1.0, "m"), True, "m", doc="centre distance of neighbours"),
@@ -149,6 +214,13 @@ _PACKING = {
                       doc="sphere radius; the lattice conducts only for radius > spacing/2 (overlap "
                           "h = 2 radius - spacing > 0), up to the neck model's largest overlap "
                           "(0.75 spacing for the volume-conserving neck)"),
+    },
+    "spheres": {
+        "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
+        "centres": Key(list, (f"a list of at most {MAX_LISTED_SPHERES} [x, y, z] points (m)", lambda v: True), True,
+                       "m", doc="sphere centres in absolute coordinates"),
+        "radii": Key(object, ("a number in [1e-08, 1] m or a list of them, one per centre", lambda v: True), True,
+                     "m", doc="one radius for all, or one per centre"),
     },
 }
 _WALL = {
@@ -161,7 +233,12 @@ _WALL = {
     "temperature": Key(float, TEMPERATURE, False, "K", doc="wall temperature (required unless insulated)"),
     "penetration": Key(float, _within(0.0, 0.2), False, "mean radii", default=0.02,
                        doc="the wall plane lies at the packing's extreme along the axis moved this many mean "
-                           "radii into the packing: the particles it cuts touch the wall"),
+                           "radii into the packing: the particles it cuts touch the wall (with mechanics, 0 places "
+                           "it touching without pushing)"),
+    "velocity": Key(list, ("a list of 3 numbers in [-1000, 1000] m/s", lambda v: True), False, "m/s",
+                    default=[0.0, 0.0, 0.0],
+                    doc="with mechanics: the wall moves at this velocity (its plane along its normal component, "
+                        "its surface rubbing along the rest)"),
 }
 # the laws' parameters in a scene: physical ranges (the API only requires them finite, > 0 or >= 0)
 _LAW_PARAMS = {
@@ -174,7 +251,7 @@ _LAW_PARAMS = {
        for c in ("c1", "c2", "c3", "c4")},
 }
 _SECTIONS = ("packing", "material", "conduction", "initial", "boundary", "walls", "beam", "convection", "radiation",
-             "run")
+             "physics", "mechanics", "softening", "run")
 _REQUIRED_SECTIONS = ("packing", "material", "conduction", "initial", "run")
 
 
@@ -214,13 +291,10 @@ def _check_section(name, table, schema):
     for key in table:
         if key not in schema:
             raise SceneError(f"unknown key {name}.{key}{_suggest(key, schema)}; allowed keys: {sorted(schema)}")
-    out = {}
+    out = {key: _value(f"{name}.{key}", table[key], spec) for key, spec in schema.items() if key in table}
     for key, spec in schema.items():
-        if key not in table:
-            if spec.required:
-                raise SceneError(f"missing key {name}.{key} ({_describe(spec)})")
-            continue
-        out[key] = _value(f"{name}.{key}", table[key], spec)
+        if key not in table and spec.required:
+            raise SceneError(f"missing key {name}.{key} ({_describe(spec)})")
     return out
 
 
@@ -256,6 +330,9 @@ def validate_scene(raw: dict) -> dict:
         if wall["mode"] != "insulated" and "temperature" not in wall:
             raise SceneError(f"walls[{k}].temperature is required for a {wall['mode']} wall "
                              f"({_describe(_WALL['temperature'])})")
+        if "velocity" in wall:
+            wall["velocity"] = _numbers(f"walls[{k}].velocity", wall["velocity"], 3, _within(-1e3, 1e3, "m/s"))
+    _check_mechanics(scene)
     _check_details(scene)
     estimate_run(scene)
     return scene
@@ -273,16 +350,75 @@ def _numbers(name, value, length, rule, integer=False):
 
 
 def _lateral_extent(packing):
+    """``((x_lo, x_hi), (y_lo, y_hi))`` (m) of the packing, from the scene alone."""
     if packing["kind"] == "powder_bed":
-        return packing["lateral_size"], packing["lateral_size"]
+        return (0.0, packing["lateral_size"]), (0.0, packing["lateral_size"])
+    if packing["kind"] == "spheres":
+        c, r = packing["centres"], packing["radii"]
+        return tuple((min(p[k] - q for p, q in zip(c, r)), max(p[k] + q for p, q in zip(c, r))) for k in (0, 1))
     nx, ny, _ = packing["counts"]
-    return ((nx - 1) * packing["spacing"] + 2 * packing["radius"], (ny - 1) * packing["spacing"] + 2 * packing["radius"])
+    return ((0.0, (nx - 1) * packing["spacing"] + 2 * packing["radius"]),
+            (0.0, (ny - 1) * packing["spacing"] + 2 * packing["radius"]))
+
+
+def restitution_damping_ratio(e):
+    """Normal damping ratio ``xi_con`` (Eq. 6) of a restitution coefficient ``e`` in (0, 1].
+
+    ``xi = sqrt(5/6) beta`` with ``beta = -ln e / sqrt(pi^2 + ln^2 e)``: the
+    ``delta^(1/4)`` (Tsuji) damping LAMMPS' ``hertz/material`` derives from
+    ``e`` (MECHANICS.md, "What users comparing with LAMMPS will see"); it
+    makes the paper's ``d_con = 2 xi sqrt(2 E* m* sqrt(r*)) delta^(1/4)``
+    equal LAMMPS' ``2 sqrt(5/6) beta sqrt(k_n m*)``, ``k_n = 2 E* sqrt(r* delta)``.
+    ``e = 1``: 0 (elastic).
+    """
+    log_e = math.log(e)
+    return math.sqrt(5.0 / 6.0) * -log_e / math.sqrt(math.pi**2 + log_e**2)
+
+
+def _check_mechanics(scene):
+    """The thermo-mechanical sections: [mechanics] and [softening] only with physics.mechanics, combinations."""
+    physics = scene.setdefault("physics", {})
+    on = physics.get("mechanics", False)
+    for section in ("mechanics", "softening"):
+        if section in scene and not on:
+            raise SceneError(f"[{section}] needs physics.mechanics = true (the packing moves); without it the run is "
+                             "thermal only: drop the section or set physics.mechanics = true")
+    for k, wall in enumerate(scene["walls"]):
+        if "velocity" in wall and any(wall["velocity"]) and not on:
+            raise SceneError(f"walls[{k}].velocity needs physics.mechanics = true (a wall moves only with mechanics)")
+    if "gravity" in physics:
+        physics["gravity"] = _numbers("physics.gravity", physics["gravity"], 3, _within(-1e3, 1e3, "m/s^2"))
+    if not on:
+        for key in physics:
+            if key != "mechanics":
+                raise SceneError(f"physics.{key} needs physics.mechanics = true (without it nothing moves and "
+                                 f"physics.{key} would be ignored)")
+        return
+    if "mechanics" not in scene:
+        raise SceneError("physics.mechanics = true needs a [mechanics] section (the contact material: at least "
+                         f"mechanics.young_modulus ({_describe(_SCHEMA['mechanics']['young_modulus'])}) and "
+                         f"mechanics.poisson_ratio ({_describe(_SCHEMA['mechanics']['poisson_ratio'])}))")
+    m = scene["mechanics"]
+    if "restitution" in m and "damping" in m:
+        raise SceneError("give mechanics.damping or mechanics.restitution, not both (restitution sets the damping)")
 
 
 def _check_packing(packing, conduction):
     from sintercond import neck
     from sintercond.packing import PackingError, check_bed
 
+    if packing["kind"] == "spheres":
+        centres, radii = packing["centres"], packing["radii"]
+        rule = ("a list of 3 numbers in [-1, 1] m", lambda v: -1.0 <= v <= 1.0)
+        if not centres or len(centres) > MAX_LISTED_SPHERES:
+            raise SceneError(f"packing.centres must be {_describe(_PACKING['spheres']['centres'])}; got "
+                             f"{len(centres)} points")
+        packing["centres"] = [_numbers(f"packing.centres[{k}]", c, 3, rule) for k, c in enumerate(centres)]
+        radius_rule = _within(1e-8, 1.0, "m")
+        if not isinstance(radii, list):
+            radii = [radii] * len(centres)
+        packing["radii"] = _numbers("packing.radii", radii, len(centres), radius_rule)
+        return
     if packing["kind"] == "powder_bed":
         packing["diameter_range"] = _numbers("packing.diameter_range", packing["diameter_range"], 2,
                                              _within(1e-8, 1.0, "m"))
@@ -336,13 +472,13 @@ def _check_details(scene):
         path = beam["path"]
         if not path or any(not isinstance(p, list) for p in path):
             raise SceneError(f"beam.path must be a non-empty list of [x, y] points (m); got {path!r}")
-        extent = _lateral_extent(scene["packing"])
+        (x0, x1), (y0, y1) = _lateral_extent(scene["packing"])
         reach = beam["spot_radius"]
-        rule = (f"within the packing's lateral extent [0, {extent[0]:g}] x [0, {extent[1]:g}] m widened by "
+        rule = (f"within the packing's lateral extent [{x0:g}, {x1:g}] x [{y0:g}, {y1:g}] m widened by "
                 f"beam.spot_radius", lambda v: True)
         beam["path"] = [_numbers(f"beam.path[{k}]", p, 2, rule) for k, p in enumerate(path)]
         for k, (x, y) in enumerate(beam["path"]):
-            if not (-reach <= x <= extent[0] + reach and -reach <= y <= extent[1] + reach):
+            if not (x0 - reach <= x <= x1 + reach and y0 - reach <= y <= y1 + reach):
                 raise SceneError(f"beam.path[{k}] = {[x, y]} must be {rule[0]} (beam coordinates are absolute)")
     convection = scene.get("convection", {})
     if ("reynolds" in convection) != ("prandtl" in convection):
@@ -391,7 +527,10 @@ def estimate_run(scene) -> RunEstimate:
     from sintercond.packing import bed_particle_count
 
     packing, material, run = scene["packing"], scene["material"], scene["run"]
-    if packing["kind"] == "powder_bed":
+    if packing["kind"] == "spheres":
+        n, r = len(packing["radii"]), min(packing["radii"])
+        h, z = 2 * r * 1e-3, 13
+    elif packing["kind"] == "powder_bed":
         n = bed_particle_count(packing["lateral_size"], packing["height"], packing["diameter_range"])
         r = packing["diameter_range"][0] / 2
         h, z = 2 * r * max(packing.get("sinter_swelling", 0.0), 1e-3), 13
@@ -416,7 +555,10 @@ def estimate_run(scene) -> RunEstimate:
         temperatures.append(scene["radiation"]["environment_temperature"])
         g += 16 * math.pi * scene["radiation"]["emissivity"] * STEFAN_BOLTZMANN * max(temperatures) ** 3 * r**2
     capacity = material["density"] * material["specific_heat"] * 4 / 3 * math.pi * r**3
-    dt = 0.9 * capacity / (z * k_pair + g) if run["dt"] == "auto" else run["dt"]
+    dt = 0.9 * capacity / (z * k_pair + g)
+    if scene.get("physics", {}).get("mechanics"):
+        dt = min(dt, 0.9 * _mechanical_step_estimate(scene, r))
+    dt = dt if run["dt"] == "auto" else run["dt"]
     steps = max(1, math.ceil(run["duration"] / dt))
     frames = steps // run["output_every"] + 1
     per_frame = n * (("vtp" in run["formats"]) * 230 + ("lammps" in run["formats"]) * 140)
@@ -435,6 +577,43 @@ def estimate_run(scene) -> RunEstimate:
                                  f"{value:.3g} {what}; the limit is {limit:g}: {advice}, or set "
                                  f"run.override_limits = true")
     return estimate
+
+
+def _mechanical_step_estimate(scene, r):
+    """:func:`sintercond.forces.stable_time_step` of two of the smallest spheres meeting at
+    ``physics.impact_velocity`` (s): Eq. 47 and the symplectic-Euler bounds (erratum 8).
+
+    The estimate :func:`estimate_run` counts steps with; the run's own step
+    (:func:`sintercond.mechanics.stable_time_step`) takes every listed pair
+    and wall (a wall contact is stiffer: about 0.8 of this).
+    """
+    m, physics = scene["mechanics"], scene["physics"]
+    e, nu = m["young_modulus"], m["poisson_ratio"]
+    mass = scene["material"]["density"] * 4 / 3 * math.pi * r**3
+    friction = m.get("friction", 0.0) > 0 or m.get("wall_friction", 0.0) > 0
+    rolling = m.get("rolling_friction", 0.0) > 0 or m.get("wall_rolling_friction", 0.0) > 0
+    xi_con = m.get("damping", 1.0)
+    if "restitution" in m:
+        xi_con = restitution_damping_ratio(m["restitution"])
+    return float(_contact_step(physics.get("shear", "paper"))(
+        r, mass, e, nu, physics.get("impact_velocity", 0.05), xi_con,
+        m.get("tangential_damping", 1.0) if friction else 0.0, m.get("rolling_damping", 0.0) if rolling else 0.0))
+
+
+@functools.cache
+def _contact_step(shear):
+    """Jitted time step of two equal spheres ``(r, m, E, nu, v, xi_con, xi_fric, xi_rol)`` (one compile, not ~50
+    dispatched ops)."""
+    import jax
+
+    from sintercond import forces
+
+    def step(r, mass, e, nu, v, xi_con, xi_fric, xi_rol):
+        g_star = forces.effective_shear_modulus(e, nu, e, nu, shear)
+        return forces.stable_time_step(r / 2, mass / 2, forces.effective_modulus(e, nu, e, nu), g_star, v,
+                                       xi_con=xi_con, xi_fric=xi_fric, xi_rol=xi_rol)
+
+    return jax.jit(step)
 
 
 def scene_reference() -> str:
@@ -457,15 +636,33 @@ def scene_reference() -> str:
           "A random bed settled under gravity (`sintercond.packing.powder_bed`), at most 20000 particles.")
     table("[packing] kind = \"simple_cubic\"", _PACKING["simple_cubic"],
           "Sphere centres at `radius + spacing * (i, j, k)`.")
+    table("[packing] kind = \"spheres\"", _PACKING["spheres"],
+          f"Spheres listed one by one (at most {MAX_LISTED_SPHERES}), e.g. one sphere on a floor.")
     for section in ("material", "conduction"):
         table(f"[{section}]", _SCHEMA[section])
     table("[conduction.params]", _LAW_PARAMS, "Keys the chosen law takes: " + "; ".join(
         f"`{name}`: {', '.join(law.default_params) or 'none'}" for name, law in sorted(CONDUCTANCE_LAWS.items())))
     for section in ("initial", "boundary"):
         table(f"[{section}]", _SCHEMA[section])
-    table("[[walls]]", _WALL, "Any number of walls; a face without one is insulated.")
-    for section in ("beam", "convection", "radiation", "run"):
+    table("[[walls]]", _WALL, "Any number of walls; a face without one is insulated. `history.csv` reports the "
+          "heat power into the packing through each held or conducting wall as `heat_wall{k}_W`, `k` its index "
+          "among the `[[walls]]` (the `[boundary]` floor comes last).")
+    for section in ("beam", "convection", "radiation"):
         table(f"[{section}]", _SCHEMA[section])
+    table("[physics]", _SCHEMA["physics"],
+          "The physics of the run. With `mechanics = true` every wall pushes (a rigid plane of infinite radius and "
+          "mass, Remark 1), rubs (`mechanics.wall_friction`) and, by its mode, conducts: `conducting` walls exchange "
+          "heat through the contact they make, `held` walls hold the particles touching them at the start at "
+          "their temperature (those particles still move), `insulated` walls only push. The time step "
+          '`run.dt = "auto"` is 0.9 x the smaller of the thermal limit and the mechanical one '
+          "(`sintercond.mechanics.stable_time_step`: Eq. 47 and the tangential and rotational bounds of "
+          "MECHANICS.md erratum 8 at `impact_velocity`); a larger `run.dt` is refused, naming the limit.")
+    table("[mechanics]", _SCHEMA["mechanics"],
+          "The contact material (Quintana-Ruiz & Campello 2020, Eqs. 2-20), with `physics.mechanics = true`. "
+          "Walls are rigid (`E* = E/(1 - nu^2)`).")
+    table("[softening]", _SCHEMA["softening"],
+          "Thermal softening of Young's modulus (Eq. 42, MECHANICS.md erratum 6), with `physics.mechanics = true`.")
+    table("[run]", _SCHEMA["run"])
     lines.extend(["## Limits", "",
                   f"- at most {MAX_LATTICE_PARTICLES} lattice particles and 20000 powder-bed particles, "
                   f"about {MAX_MEMORY_BYTES / 1e9:g} GB;",
@@ -475,15 +672,39 @@ def scene_reference() -> str:
     return "\n".join(lines)
 
 
-def load_scene(path=None) -> dict:
-    """Read and validate a scene file; ``None`` loads the built-in default scene."""
+def _builtin_dir():
+    return importlib.resources.files("sintercond.data").joinpath("scenes")
+
+
+def builtin_scenes() -> dict:
+    """The example scenes shipped with the package: ``{name: one-line description}`` (their first comment line)."""
+    scenes = {}
+    for entry in sorted(_builtin_dir().iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".toml"):
+            first = entry.read_text(encoding="utf-8").splitlines()[0]
+            scenes[entry.name.removesuffix(".toml")] = first.lstrip("# ").strip()
+    return scenes
+
+
+def load_scene(path=None, duration=None) -> dict:
+    """Read and validate a scene file or a built-in scene by name; ``None`` loads the built-in default scene.
+
+    ``path`` is a TOML file, or the name of a built-in example scene
+    (:func:`builtin_scenes`, e.g. ``"quintana2020_5_1"``) when no such file
+    exists. ``duration`` (s) replaces ``run.duration`` before validation
+    (a shorter run of the same scene).
+    """
     if path is None:
         data = importlib.resources.files("sintercond.data").joinpath("default_scene.toml").read_bytes()
         source = "default scene"
+    elif not Path(path).is_file() and str(path) in builtin_scenes():
+        data = _builtin_dir().joinpath(f"{path}.toml").read_bytes()
+        source = f"built-in scene {str(path)!r}"
     else:
         path = Path(path)
         if not path.is_file():
-            raise SceneError(f"scene file {str(path)!r} does not exist")
+            raise SceneError(f"scene file {str(path)!r} does not exist (built-in scenes: "
+                             f"{', '.join(builtin_scenes())}; `sintercond scenes` lists them)")
         data, source = path.read_bytes(), str(path)
     if b"\x00" in data:
         raise SceneError(f"{source} is a binary file, not a TOML scene (UTF-8 text)")
@@ -496,6 +717,9 @@ def load_scene(path=None) -> dict:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneError(f"{source} is not valid TOML: {err}") from None
+    if duration is not None:
+        if isinstance(raw.get("run"), dict):
+            raw["run"]["duration"] = duration
     return validate_scene(raw)
 
 

@@ -30,6 +30,7 @@ BASE = {
     "walls": [{"axis": 0, "side": "max", "mode": "conducting", "temperature": 350.0}],
     "run": {"duration": 1e-3, "dt": "auto", "output_every": 5, "checkpoint_every": 10, "formats": ["vtp"]},
 }
+MECHANICS = {"young_modulus": 1e6, "poisson_ratio": 0.3}
 BED = {"kind": "powder_bed", "lateral_size": 400e-6, "height": 300e-6, "diameter_range": [45e-6, 105e-6],
        "seed": 0, "sinter_swelling": 0.02}
 
@@ -106,7 +107,7 @@ def _range_cases():
 
 
 STRUCTURAL = [
-    ("unknown section", lambda s: s.update(mechanics={}), r"unknown section \[mechanics\]", "allowed sections"),
+    ("unknown section", lambda s: s.update(magnetism={}), r"unknown section \[magnetism\]", "allowed sections"),
     ("misspelled section", lambda s: s.update(materal={}), r"unknown section \[materal\]", "did you mean 'material'"),
     ("unknown key", _set("material.colour", "red"), r"unknown key material\.colour", "allowed keys"),
     ("misspelled key", _set("material.conductivty", 1.0), r"material\.conductivty", "did you mean 'conductivity'"),
@@ -201,6 +202,44 @@ STRUCTURAL = [
     ("bed: lattice key", lambda s: s.update(packing={**BED, "spacing": 1e-4}), r"packing\.spacing", "allowed keys"),
     ("bed: huge", lambda s: s.update(packing={**BED, "lateral_size": 1.0, "height": 1.0}), r"packing\.lateral_size",
      "limit is 20000"),
+    ("bed: method", lambda s: s.update(packing={**BED, "method": "shake"}), r"packing\.method must be one of",
+     '"relax"'),
+    ("mechanics without its material", _set("physics.mechanics", True),
+     r"physics\.mechanics = true needs a \[mechanics\] section", r"\[1, 1e\+13\] Pa"),
+    ("mechanics not a bool", _set("physics.mechanics", "yes"), r"physics\.mechanics", "true or false"),
+    ("material without mechanics", lambda s: s.update(mechanics=dict(MECHANICS)),
+     r"\[mechanics\] needs physics\.mechanics = true", "thermal only"),
+    ("softening without mechanics", lambda s: s.update(softening={"onset_temperature": 400.0}),
+     r"\[softening\] needs physics\.mechanics = true", "thermal only"),
+    ("damping and restitution", lambda s: s.update(physics={"mechanics": True},
+                                                    mechanics={**MECHANICS, "damping": 1.0, "restitution": 0.5}),
+     r"mechanics\.damping or mechanics\.restitution", "not both"),
+    ("missing modulus", lambda s: s.update(physics={"mechanics": True}, mechanics={"poisson_ratio": 0.3}),
+     r"missing key mechanics\.young_modulus", r"\[1, 1e\+13\] Pa"),
+    ("misspelled mechanics key", lambda s: s.update(physics={"mechanics": True},
+                                                     mechanics={**MECHANICS, "frition": 0.3}),
+     r"mechanics\.frition", "did you mean 'friction'"),
+    ("gravity two numbers", _set("physics.gravity", [0.0, -9.81]), r"physics\.gravity must be a list of 3",
+     r"\[-1000, 1000\] m/s\^2"),
+    ("gravity huge", _set("physics.gravity", [0.0, 0.0, -1e4]), r"physics\.gravity", r"\[-1000, 1000\]"),
+    ("gravity without mechanics", _set("physics.gravity", [0.0, 0.0, -9.81]),
+     r"physics\.gravity needs physics\.mechanics = true", "ignored"),
+    ("shear convention", _set("physics.shear", "voigt"), r"physics\.shear must be one of", '"mindlin"'),
+    ("slip direction", _set("physics.slip_direction", "force"), r"physics\.slip_direction must be one of", '"trial"'),
+    ("wall velocity without mechanics", _set("walls.0.velocity", [0.0, 0.0, 1e-3]),
+     r"walls\[0\]\.velocity needs physics\.mechanics", "mechanics = true"),
+    ("wall velocity text", _set("walls.0.velocity", "up"), r"walls\[0\]\.velocity must be a list of 3",
+     r"\[-1000, 1000\] m/s"),
+    ("spheres: no centres", lambda s: s.update(packing={"kind": "spheres", "centres": [], "radii": 1e-4}),
+     r"packing\.centres must be", "at most 10000"),
+    ("spheres: centre short", lambda s: s.update(packing={"kind": "spheres", "centres": [[0.0, 0.0]], "radii": 1e-4}),
+     r"packing\.centres\[0\] must be a list of 3 numbers", r"\[-1, 1\] m"),
+    ("spheres: radii count", lambda s: s.update(packing={"kind": "spheres", "centres": [[0.0, 0.0, 1e-4]] * 2,
+                                                         "radii": [1e-4]}),
+     r"packing\.radii must be a list of 2 numbers", r"\[1e-08, 1\] m"),
+    ("spheres: radius negative", lambda s: s.update(packing={"kind": "spheres", "centres": [[0.0, 0.0, 1e-4]],
+                                                             "radii": -1e-4}),
+     r"packing\.radii", r"\[1e-08, 1\] m"),
 ]
 
 SCENES = [(name, mutate, key, rng) for name, mutate, key, rng in _range_cases()] + STRUCTURAL

@@ -91,3 +91,23 @@ def test_a_run_opens_in_both_readers_with_its_time(tmp_path):
     data = pipeline.compute(pipeline.num_frames - 1)
     order = np.argsort(np.asarray(data.particles["Particle Identifier"]))
     np.testing.assert_allclose(np.asarray(data.particles["temperature"])[order], np.asarray(final), rtol=3e-16)
+
+
+def test_mechanics_fields_read_by_vtk_and_ovito(tmp_path):
+    """Velocity and force [n, 3] and coordination [n] ints: VTK reads them as point arrays, OVITO maps the dump's
+    vx vy vz / fx fy fz columns to its Velocity and Force properties."""
+    centres, radii, temperature = _particles()
+    rng = np.random.default_rng(1)
+    fields = {"velocity": rng.normal(size=(5, 3)), "force": rng.normal(size=(5, 3)) * 1e-4,
+              "coordination": np.array([0, 1, 2, 3, 4])}
+    io.write_vtp(tmp_path / "m.vtp", centres, radii, temperature, 3, 1e-3, fields)
+    _, _, point_data, _ = read_vtp(tmp_path / "m.vtp")
+    np.testing.assert_array_equal(point_data["velocity"], fields["velocity"])
+    np.testing.assert_array_equal(point_data["force"], fields["force"])
+    np.testing.assert_array_equal(point_data["coordination"], fields["coordination"])
+    io.append_lammps(tmp_path / "m.lammpstrj", centres, radii, temperature, 3, fields)
+    data = ovito_io.import_file(str(tmp_path / "m.lammpstrj")).compute()
+    # OVITO's own number parser: within an ulp of the written shortest round-trip text
+    np.testing.assert_allclose(np.asarray(data.particles["Velocity"]), fields["velocity"], rtol=3e-16)
+    np.testing.assert_allclose(np.asarray(data.particles["Force"]), fields["force"], rtol=3e-16)
+    np.testing.assert_array_equal(np.asarray(data.particles["Coordination"]), fields["coordination"])

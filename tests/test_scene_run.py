@@ -34,7 +34,7 @@ def test_default_scene_is_valid():
     "mutate,message",
     [
         (lambda s: s["material"].update(colour="red"), r"unknown key material\.colour"),
-        (lambda s: s.update(mechanics={}), r"unknown section \[mechanics\]"),
+        (lambda s: s.update(magnetism={}), r"unknown section \[magnetism\]"),
         (lambda s: s["material"].update(density=-1.0), r"material\.density must be a number in \[1, 100000\] kg/m\^3; got -1\.0"),
         (lambda s: s["material"].update(conductivity="high"), r"material\.conductivity must be a number"),
         (lambda s: s["packing"].update(radius=1.2e-4), r"packing\.radius must be in \(spacing/2, 7\.5e-05\] m"),
@@ -181,3 +181,24 @@ def test_history_csv_reads_back_as_numbers(tmp_path):
     assert history["time"][-1] == pytest.approx(summary["simulated_s"], rel=1e-12)
     assert history["T_max_K"][-1] == float(np.max(np.asarray(final)))
     assert (tmp_path / "history.png").stat().st_size > 0
+
+
+def test_history_reports_the_heat_through_held_and_conducting_walls(tmp_path):
+    """At the start (uniform 300 K) the heat through a held 900 K face of the 6x3x3 lattice is 9 pairs of the
+    Rojek conductance times 600 K (its neighbours within the face are held too), and through a conducting 350 K
+    face the wall conductances of the 9 particles it cuts times 50 K: closed forms of the laws."""
+    from sintercond.conductance import rojek_pair_conductance
+    from sintercond.walls import wall_conductance
+
+    scene = copy.deepcopy(SMALL)
+    scene.pop("beam"), scene.pop("radiation"), scene.pop("boundary")
+    scene["walls"] = [{"axis": 0, "side": "min", "mode": "held", "temperature": 900.0},
+                      {"axis": 0, "side": "max", "mode": "conducting", "temperature": 350.0}]
+    scene["run"].update(duration=1e-4, formats=["vtp"])
+    runner.run_scene(validate_scene(scene), tmp_path, progress=False)
+    first = {k: v[0] for k, v in runner.read_history(tmp_path).items()}
+    r, kappa = 0.52e-4, 12.6
+    held = 9 * float(rojek_pair_conductance(r, r, 2 * r - 1e-4, kappa)) * 600.0
+    assert first["heat_wall0_W"] == pytest.approx(held, rel=1e-12)
+    conducting = 9 * float(wall_conductance("rojek", r, 0.02 * r, kappa)) * 50.0
+    assert first["heat_wall1_W"] == pytest.approx(conducting, rel=1e-12)
