@@ -435,9 +435,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
         wall_k = wall_t = None
         if physics.conductance == "table":
-            # per particle: reverse mode then accumulates its cotangent elementwise over the steps and
-            # reduces it once, instead of reducing an [n] array at every step
-            conductance, scale = contacts.conductance, jnp.broadcast_to(kappa[0], capacity.shape)
+            conductance, scale = contacts.conductance, kappa[0]
             if physics.conducting_walls:
                 wall_k, wall_t = contacts.wall_conductance[None], contacts.wall_temperature[None]
         else:

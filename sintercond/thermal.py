@@ -98,17 +98,16 @@ def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_tem
 def _conduction_update(temperature, power, capacity, dt, scale, conductance, neighbors):
     """``T + dt (P - s L T) / C`` (K) with a derivative cheap in reverse mode.
 
-    JAX's own transpose of this update takes about ten passes over the
-    particles per step on a CPU (each cotangent its own kernel, the
-    conductivity's reduced at every step, and the gather reading several
-    arrays). Here the tangent is one ``linear_call`` whose transpose
-    (:func:`_conduction_transpose`) is written out: with ``v = dt ct / C``,
-    ``ct_T = ct - L (s v)`` (``L`` symmetric), ``ct_P = v``,
-    ``ct_s = -v L T`` and ``ct_C = -v (P - s L T) / C``; ``L T`` and
-    ``L (s v)`` come from one gather of both fields. The residuals per step
-    are ``T`` (and ``P`` when ``C`` is differentiated), not ``L T``, so the
-    recomputed forward step stays one fused kernel. A tangent of ``dt`` or
-    of the conductances falls back to JAX's derivative of the same formula.
+    JAX's own transpose of this update runs about ten kernels per step on a
+    CPU (each cotangent its own pass, and a gather of ``dt / C * ct`` that
+    XLA fuses so that it reads two arrays per slot). Here the tangent is one
+    ``linear_call`` whose transpose (:func:`_conduction_transpose`) is
+    written out: with ``v = dt ct / C``, ``ct_T = ct - L (s v)`` (``L``
+    symmetric: the same gather as the forward, of one materialised array),
+    ``ct_P = v``, ``ct_s = -v L T`` and ``ct_C = -v (P - s L T) / C``. The
+    residuals per step are ``L T`` (when ``s`` or ``C`` is differentiated)
+    and ``P`` (when ``C`` is). A tangent of ``dt`` or of the conductances
+    (lifted conductances) falls back to JAX's derivative of the same formula.
     """
     return _conduction_formula(temperature, power, capacity, dt, scale, conductance, neighbors)
 
