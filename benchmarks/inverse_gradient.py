@@ -10,8 +10,9 @@ Variants, each in its own process so that its peak memory is its own:
 * adjoint: value and d/d(kappa, c) by fitting.inverse's checkpointed discrete
   adjoint (states every ~sqrt(steps) steps, each segment recomputed once).
 * autodiff checkpointed: JAX's own reverse mode through `sintercond.simulate.rollout`
-  (jax.checkpoint around segments of ~sqrt(steps) steps; the network mat-vec's custom
-  JVP makes the transpose a gather, not a scatter-add).
+  (jax.checkpoint around segments of ~sqrt(steps) steps; the explicit table step's
+  derivative is written out, `thermal._conduction_update`: its transpose is the same
+  gather as the forward, and it keeps L T per step).
 * autodiff plain: the same rollout without checkpoints (every step's residuals kept).
 
 Times: the best of alternating runs of the variant and the forward program in the same process
@@ -26,6 +27,7 @@ Prints the table and rewrites its section of benchmarks/RESULTS.md.
 import argparse
 import json
 import math
+import os
 import pathlib
 import resource
 import subprocess
@@ -154,7 +156,9 @@ def main():
         return
 
     from _common import markdown_table, write_section
+    from thermal_step import load_line
 
+    load_start = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         path = pathlib.Path(tmp) / "experiment.npz"
         n = build(path, args.particles)
@@ -184,7 +188,7 @@ def main():
               "grad rel. diff to adjoint"]
     body = (f"{n:,} particles (sintered SC lattice, 6 contacts each), float64, 8 probes read every 10 steps, "
             f"loss = sum of squared readings, gradient d/d(kappa, c).\n\n" + markdown_table(header, rows) +
-            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\n" + plot(rows))
+            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\n" + load_line(load_start) + "\n\n" + plot(rows))
     print(body)
     write_section("inverse_gradient", "python benchmarks/inverse_gradient.py " + " ".join(sys.argv[1:]), body)
 

@@ -12,6 +12,7 @@ its section of benchmarks/RESULTS.md.
 """
 
 import argparse
+import os
 import resource
 import time
 
@@ -60,6 +61,12 @@ def best_alternating(functions, argument, repeats):
     return best
 
 
+def load_line(load_start):
+    """The machine's 1-minute load average at the start and end of the run (timings are clean only below the core count)."""
+    return (f"Load average (1 min) at the start / end of the run: {load_start:.1f} / {os.getloadavg()[0]:.1f} on "
+            f"{os.cpu_count()} cores (above the core count other jobs shared the cores: timings not clean).")
+
+
 def plot(rows):
     """Particle-steps per second against the particle count: JAX and SciPy CSR, random and Morton order."""
     fig = new_figure()
@@ -81,6 +88,7 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     args = parser.parse_args()
+    load_start = os.getloadavg()[0]
     rows = []
     for n in args.sizes:
         centres, radii = jittered_packing(n)
@@ -133,7 +141,7 @@ def main():
         + markdown_table(("particles", "order", "JAX particle-steps/s", "previous step particle-steps/s",
                           "SciPy CSR particle-steps/s", "JAX / SciPy", "max |T_jax - T_scipy| (K)", "build (s)",
                           "peak RSS so far (GB)"), rows)
-        + "\n\n" + plot(rows)
+        + "\n\n" + load_line(load_start) + "\n\n" + plot(rows)
     )
     write_section("thermal_step", "python benchmarks/thermal_step.py", body)
 

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond._symmetric import self_adjoint
+from sintercond._symmetric import materialized, self_adjoint
 from sintercond._validation import require_finite, require_positive
 from sintercond.conductance import pair_conductance, validate_pair_conductance_inputs
 from sintercond.neighbors import cell_list_pairs, minimum_image
@@ -261,6 +261,16 @@ def _gather_laplacian(table, x):
     return jnp.sum(conductance * (x[:, None] - x[neighbors]), axis=1)
 
 
+def gather_laplacian(conductance, neighbors, x):
+    """:func:`network_laplacian` without its custom derivative, for derivative rules that apply ``L`` themselves."""
+    return _gather_laplacian((conductance, neighbors), x)
+
+
+def _gather_laplacian_cotangent(table, ct):
+    # a cotangent arrives as a product (e.g. dt / C * ct); gathered unfused, that reads several arrays per slot
+    return _gather_laplacian(table, materialized(ct))
+
+
 def _network_laplacian_jvp(primals, tangents):
     conductance, neighbors, x = primals
     d_conductance, _, dx = tangents
@@ -268,7 +278,7 @@ def _network_laplacian_jvp(primals, tangents):
     # symbolic zeros: a constant table (or field) adds no work to the tangent
     tangent = jnp.zeros_like(value)
     if not isinstance(dx, jax.custom_derivatives.SymbolicZero):
-        tangent = self_adjoint(_gather_laplacian, (conductance, neighbors), dx)
+        tangent = self_adjoint(_gather_laplacian, (conductance, neighbors), dx, _gather_laplacian_cotangent)
     if not isinstance(d_conductance, jax.custom_derivatives.SymbolicZero):
         tangent = tangent + _gather_laplacian((d_conductance, neighbors), x)
     return value, tangent

@@ -451,7 +451,10 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         return Prepared(params, capacity, conductance, scale, wall_k, wall_t)
 
     def conduction_power(state: SimState, prep: Prepared, temperature, conductance, neighbors):
-        power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
+        """Heat into each particle through the contacts (None: walls only) and conducting walls (W)."""
+        power = jnp.zeros_like(temperature)
+        if conductance is not None:
+            power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
         if physics.conducting_walls:
             power = power + prep.scale * jnp.sum(prep.wall_conductance * (prep.wall_temperature - temperature), axis=0)
         return power
@@ -525,7 +528,13 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         state, conductance, neighbors = current_network(state, prep)
         particles = state.particles
         fixed = particles.fixed if physics.held else None
-        if physics.integrator == "explicit":
+        if physics.integrator == "explicit" and physics.contacts == "static":
+            # the network term inside the update, whose reverse mode is written for the CPU
+            power = conduction_power(state, prep, particles.temperature, None, None)
+            power = power + thermal.source_power(physics, state, prep.params)
+            temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
+                                                  particles.fixed_temperature, (prep.scale, conductance, neighbors))
+        elif physics.integrator == "explicit":
             power = heat_power_fn(state, prep, conductance, neighbors)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
                                                   particles.fixed_temperature)
@@ -743,15 +752,39 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
         s = run_steps(s, every)
         return s, observe(s)
 
+    def saving_steps(s, n_saved):
+        """``n_saved * every`` steps in one flat scan, the observable written into a buffer every ``every`` steps.
+
+        A scan over saves of a scan over steps would stack the per-step
+        residuals of reverse mode twice (and copy them between the levels).
+        """
+        shapes = jax.eval_shape(observe, s)
+        buffer = jax.tree.map(lambda x: jnp.zeros((n_saved,) + x.shape, x.dtype), shapes)
+
+        def save(s, buffer, k):
+            return jax.tree.map(lambda b, x: jax.lax.dynamic_update_index_in_dim(b, x, k // every, 0), buffer,
+                                observe(s))
+
+        def step(carry, k):
+            s, buffer = carry
+            s = advance(s, None)[0]
+            buffer = jax.lax.cond((k + 1) % every == 0, save, lambda s, b, k: b, s, buffer, k)
+            return (s, buffer), None
+
+        (s, buffer), _ = jax.lax.scan(step, (s, buffer), jnp.arange(n_saved * every))
+        return s, buffer
+
     n_saves = n_steps // every
     group = max(1, seg // every)
-    if group <= 1 or group >= n_saves:
+    if group <= 1:
         return jax.lax.scan(one_save, state, None, length=n_saves)
+    if group >= n_saves:
+        return saving_steps(state, n_saves)
     q, r = divmod(n_saves, group)
-    state, saved = jax.lax.scan(jax.checkpoint(lambda s, _: jax.lax.scan(one_save, s, None, length=group), prevent_cse=False),
-                                state, None, length=q)
+    state, saved = jax.lax.scan(jax.checkpoint(lambda s, _: saving_steps(s, group), prevent_cse=False), state, None,
+                                length=q)
     saved = jax.tree.map(lambda x: x.reshape((q * group,) + x.shape[2:]), saved)
     if r:
-        state, tail = jax.lax.scan(one_save, state, None, length=r)
+        state, tail = saving_steps(state, r)
         saved = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), saved, tail)
     return state, saved
