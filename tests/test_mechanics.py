@@ -41,7 +41,7 @@ def _scene(positions, velocity, dt, params, skin=0.1 * R, **physics):
     phys = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
                             mechanics=True, **physics)
     contacts, fns = simulate.dynamic_contacts(positions, particles.radii, skin, capacity_multiplier=3.0)
-    motion = mechanics.mechanical_state(phys, positions, contacts.neighbors, velocity=velocity)
+    motion = mechanics.mechanical_state(phys, positions, contacts, velocity=velocity)
     return simulate.simulator(phys, fns), simulate.init_state(particles, contacts, dt, mechanics=motion), params
 
 
@@ -72,7 +72,7 @@ def test_example_5_1_settles_on_the_weight_and_hertz_overlap():
 
 def _loads(sim, state, params):
     p, mp = state.particles, params.mechanics
-    geometry = mechanics.pair_geometry(p.positions, p.radii, state.contacts.neighbors)
+    geometry = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
     modulus = mechanics.particle_modulus(sim.physics, mp, p.temperature, p.material)
     nu = jnp.broadcast_to(mp.nu, p.radii.shape)
     return mechanics.contact_loads(sim.physics, mp, geometry, p.positions, p.radii, p.mass, modulus, nu,
