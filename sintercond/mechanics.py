@@ -97,7 +97,8 @@ class MechanicalState:
       spin: ``[n, 3]`` angular velocities (rad/s).
       spring: ``[capacity, 3]`` tangential springs of the half pair list's
         pairs (m), the spring of ``i`` relative to ``j`` (``i < j``); None
-        without friction.
+        without friction. Springs are in the force dtype
+        (``Physics.force_dtype``).
       rolling: ``[capacity, 3]`` rolling springs per pair (rad); None without rolling.
       wall_spring, wall_rolling: ``[n_walls, n, 3]`` the same against each wall.
     """
@@ -130,8 +131,9 @@ def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> 
     zeros = jnp.zeros_like(positions)
     velocity = zeros if velocity is None else jnp.asarray(velocity, positions.dtype)
     spin = zeros if spin is None else jnp.asarray(spin, positions.dtype)
-    pair = jnp.zeros((half.capacity, 3), positions.dtype)
-    wall = jnp.zeros((w, n, 3), positions.dtype)
+    fd = force_dtype(physics, positions.dtype)
+    pair = jnp.zeros((half.capacity, 3), fd)
+    wall = jnp.zeros((w, n, 3), fd)
     return MechanicalState(velocity, spin, pair if physics.friction else None, pair if physics.rolling else None,
                            wall if physics.friction else None, wall if physics.rolling else None)
 
@@ -253,34 +255,45 @@ def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, pos
       t, dt: time and step (s).
     """
     dtype = positions.dtype
+    fd = force_dtype(physics, dtype)
+    cast = lambda x: x if x is None else jnp.asarray(x).astype(fd)  # noqa: E731
+    params, dt = jax.tree.map(cast, params), cast(dt)
+    radii_f, mass_f, modulus, nu = cast(radii), cast(mass), cast(modulus), cast(nu)
     n = radii.shape[0]
-    v, omega = state.velocity, state.spin
+    v, omega = cast(state.velocity), cast(state.spin)
     i, j = geometry.i, geometry.j
     f, t_i, t_j, spring, rolling, _ = _contact_laws(
-        physics, params, dt, geometry.normal, geometry.overlap, radii[i], radii[j], mass[i], mass[j],
-        modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii[j], state.spring,
+        physics, params, dt, cast(geometry.normal), cast(geometry.overlap), radii_f[i], radii_f[j], mass_f[i],
+        mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], state.spring,
         state.rolling, params.mu, params.mu_r)
+    # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
+    f, t_i, t_j = f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype)
     force = pair_sum(f, -f, geometry.pairs, n)
     torque = pair_sum(t_i, t_j, geometry.pairs, n)
-    force = force + mass[:, None] * jnp.asarray(physics.gravity, dtype)
     new = dataclasses.replace(state, spring=spring, rolling=rolling)
     h = wall_n = None
     if physics.walls:
-        h = wall_penetration(physics.walls, positions, radii, t)
-        inward = jnp.stack([jnp.asarray(w.normal, dtype) for w in physics.walls])[:, None, :]
-        wall_v = jnp.stack([jnp.asarray(w.velocity, dtype) for w in physics.walls])[:, None, :]
-        inf = jnp.asarray(jnp.inf, dtype)
+        h = wall_penetration(physics.walls, positions, radii, t)  # in the positions' precision
+        inward = jnp.stack([jnp.asarray(w.normal, fd) for w in physics.walls])[:, None, :]
+        wall_v = jnp.stack([jnp.asarray(w.velocity, fd) for w in physics.walls])[:, None, :]
+        inf = jnp.asarray(jnp.inf, fd)
         mu_w = params.mu if params.mu_wall is None else params.mu_wall
         mu_r_w = params.mu_r if params.mu_r_wall is None else params.mu_r_wall
         # the wall is j: the normal from the particle to the wall is -n_w
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
-            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h, radii, inf, mass, inf,
-            modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
-            jnp.zeros_like(omega), jnp.zeros((), dtype), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
-        force = force + jnp.sum(f_w, axis=0)
-        torque = torque + jnp.sum(t_w, axis=0)
+            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), cast(h), radii_f, inf, mass_f,
+            inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
+            jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
+        force = force + jnp.sum(f_w.astype(dtype), axis=0)
+        torque = torque + jnp.sum(t_w.astype(dtype), axis=0)
         new = dataclasses.replace(new, wall_spring=wall_spring, wall_rolling=wall_rolling)
+    force = force + mass[:, None] * jnp.asarray(physics.gravity, dtype)
     return Loads(force, torque, new, h, wall_n)
+
+
+def force_dtype(physics, dtype):
+    """The dtype the contact laws run in: ``physics.force_dtype``, or the positions' ``dtype`` if None."""
+    return jnp.dtype(dtype if physics.force_dtype is None else physics.force_dtype)
 
 
 def remap_history(state: MechanicalState, old_pairs, new_pairs) -> MechanicalState:

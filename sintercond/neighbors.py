@@ -9,9 +9,17 @@ Three tools, from the fastest path to the reference:
   the skin since the last rebuild (jax-md's ``dr_threshold``), so most steps
   pay only a displacement check. A list that outgrows its capacity sets a
   flag (:func:`did_buffer_overflow`); the host reallocates and redoes the
-  chunk. Per-pair quantities (a neck, a tangential spring, a contact age)
+  chunk. Per-pair quantities of a Dense table (a neck, a contact age)
   follow the pair through rebuilds and reallocations with
   :func:`remap_pair_history`.
+* :func:`half_pairs`: the pairs the contact laws run on, each ``i < j``
+  once, kept within ``r_i + r_j + skin`` (size-aware) and sorted by
+  ``(i, j)``, rebuilt from the Dense list whenever it is rebuilt, in a
+  fixed-capacity buffer with its own overflow flag
+  (:func:`half_pairs_overflowed`). Per-pair values (the springs) follow
+  with :func:`remap_half_pairs`; :func:`pair_sum` adds a per-pair value to
+  one end and its opposite to the other, so forces and heat are conserved
+  by construction.
 * :func:`cell_list_pairs`: the contacts of a static packing on the host, in
   vectorised NumPy (a cell list, no per-particle Python loop, no compile).
 * :func:`brute_force_pairs`: the O(n^2) reference for tests.

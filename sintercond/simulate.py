@@ -126,6 +126,11 @@ class Physics:
       shear: ``"paper"`` (Eq. 9) or ``"mindlin"`` effective shear modulus.
       slip_direction: ``"trial"`` or ``"velocity"`` (erratum 3).
       rolling_projection: roll on the tangential part of the relative spin only (erratum 5).
+      force_dtype: ``None`` (the contact laws in the positions' dtype) or
+        ``"float32"``: forces, torques and springs in float32 while
+        positions, velocities and temperatures stay float64 (relative
+        separations are formed in float64 first, so the overlap keeps its
+        digits); see tests/test_mechanics.py for the accuracy.
     """
 
     law: str = "rojek"
@@ -152,6 +157,7 @@ class Physics:
     shear: str = "paper"
     slip_direction: str = "trial"
     rolling_projection: bool = False
+    force_dtype: str | None = None
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
@@ -191,6 +197,8 @@ class Physics:
                              "for heat); conducting_walls must be 0")
         if self.shear not in SHEAR_CONVENTIONS:
             raise ValueError(f"Physics.shear must be one of {list(SHEAR_CONVENTIONS)}; got {self.shear!r}")
+        if self.force_dtype not in (None, "float32", "float64"):
+            raise ValueError(f"Physics.force_dtype must be None, 'float32' or 'float64'; got {self.force_dtype!r}")
         if self.slip_direction not in SLIP_DIRECTIONS:
             raise ValueError(f"Physics.slip_direction must be one of {list(SLIP_DIRECTIONS)}; got {self.slip_direction!r}")
         gravity = tuple(float(g) for g in self.gravity)
