@@ -70,7 +70,7 @@ def example_5_1(softening=True, dt=2e-5, t_end=40.0, law="conductivity", neck_mo
                                              theta_star=f64(d["theta_star"]), rate=f64(1.0), E_min=f64(0.0)))
     mechanics.check_time_step(dt, physics, particles, contacts.neighbors, params.mechanics, impact_velocity)
     state = simulate.init_state(particles, contacts, dt,
-                                mechanics=mechanics.mechanical_state(physics, positions, contacts.neighbors))
+                                mechanics=mechanics.mechanical_state(physics, positions, contacts))
     return simulate.simulator(physics, fns), state, params, int(round(t_end / dt))
 
 

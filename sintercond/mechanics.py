@@ -9,14 +9,16 @@ motion. :mod:`sintercond.simulate` builds the coupled step from it
 
 Pairs
 -----
-Every pair appears on both rows of the Dense table and is evaluated on both
-(a half list, each pair once with a ``segment_sum`` to both ends, is faster:
-MECHANICS.md, "Contacts and history"; left for later). Each slot evaluates
-the laws with the pair in index order (``lo = min(i, j)`` first, normal from
-``lo`` to ``hi``), so both rows compute bitwise the same force, which row
-``lo`` adds and row ``hi`` subtracts: momentum is conserved to round-off, and
-the springs stored on both rows stay bitwise equal (the spring of ``lo``
-relative to ``hi``).
+The laws run on a half pair list (:class:`sintercond.neighbors.HalfPairs`,
+``[capacity, 2]``, each pair ``i < j`` once, kept within
+``r_i + r_j + skin``), built from the jax-md Dense list whenever that list
+is rebuilt (MECHANICS.md, "Contacts and history"). The force on ``i`` is
+added to ``i`` and subtracted from ``j`` (:func:`sintercond.neighbors.pair_sum`),
+so momentum is conserved by construction; the springs belong to the pair
+(``[capacity, 3]``, the spring of ``i`` relative to ``j``) and follow it
+through rebuilds and reallocations (:func:`remap_history`). The list is
+sorted by ``(i, j)``, so the sums over it do not depend on when the list was
+last rebuilt or on its capacity.
 
 Walls (Remark 1)
 ----------------
@@ -47,7 +49,7 @@ import jax.numpy as jnp
 
 from sintercond import forces
 from sintercond.materials import softened_modulus
-from sintercond.neighbors import remap_pair_history
+from sintercond.neighbors import HalfPairs, pair_sum, remap_half_pairs
 from sintercond.state import pytree_dataclass
 
 
@@ -93,9 +95,11 @@ class MechanicalState:
     Attributes:
       velocity: ``[n, 3]`` (m/s).
       spin: ``[n, 3]`` angular velocities (rad/s).
-      spring: ``[n, m, 3]`` tangential springs per neighbour slot (m), the
-        spring of ``min(i, j)`` relative to ``max(i, j)`` on both rows; None without friction.
-      rolling: ``[n, m, 3]`` rolling springs per slot (rad); None without rolling.
+      spring: ``[capacity, 3]`` tangential springs of the half pair list's
+        pairs (m), the spring of ``i`` relative to ``j`` (``i < j``); None
+        without friction. Springs are in the force dtype
+        (``Physics.force_dtype``).
+      rolling: ``[capacity, 3]`` rolling springs per pair (rad); None without rolling.
       wall_spring, wall_rolling: ``[n_walls, n, 3]`` the same against each wall.
     """
 
@@ -107,21 +111,29 @@ class MechanicalState:
     wall_rolling: Any = None
 
 
-def mechanical_state(physics, positions, neighbors, velocity=None, spin=None) -> MechanicalState:
+def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> MechanicalState:
     """A :class:`MechanicalState` at rest (or with ``velocity``/``spin`` ``[n, 3]``), springs zero.
 
     Args:
       physics: the :class:`sintercond.simulate.Physics` (which springs exist).
       positions: ``[n, 3]`` (m), for shapes and dtype.
-      neighbors: ``[n, m]`` the neighbour table the springs are laid on.
+      contacts: the :class:`sintercond.simulate.Contacts` of
+        :func:`sintercond.simulate.dynamic_contacts` (or its
+        :class:`sintercond.neighbors.HalfPairs`): the springs are laid on
+        its half pair list.
     """
+    half = getattr(contacts, "pairs", None) if not isinstance(contacts, HalfPairs) else contacts
+    if not isinstance(half, HalfPairs):
+        raise TypeError("mechanical_state needs the Contacts of simulate.dynamic_contacts (the springs live on its "
+                        f"half pair list, Contacts.pairs); got {type(contacts).__name__}")
     positions = jnp.asarray(positions)
-    n, m, w = positions.shape[0], neighbors.shape[1], len(physics.walls)
+    n, w = positions.shape[0], len(physics.walls)
     zeros = jnp.zeros_like(positions)
     velocity = zeros if velocity is None else jnp.asarray(velocity, positions.dtype)
     spin = zeros if spin is None else jnp.asarray(spin, positions.dtype)
-    pair = jnp.zeros((n, m, 3), positions.dtype)
-    wall = jnp.zeros((w, n, 3), positions.dtype)
+    fd = force_dtype(physics, positions.dtype)
+    pair = jnp.zeros((half.capacity, 3), fd)
+    wall = jnp.zeros((w, n, 3), fd)
     return MechanicalState(velocity, spin, pair if physics.friction else None, pair if physics.rolling else None,
                            wall if physics.friction else None, wall if physics.rolling else None)
 
@@ -131,40 +143,38 @@ def mechanical_state(physics, positions, neighbors, velocity=None, spin=None) ->
 
 
 class PairGeometry(NamedTuple):
-    """Pairs of a Dense table ``[n, m]`` evaluated in index order (``lo -> hi``).
+    """The pairs of a half pair list ``[c, 2]`` (``i < j``; padding ``(n, n)``).
 
-    ``j``: neighbours, padding replaced by the row; ``lo``, ``hi``; ``valid``
-    (a real pair); ``touching`` (overlap > 0); ``normal`` ``[n, m, 3]`` unit
-    vector from ``lo`` to ``hi`` (``e_z`` for padding); ``overlap`` (m, 0
-    where not touching).
+    ``pairs``: the list (for :func:`sintercond.neighbors.pair_sum`); ``i``,
+    ``j``: its ends, padding replaced by particle 0 (safe to gather);
+    ``valid`` (a real pair); ``touching`` (overlap > 0); ``normal``
+    ``[c, 3]`` unit vector from ``i`` to ``j`` (``e_z`` for padding);
+    ``overlap`` (m, 0 where not touching).
     """
 
+    pairs: Any
+    i: Any
     j: Any
-    lo: Any
-    hi: Any
     valid: Any
     touching: Any
     normal: Any
     overlap: Any
 
 
-def pair_geometry(positions, radii, neighbors) -> PairGeometry:
-    """Overlaps ``delta = r_lo + r_hi - |x_hi - x_lo|`` (Eq. 4) and normals (Eq. 5) of every slot, bitwise equal on both rows."""
-    n = radii.shape[0]
-    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
-    valid = (neighbors < n) & (neighbors != rows)
-    j = jnp.where(valid, neighbors, rows)
-    lo, hi = jnp.minimum(rows, j), jnp.maximum(rows, j)
-    delta = positions[hi] - positions[lo]
+def pair_geometry(positions, radii, pairs) -> PairGeometry:
+    """Overlaps ``delta = r_i + r_j - |x_j - x_i|`` (Eq. 4) and normals (Eq. 5) of every pair of a half list ``[c, 2]``."""
+    valid = pairs[:, 0] < pairs[:, 1]
+    i, j = jnp.where(valid, pairs[:, 0], 0), jnp.where(valid, pairs[:, 1], 0)
+    delta = positions[j] - positions[i]
     distance_sq = jnp.sum(delta * delta, axis=-1)
-    contact_range = (radii[lo] + radii[hi]) ** 2
+    contact_range = (radii[i] + radii[j]) ** 2
     touching = valid & (distance_sq < contact_range)
     apart = valid & (distance_sq > 0)
     distance = jnp.sqrt(jnp.where(apart, distance_sq, contact_range))
-    overlap = jnp.where(touching, radii[lo] + radii[hi] - distance, 0.0)
+    overlap = jnp.where(touching, radii[i] + radii[j] - distance, 0.0)
     e_z = jnp.zeros_like(delta).at[..., 2].set(1.0)
     normal = jnp.where(apart[..., None], delta / distance[..., None], e_z)
-    return PairGeometry(j, lo, hi, valid, touching, normal, overlap)
+    return PairGeometry(pairs, i, j, valid, touching, normal, overlap)
 
 
 def wall_penetration(walls, positions, radii, t):
@@ -238,60 +248,64 @@ def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, pos
     Args:
       physics: the spec (which laws, walls, gravity; static).
       params: :class:`MechanicalParams`.
-      geometry: :func:`pair_geometry` of the current table.
+      geometry: :func:`pair_geometry` of the current half pair list.
       positions, radii, mass: ``[n, 3]``, ``[n]``, ``[n]`` (m, m, kg).
       modulus, nu: ``[n]`` Young's modulus (Pa, softened or not) and Poisson ratio.
-      state: velocities, spins and springs at ``t`` (springs on ``geometry``'s table).
+      state: velocities, spins and springs at ``t`` (springs on ``geometry``'s pairs).
       t, dt: time and step (s).
     """
     dtype = positions.dtype
+    fd = force_dtype(physics, dtype)
+    cast = lambda x: x if x is None else jnp.asarray(x).astype(fd)  # noqa: E731
+    params, dt = jax.tree.map(cast, params), cast(dt)
+    radii_f, mass_f, modulus, nu = cast(radii), cast(mass), cast(modulus), cast(nu)
     n = radii.shape[0]
-    v, omega = state.velocity, state.spin
-    lo, hi = geometry.lo, geometry.hi
-    f, t_lo, t_hi, spring, rolling, _ = _contact_laws(
-        physics, params, dt, geometry.normal, geometry.overlap, radii[lo], radii[hi], mass[lo], mass[hi],
-        modulus[lo], nu[lo], modulus[hi], nu[hi], v[lo], v[hi], omega[lo], omega[hi], radii[hi], state.spring,
+    v, omega = cast(state.velocity), cast(state.spin)
+    i, j = geometry.i, geometry.j
+    f, t_i, t_j, spring, rolling, _ = _contact_laws(
+        physics, params, dt, cast(geometry.normal), cast(geometry.overlap), radii_f[i], radii_f[j], mass_f[i],
+        mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], state.spring,
         state.rolling, params.mu, params.mu_r)
-    is_lo = (jnp.arange(n, dtype=lo.dtype)[:, None] == lo)[..., None]
-    force = jnp.sum(jnp.where(is_lo, f, -f), axis=1)
-    torque = jnp.sum(jnp.where(is_lo, t_lo, t_hi), axis=1)
-    force = force + mass[:, None] * jnp.asarray(physics.gravity, dtype)
+    # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
+    f, t_i, t_j = f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype)
+    force = pair_sum(f, -f, geometry.pairs, n)
+    torque = pair_sum(t_i, t_j, geometry.pairs, n)
     new = dataclasses.replace(state, spring=spring, rolling=rolling)
     h = wall_n = None
     if physics.walls:
-        h = wall_penetration(physics.walls, positions, radii, t)
-        inward = jnp.stack([jnp.asarray(w.normal, dtype) for w in physics.walls])[:, None, :]
-        wall_v = jnp.stack([jnp.asarray(w.velocity, dtype) for w in physics.walls])[:, None, :]
-        inf = jnp.asarray(jnp.inf, dtype)
+        h = wall_penetration(physics.walls, positions, radii, t)  # in the positions' precision
+        inward = jnp.stack([jnp.asarray(w.normal, fd) for w in physics.walls])[:, None, :]
+        wall_v = jnp.stack([jnp.asarray(w.velocity, fd) for w in physics.walls])[:, None, :]
+        inf = jnp.asarray(jnp.inf, fd)
         mu_w = params.mu if params.mu_wall is None else params.mu_wall
         mu_r_w = params.mu_r if params.mu_r_wall is None else params.mu_r_wall
         # the wall is j: the normal from the particle to the wall is -n_w
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
-            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h, radii, inf, mass, inf,
-            modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
-            jnp.zeros_like(omega), jnp.zeros((), dtype), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
-        force = force + jnp.sum(f_w, axis=0)
-        torque = torque + jnp.sum(t_w, axis=0)
+            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), cast(h), radii_f, inf, mass_f,
+            inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
+            jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
+        force = force + jnp.sum(f_w.astype(dtype), axis=0)
+        torque = torque + jnp.sum(t_w.astype(dtype), axis=0)
         new = dataclasses.replace(new, wall_spring=wall_spring, wall_rolling=wall_rolling)
+    force = force + mass[:, None] * jnp.asarray(physics.gravity, dtype)
     return Loads(force, torque, new, h, wall_n)
 
 
-def remap_history(state: MechanicalState, old_idx, new_idx, rebuilt) -> MechanicalState:
-    """Carry the pair springs from ``old_idx`` to ``new_idx`` (:func:`remap_pair_history`) when the list ``rebuilt``.
+def force_dtype(physics, dtype):
+    """The dtype the contact laws run in: ``physics.force_dtype``, or the positions' ``dtype`` if None."""
+    return jnp.dtype(dtype if physics.force_dtype is None else physics.force_dtype)
 
-    Under ``lax.cond``: the remap (a sort per row) runs only on rebuild
-    steps. Tables of different widths (a reallocation) are remapped directly.
+
+def remap_history(state: MechanicalState, old_pairs, new_pairs) -> MechanicalState:
+    """Carry the pair springs from the half list ``old_pairs`` to ``new_pairs`` by ``(i, j)`` identity.
+
+    :func:`sintercond.neighbors.remap_half_pairs`: a pair new to the list
+    starts at zero; the lists may differ in capacity (a reallocation). Call
+    it when the list is rebuilt (under the rebuild's ``lax.cond``).
     """
-    fields = [f for f in ("spring", "rolling") if getattr(state, f) is not None]
-    if not fields:
-        return state
-    values = tuple(getattr(state, f) for f in fields)
-    if old_idx.shape != new_idx.shape:
-        remapped = tuple(remap_pair_history(old_idx, new_idx, x) for x in values)
-    else:
-        remapped = jax.lax.cond(rebuilt, lambda xs: tuple(remap_pair_history(old_idx, new_idx, x) for x in xs),
-                                lambda xs: xs, values)
-    return dataclasses.replace(state, **dict(zip(fields, remapped)))
+    fields = {f: remap_half_pairs(old_pairs, new_pairs, getattr(state, f))
+              for f in ("spring", "rolling") if getattr(state, f) is not None}
+    return dataclasses.replace(state, **fields)
 
 
 def integrate(positions, state: MechanicalState, force, torque, mass, radii, dt):

@@ -9,9 +9,17 @@ Three tools, from the fastest path to the reference:
   the skin since the last rebuild (jax-md's ``dr_threshold``), so most steps
   pay only a displacement check. A list that outgrows its capacity sets a
   flag (:func:`did_buffer_overflow`); the host reallocates and redoes the
-  chunk. Per-pair quantities (a neck, a tangential spring, a contact age)
+  chunk. Per-pair quantities of a Dense table (a neck, a contact age)
   follow the pair through rebuilds and reallocations with
   :func:`remap_pair_history`.
+* :func:`half_pairs`: the pairs the contact laws run on, each ``i < j``
+  once, kept within ``r_i + r_j + skin`` (size-aware) and sorted by
+  ``(i, j)``, rebuilt from the Dense list whenever it is rebuilt, in a
+  fixed-capacity buffer with its own overflow flag
+  (:func:`half_pairs_overflowed`). Per-pair values (the springs) follow
+  with :func:`remap_half_pairs`; :func:`pair_sum` adds a per-pair value to
+  one end and its opposite to the other, so forces and heat are conserved
+  by construction.
 * :func:`cell_list_pairs`: the contacts of a static packing on the host, in
   vectorised NumPy (a cell list, no per-particle Python loop, no compile).
 * :func:`brute_force_pairs`: the O(n^2) reference for tests.
@@ -31,13 +39,16 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import math
 import warnings
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from sintercond.state import pytree_dataclass
 
 CANDIDATE_MARGIN = 1e-6
 """Relative margin on the contact range ``2 r_max`` of :func:`neighbor_list`:
@@ -78,18 +89,22 @@ class NeighborListFns(NamedTuple):
     """A skinned Dense neighbour list for contacts (see :func:`neighbor_list`).
 
     Attributes:
-      allocate: ``positions [n, 3] -> NeighborList`` (host, not jit-able):
-        sizes the buffer from these positions times ``capacity_multiplier``.
+      allocate: ``(positions [n, 3], extra_capacity=0) -> NeighborList``
+        (host, not jit-able): sizes the buffer from these positions times
+        ``capacity_multiplier``, plus ``extra_capacity`` slots per row.
       update: ``(positions [n, 3], nbrs) -> nbrs`` (jit-able): rebuilds only
         once a particle moved more than ``skin / 2`` since the last rebuild.
       cutoff: the contact range ``2 r_max (1 + CANDIDATE_MARGIN)`` (m).
       skin: the Verlet skin (m); candidates lie within ``cutoff + skin``.
+      capacity_multiplier: spare capacity of each allocation (also of the
+        half pair list, :func:`allocate_half_pairs`).
     """
 
     allocate: Callable
     update: Callable
     cutoff: float
     skin: float
+    capacity_multiplier: float = 1.25
 
 
 def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capacity_multiplier=1.25):
@@ -152,16 +167,16 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
                                       capacity_multiplier=float(capacity_multiplier),
                                       format=partition.NeighborListFormat.Dense)
 
-    def allocate(positions):
+    def allocate(positions, extra_capacity=0):
         positions = jnp.asarray(positions)
         with jax_md_guard():
-            return _kept_dtype(fns.allocate(to_box(positions)), positions)
+            return _kept_dtype(fns.allocate(to_box(positions), extra_capacity=int(extra_capacity)), positions)
 
     def update(positions, nbrs):
         with jax_md_guard():
             return _kept_dtype(fns.update(to_box(positions), nbrs), positions)
 
-    return NeighborListFns(allocate, update, cutoff, float(skin))
+    return NeighborListFns(allocate, update, cutoff, float(skin), float(capacity_multiplier))
 
 
 def _kept_dtype(nbrs, positions):
@@ -219,6 +234,151 @@ def remap_pair_history(old_idx, new_idx, values, fill=0):
     carried = values[rows, jnp.take_along_axis(order, at, axis=1)]
     found = found.reshape(found.shape + (1,) * (values.ndim - 2))
     return jnp.where(found, carried, jnp.asarray(fill, dtype=values.dtype))
+
+
+# --------------------------------------------------------------------------
+# half pair list (each pair once), fed by the Dense list
+
+
+@pytree_dataclass
+class HalfPairs:
+    """Each contact candidate once: the pairs a contact law is evaluated on.
+
+    Attributes:
+      pairs: ``[capacity, 2]`` int32 ``(i, j)`` with ``i < j``, sorted by
+        ``(i, j)``; the unused tail is padding ``(n, n)``.
+      demand: int32 scalar, the most pairs any build since the allocation
+        kept; above ``capacity`` the list overflowed (pairs were dropped):
+        :func:`half_pairs_overflowed`, and the host reallocates from it.
+    """
+
+    pairs: Any
+    demand: Any
+
+    @property
+    def capacity(self) -> int:
+        return self.pairs.shape[0]
+
+
+def _kept_neighbors(idx, positions, radii, skin):
+    """``[n, m]`` rows of ``idx`` keeping ``j > i`` within ``r_i + r_j + skin`` (ascending; ``n`` after them)."""
+    n = radii.shape[0]
+    rows = jnp.arange(n, dtype=idx.dtype)[:, None]
+    ahead = (idx < n) & (idx > rows)
+    j = jnp.where(ahead, idx, rows)
+    delta = positions[j] - positions[:, None, :]
+    # between two rebuilds each particle moves at most skin / 2 (jax-md's threshold, rounded in float32):
+    # a pair beyond r_i + r_j + skin at the rebuild cannot touch before the next one
+    reach = (radii[:, None] + radii[j] + skin) * (1.0 + CANDIDATE_MARGIN)
+    keep = ahead & (jnp.sum(delta * delta, axis=-1) < reach * reach)
+    return jnp.sort(jnp.where(keep, idx, n), axis=1)
+
+
+def half_pairs(idx, positions, radii, skin, capacity, demand=0) -> HalfPairs:
+    """The half pair list of a Dense table at ``positions`` (jit-able; build it when the table is rebuilt).
+
+    Keeps each pair ``i < j`` of ``idx`` whose centres are closer than
+    ``(r_i + r_j + skin)(1 + CANDIDATE_MARGIN)`` (size-aware, as LAMMPS'
+    granular lists: with a polydisperse packing far fewer pairs than the
+    Dense list's ``2 r_max + skin``), sorted by ``(i, j)`` so that the
+    order of the pairs, and of every sum over them, does not depend on the
+    Dense table's layout or on the capacity.
+
+    Args:
+      idx: ``[n, m]`` int32 Dense table (padding ``n``), e.g. ``nbrs.idx``.
+      positions: ``[n, 3]`` (m), the positions ``idx`` was built at.
+      radii: ``[n]`` (m).
+      skin: the list's Verlet skin (m).
+      capacity: static int, the rows of the result.
+      demand: the previous list's ``demand`` (kept if larger).
+
+    Returns:
+      :class:`HalfPairs`; ``demand > capacity`` flags an overflow.
+    """
+    n, m = idx.shape
+    kept = _kept_neighbors(idx, positions, radii, skin)
+    real = kept < n
+    count = jnp.sum(real, dtype=jnp.int32)
+    flat = jnp.nonzero(real.ravel(), size=capacity, fill_value=n * m)[0].astype(idx.dtype)
+    inside = flat < n * m
+    i = jnp.where(inside, flat // max(m, 1), n)
+    j = jnp.where(inside, jnp.append(kept.ravel(), n)[flat], n)  # flat == n m: the appended padding
+    return HalfPairs(jnp.stack([i, j], axis=1).astype(jnp.int32), jnp.maximum(count, jnp.asarray(demand, jnp.int32)))
+
+
+def half_pair_count(idx, positions, radii, skin) -> int:
+    """Pairs :func:`half_pairs` keeps from ``idx`` at ``positions`` (host)."""
+    return int(jnp.sum(_kept_neighbors(jnp.asarray(idx), jnp.asarray(positions), jnp.asarray(radii), skin)
+                       < radii.shape[0]))
+
+
+def allocate_half_pairs(idx, positions, radii, skin, capacity_multiplier=1.25, minimum=1) -> HalfPairs:
+    """A :func:`half_pairs` list sized on the host: ``capacity_multiplier`` times the pairs kept now (at least ``minimum``)."""
+    capacity = max(int(math.ceil(capacity_multiplier * half_pair_count(idx, positions, radii, skin))), int(minimum), 1)
+    return half_pairs(jnp.asarray(idx), jnp.asarray(positions), jnp.asarray(radii), skin, capacity)
+
+
+def half_pairs_overflowed(half: HalfPairs):
+    """Scalar bool (jit-able): a build kept more pairs than the list holds; reallocate and redo."""
+    return half.demand > half.capacity
+
+
+def padded_half_pairs(half: HalfPairs, capacity: int, n: int) -> HalfPairs:
+    """``half`` with room for ``capacity`` pairs (>= its own): padding ``(n, n)`` appended (host)."""
+    extra = capacity - half.capacity
+    if extra < 0:
+        raise ValueError(f"capacity {capacity} is below the list's {half.capacity}")
+    pad = jnp.full((extra, 2), n, half.pairs.dtype)
+    return HalfPairs(jnp.concatenate([half.pairs, pad]), half.demand)
+
+
+def remap_half_pairs(old_pairs, new_pairs, values, fill=0):
+    """Carry per-pair values from one half pair list to another by ``(i, j)`` identity (jit-able).
+
+    Both lists sorted by ``(i, j)`` (:func:`half_pairs`): each new pair is
+    found by a lexicographic binary search in the old list
+    (``O(capacity log capacity)``, no integer key that could overflow);
+    a pair absent from the old list, and padding (``i == j``), gets
+    ``fill``. The lists may differ in capacity (a reallocation).
+
+    Args:
+      old_pairs: ``[c_old, 2]`` pairs the values belong to.
+      new_pairs: ``[c_new, 2]`` pairs to carry them to.
+      values: ``[c_old, ...]`` (e.g. ``[c_old, 3]`` tangential springs).
+
+    Returns:
+      ``[c_new, ...]`` values, dtype of ``values``.
+    """
+    old_pairs, new_pairs, values = jnp.asarray(old_pairs), jnp.asarray(new_pairs), jnp.asarray(values)
+    c_old = old_pairs.shape[0]
+    oi, oj, ni, nj = old_pairs[:, 0], old_pairs[:, 1], new_pairs[:, 0], new_pairs[:, 1]
+
+    def bisect(_, bounds):
+        lo, hi = bounds
+        mid = (lo + hi) // 2
+        at = jnp.minimum(mid, c_old - 1)
+        before = (oi[at] < ni) | ((oi[at] == ni) & (oj[at] < nj))
+        active = lo < hi
+        return jnp.where(active & before, mid + 1, lo), jnp.where(active & ~before, mid, hi)
+
+    lo = jnp.zeros(ni.shape, jnp.int32)
+    lo, _ = jax.lax.fori_loop(0, max(c_old, 1).bit_length() + 1, bisect, (lo, jnp.full_like(lo, c_old)))
+    at = jnp.minimum(lo, max(c_old - 1, 0))
+    found = (ni < nj) & (lo < c_old) & (oi[at] == ni) & (oj[at] == nj)
+    found = found.reshape(found.shape + (1,) * (values.ndim - 1))
+    return jnp.where(found, values[at], jnp.asarray(fill, values.dtype))
+
+
+def pair_sum(on_i, on_j, pairs, n):
+    """``[n, ...]``: per-pair values scattered to both ends, ``on_i`` to ``pairs[:, 0]``, ``on_j`` to ``pairs[:, 1]``.
+
+    With ``on_j = -on_i`` (a force, a heat flow) the total is zero to
+    round-off by construction. Padding pairs (index ``n``) are dropped.
+    The additions run in pair order, so sorted lists give sums independent
+    of the capacity.
+    """
+    out = jnp.zeros((n,) + on_i.shape[1:], jnp.result_type(on_i, on_j))
+    return out.at[pairs[:, 0]].add(on_i, mode="drop").at[pairs[:, 1]].add(on_j, mode="drop")
 
 
 # --------------------------------------------------------------------------

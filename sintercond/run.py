@@ -13,6 +13,7 @@ inputs.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import sys
 import time
@@ -379,7 +380,9 @@ def _finite_temperatures(state):
         raise FloatingPointError(f"non-finite temperature at step {int(state.step)}; reduce the time step")
 
 
+@functools.lru_cache(maxsize=16)
 def _compiled_chunk(sim, chunk):
+    """The jitted chunk of ``sim`` (hashable), kept across :func:`advance` calls: a second run does not recompile."""
     def run_chunk(state, params):
         return simulate.rollout(sim, state, params, chunk, simulate.SaveAt(chunk, _nothing), checkpoint=False)[0]
 

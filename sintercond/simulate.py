@@ -42,11 +42,16 @@ slope, a contact resistance, the fitted law's coefficients) and per-material
 conductivities are differentiable. Both give the same numbers and gradients
 where both apply (tests/test_simulate.py).
 
-``contacts="dynamic"``: positions move (a prescribed ``motion(t)`` today; the
-thermo-mechanical model next); a jax-md neighbour list with a skin is
-updated inside the step and the same lift gives conductances from the
-current overlaps at every step. Overflow of the list is a flag in the state,
-recovered by the host driver (:func:`sintercond.run.advance`).
+``contacts="dynamic"``: positions move (a prescribed ``motion(t)``, or the
+thermo-mechanical step); a jax-md neighbour list with a skin is updated
+inside the step, and whenever it is rebuilt a half pair list (each pair
+``i < j`` once, within ``r_i + r_j + skin``;
+:class:`sintercond.neighbors.HalfPairs`) is rebuilt from it. The law is
+evaluated once per pair of the half list from the current overlaps at every
+step, and heat (and force) is added to one end and taken from the other
+(:func:`sintercond.neighbors.pair_sum`): conserved by construction.
+Overflow of either list is a flag in the state, recovered by the host
+driver (:func:`sintercond.run.advance` with :func:`reallocate_neighbors`).
 """
 
 from __future__ import annotations
@@ -64,7 +69,8 @@ from sintercond import mechanics, thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState
 from sintercond.neck import NECK_MODELS
-from sintercond.neighbors import did_buffer_overflow, did_rebuild
+from sintercond.neighbors import (HalfPairs, allocate_half_pairs, did_buffer_overflow, did_rebuild, half_pair_count,
+                                  half_pairs, half_pairs_overflowed, pair_sum, padded_half_pairs)
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -120,6 +126,11 @@ class Physics:
       shear: ``"paper"`` (Eq. 9) or ``"mindlin"`` effective shear modulus.
       slip_direction: ``"trial"`` or ``"velocity"`` (erratum 3).
       rolling_projection: roll on the tangential part of the relative spin only (erratum 5).
+      force_dtype: ``None`` (the contact laws in the positions' dtype) or
+        ``"float32"``: forces, torques and springs in float32 while
+        positions, velocities and temperatures stay float64 (relative
+        separations are formed in float64 first, so the overlap keeps its
+        digits); see tests/test_mechanics.py for the accuracy.
     """
 
     law: str = "rojek"
@@ -146,6 +157,7 @@ class Physics:
     shear: str = "paper"
     slip_direction: str = "trial"
     rolling_projection: bool = False
+    force_dtype: str | None = None
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
@@ -185,6 +197,8 @@ class Physics:
                              "for heat); conducting_walls must be 0")
         if self.shear not in SHEAR_CONVENTIONS:
             raise ValueError(f"Physics.shear must be one of {list(SHEAR_CONVENTIONS)}; got {self.shear!r}")
+        if self.force_dtype not in (None, "float32", "float64"):
+            raise ValueError(f"Physics.force_dtype must be None, 'float32' or 'float64'; got {self.force_dtype!r}")
         if self.slip_direction not in SLIP_DIRECTIONS:
             raise ValueError(f"Physics.slip_direction must be one of {list(SLIP_DIRECTIONS)}; got {self.slip_direction!r}")
         gravity = tuple(float(g) for g in self.gravity)
@@ -296,6 +310,9 @@ class Contacts:
       wall_neck, wall_overlap: ``[n_walls, n]`` neck radius and penetration (m)
         of each particle on each conducting wall (lifted), else None.
       neighbor_list: the jax-md neighbour list of dynamic contacts, else None.
+      pairs: the half pair list (:class:`sintercond.neighbors.HalfPairs`,
+        ``[capacity, 2]``) of dynamic contacts, rebuilt with the jax-md
+        list, else None.
     """
 
     neighbors: Any
@@ -307,6 +324,7 @@ class Contacts:
     wall_neck: Any = None
     wall_overlap: Any = None
     neighbor_list: Any = None
+    pairs: HalfPairs | None = None
 
 
 @pytree_dataclass
@@ -388,7 +406,12 @@ def conductance_lift(physics: Physics, radii, material, neighbors, neck, overlap
     rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
     valid = (neighbors != rows) & (neighbors < n)
     j = jnp.where(valid, neighbors, rows)
-    lo, hi = jnp.minimum(rows, j), jnp.maximum(rows, j)
+    return _law_on_pairs(physics, radii, material, jnp.minimum(rows, j), jnp.maximum(rows, j), valid, neck, overlap,
+                         conductivity, law_params)
+
+
+def _law_on_pairs(physics, radii, material, lo, hi, valid, neck, overlap, conductivity, law_params):
+    """The conductance law on pairs ``(lo, hi)`` (any shape) from their necks (W/K); 0 where not ``valid``."""
     kappa = jnp.asarray(conductivity)
     k = conductance_from_neck(physics.law, neck, radii[lo], radii[hi], overlap, kappa[material[lo]],
                               kappa[material[hi]], law_params)
@@ -402,15 +425,50 @@ def _wall_lift(physics, particles, contacts, conductivity, law_params):
                                       kappa, law_params)
 
 
-def _dynamic_geometry(physics, positions, radii, neighbors):
-    """Overlaps and necks ``[n, m]`` of a jax-md table (padding ``n``) at the current positions."""
-    g = mechanics.pair_geometry(positions, radii, neighbors)  # the pair in index order: bitwise equal on both rows
-    return g.j, _pair_neck(physics, radii, g), g.overlap
+def pair_conductance(physics: Physics, radii, material, geometry, conductivity, law_params):
+    """Conductances ``[c]`` (W/K) of the pairs of a half list from their current overlaps: neck, then the law, once per pair.
+
+    ``geometry``: :func:`sintercond.mechanics.pair_geometry` of the list.
+    """
+    return _law_on_pairs(physics, radii, material, geometry.i, geometry.j, geometry.valid,
+                         _pair_neck(physics, radii, geometry), geometry.overlap, conductivity, law_params)
 
 
 def _pair_neck(physics, radii, g):
-    """Neck radii ``[n, m]`` (m) of the touching slots of a :class:`sintercond.mechanics.PairGeometry`."""
-    return jnp.where(g.touching, NECK_MODELS[physics.neck](radii[g.lo], radii[g.hi], g.overlap), 0.0)
+    """Neck radii ``[c]`` (m) of the touching pairs of a :class:`sintercond.mechanics.PairGeometry`."""
+    return jnp.where(g.touching, NECK_MODELS[physics.neck](radii[g.i], radii[g.j], g.overlap), 0.0)
+
+
+def pair_heat_power(conductance, pairs, temperature):
+    """Heat power ``[n]`` (W) into each particle through the pairs ``[c, 2]`` of a half list, ``K (T_j - T_i)`` into ``i``.
+
+    Each pair's flow is added to one end and taken from the other: the total is zero to round-off.
+    """
+    n = temperature.shape[0]
+    i, j = jnp.minimum(pairs[:, 0], n - 1), jnp.minimum(pairs[:, 1], n - 1)
+    q = conductance * (temperature[j] - temperature[i])
+    return pair_sum(q, -q, pairs, n)
+
+
+def follow_contacts(neighbor_fn, positions, radii, contacts: Contacts, history=None):
+    """Dynamic contacts at ``positions``: ``(contacts, history, overflow)``.
+
+    Updates the jax-md list (it rebuilds once a particle moved half the
+    skin); when it rebuilt, rebuilds the half pair list from it and carries
+    the per-pair ``history`` (a :class:`sintercond.mechanics.MechanicalState`
+    or None) to the new pairs (:func:`sintercond.mechanics.remap_history`),
+    all under one ``lax.cond``. ``overflow``: either list ran out of room.
+    """
+    nbrs = neighbor_fn.update(positions, contacts.neighbor_list)
+    old = contacts.pairs
+
+    def rebuild(history):
+        new = half_pairs(nbrs.idx, positions, radii, neighbor_fn.skin, old.capacity, old.demand)
+        return new, None if history is None else mechanics.remap_history(history, old.pairs, new.pairs)
+
+    half, history = jax.lax.cond(did_rebuild(contacts.neighbor_list, nbrs), rebuild, lambda h: (old, h), history)
+    overflow = did_buffer_overflow(nbrs) | half_pairs_overflowed(half)
+    return dataclasses.replace(contacts, neighbor_list=nbrs, neighbors=nbrs.idx, pairs=half), history, overflow
 
 
 # --------------------------------------------------------------------------
@@ -451,9 +509,14 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         return Prepared(params, capacity, conductance, scale, wall_k, wall_t)
 
     def conduction_power(state: SimState, prep: Prepared, temperature, conductance, neighbors):
-        """Heat into each particle through the contacts (None: walls only) and conducting walls (W)."""
+        """Heat into each particle through the contacts (None: walls only) and conducting walls (W).
+
+        Dynamic contacts: a half pair list ``[c, 2]`` and its conductances ``[c]``; static: the table.
+        """
         power = jnp.zeros_like(temperature)
-        if conductance is not None:
+        if conductance is not None and physics.contacts == "dynamic":
+            power = pair_heat_power(conductance, neighbors, temperature)
+        elif conductance is not None:
             power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
         if physics.conducting_walls:
             power = power + prep.scale * jnp.sum(prep.wall_conductance * (prep.wall_temperature - temperature), axis=0)
@@ -467,14 +530,13 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         if physics.motion is not None:
             positions = physics.motion(state.time).astype(particles.positions.dtype)
             particles = dataclasses.replace(particles, positions=positions)
-        nbrs = neighbor_fn.update(particles.positions, contacts.neighbor_list)
-        j, neck, overlap = _dynamic_geometry(physics, particles.positions, particles.radii, nbrs.idx)
+        contacts, _, overflow = follow_contacts(neighbor_fn, particles.positions, particles.radii, contacts)
+        geometry = mechanics.pair_geometry(particles.positions, particles.radii, contacts.pairs.pairs)
         kappa = jnp.atleast_1d(jnp.asarray(prep.params.conductivity))
-        conductance = conductance_lift(physics, particles.radii, particles.material, j, neck, overlap, kappa,
+        conductance = pair_conductance(physics, particles.radii, particles.material, geometry, kappa,
                                        merged_law_params(physics, prep.params))
-        state = dataclasses.replace(state, particles=particles, overflow=state.overflow | did_buffer_overflow(nbrs),
-                                    contacts=dataclasses.replace(contacts, neighbor_list=nbrs, neighbors=nbrs.idx))
-        return state, conductance, j
+        state = dataclasses.replace(state, particles=particles, overflow=state.overflow | overflow, contacts=contacts)
+        return state, conductance, contacts.pairs.pairs
 
     def heat_power_fn(state: SimState, prep: Prepared, conductance=None, neighbors=None):
         """Heat power into every particle (W): conduction, walls and sources at the state's time."""
@@ -489,12 +551,9 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         particles, contacts, params = state.particles, state.contacts, prep.params
         mp = params.mechanics
         positions, radii, mass, t = particles.positions, particles.radii, particles.mass, state.time
-        nbrs = neighbor_fn.update(positions, contacts.neighbor_list)
-        motion = mechanics.remap_history(state.mechanics, contacts.neighbors, nbrs.idx,
-                                         did_rebuild(contacts.neighbor_list, nbrs))
-        state = dataclasses.replace(state, overflow=state.overflow | did_buffer_overflow(nbrs),
-                                    contacts=dataclasses.replace(contacts, neighbor_list=nbrs, neighbors=nbrs.idx))
-        geometry = mechanics.pair_geometry(positions, radii, nbrs.idx)
+        contacts, motion, overflow = follow_contacts(neighbor_fn, positions, radii, contacts, state.mechanics)
+        state = dataclasses.replace(state, overflow=state.overflow | overflow, contacts=contacts)
+        geometry = mechanics.pair_geometry(positions, radii, contacts.pairs.pairs)
         modulus = mechanics.particle_modulus(physics, mp, particles.temperature, particles.material)
         nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, positions.dtype))[particles.material], radii.shape)
         loads = mechanics.contact_loads(physics, mp, geometry, positions, radii, mass, modulus, nu, motion, t,
@@ -502,9 +561,8 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         # heat through the contacts of this geometry (Eqs. 32-36; walls as neighbours of infinite radius)
         kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
         law_params = merged_law_params(physics, params)
-        conductance = conductance_lift(physics, radii, particles.material, geometry.j,
-                                       _pair_neck(physics, radii, geometry), geometry.overlap, kappa, law_params)
-        power = -network_laplacian(conductance, geometry.j, particles.temperature)
+        conductance = pair_conductance(physics, radii, particles.material, geometry, kappa, law_params)
+        power = pair_heat_power(conductance, geometry.pairs, particles.temperature)
         for w, wall in enumerate(physics.walls):
             if wall.mode == "conducting":
                 h = loads.wall_penetration[w]
@@ -627,7 +685,9 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
     """Contacts of ``contacts="dynamic"`` and their neighbour-list functions: ``(contacts, neighbor_fns)``.
 
     A jax-md Dense list with a Verlet skin (:func:`sintercond.neighbors.neighbor_list`):
-    inside the step it is rebuilt only once a particle moved ``skin / 2``.
+    inside the step it is rebuilt only once a particle moved ``skin / 2``,
+    and the half pair list (``Contacts.pairs``, the pairs the laws run on)
+    with it. Both are sized here with ``capacity_multiplier`` spare room.
     The cell-list region is the packing's extent widened by ``margin`` (m;
     default half the extent plus ``2 r_max`` on every side). Pass
     ``neighbor_fns`` to :func:`simulator`.
@@ -640,25 +700,42 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
     margin = 0.5 * (hi - lo) + 2.0 * radii.max() if margin is None else margin
     fns = neighbor_list(radii, skin, lo - margin, hi + margin, capacity_multiplier=capacity_multiplier)
     nbrs = fns.allocate(jnp.asarray(positions))
-    return Contacts(neighbors=nbrs.idx, neighbor_list=nbrs), fns
+    half = allocate_half_pairs(nbrs.idx, jnp.asarray(positions), jnp.asarray(radii), fns.skin, capacity_multiplier)
+    return Contacts(neighbors=nbrs.idx, neighbor_list=nbrs, pairs=half), fns
 
 
 def reallocate_neighbors(neighbor_fns):
-    """A ``reallocate(start, end)`` for :func:`sintercond.run.advance`: a list sized for the chunk's end positions.
+    """A ``reallocate(start, end)`` for :func:`sintercond.run.advance`: room for the chunk that overflowed.
 
-    The redone chunk starts from ``start`` with the larger list; its first
-    update rebuilds it at the start positions (they moved more than the skin
-    from the end positions it was sized at, or it was already valid).
-    Contact springs of a mechanical state are remapped onto the new table
-    (pairs absent from it start at zero after the rebuild's own remap).
+    The jax-md list is allocated at the chunk's end positions (never
+    narrower than before); the half pair list grows to
+    ``capacity_multiplier`` times the most pairs any build of the chunk
+    needed (or the end positions need), if it overflowed. The redone chunk
+    starts from ``start``: its pairs and springs are kept (padded to the new
+    capacity), and its first update rebuilds both lists at the start
+    positions, carrying the springs to them pair by pair, exactly as a roomy
+    list would have held them.
     """
     def reallocate(start: SimState, end: SimState) -> SimState:
+        old = start.contacts.neighbor_list
         nbrs = neighbor_fns.allocate(end.particles.positions)
+        if nbrs.idx.shape[1] < old.idx.shape[1]:
+            nbrs = neighbor_fns.allocate(end.particles.positions, old.idx.shape[1] - nbrs.idx.shape[1])
         nbrs = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
-        contacts = dataclasses.replace(start.contacts, neighbor_list=nbrs, neighbors=nbrs.idx)
+        half = start.contacts.pairs
+        capacity = half.capacity
+        if bool(half_pairs_overflowed(end.contacts.pairs)):
+            need = max(int(end.contacts.pairs.demand), half_pair_count(nbrs.idx, end.particles.positions,
+                                                                       end.particles.radii, neighbor_fns.skin))
+            capacity = max(capacity + 1, int(math.ceil(neighbor_fns.capacity_multiplier * need)))
+        n = start.particles.radii.shape[0]
+        contacts = dataclasses.replace(start.contacts, neighbor_list=nbrs, neighbors=nbrs.idx,
+                                       pairs=padded_half_pairs(half, capacity, n))
         motion = start.mechanics
-        if motion is not None:  # the springs follow their pairs onto the wider table
-            motion = mechanics.remap_history(motion, start.contacts.neighbors, nbrs.idx, True)
+        if motion is not None and capacity > half.capacity:  # the springs stay with their pairs, zeros after them
+            pad = lambda x: None if x is None else jnp.concatenate(  # noqa: E731
+                [x, jnp.zeros((capacity - half.capacity,) + x.shape[1:], x.dtype)])
+            motion = dataclasses.replace(motion, spring=pad(motion.spring), rolling=pad(motion.rolling))
         return dataclasses.replace(start, contacts=contacts, mechanics=motion)
 
     return reallocate

@@ -250,3 +250,75 @@ def test_pair_conductances_compiled_equal_the_eager_law():
                                rtol=1e-14)
     with pytest.raises(ValueError, match="kappa_i"):
         network.pair_conductances("rojek", pairs, -k_i, k_j)
+
+
+# --------------------------------------------------------------------------
+# half pair list
+
+
+def size_aware_pairs(positions, radii, skin):
+    """Pairs i < j closer than ``(r_i + r_j + skin)(1 + CANDIDATE_MARGIN)``, by brute force in NumPy."""
+    scale = 1.0 + neighbors.CANDIDATE_MARGIN
+    d = np.linalg.norm(positions[:, None, :] - positions[None, :, :], axis=-1)
+    i, j = np.nonzero((d < (radii[:, None] + radii[None, :] + skin) * scale) & np.triu(np.ones_like(d, bool), 1))
+    return list(zip(i.tolist(), j.tolist()))
+
+
+def test_half_pairs_are_the_size_aware_brute_force_pairs_sorted():
+    centres, radii = random_packing(300, seed=9, polydispersity=0.8)  # polydisperse: far fewer than 2 r_max + skin
+    skin = 0.15
+    fns = free_list(radii, centres, skin)
+    nbrs = fns.allocate(centres)
+    half = neighbors.allocate_half_pairs(nbrs.idx, centres, radii, skin, 1.3)
+    expected = size_aware_pairs(centres, radii, skin)  # sorted by (i, j)
+    pairs = np.asarray(half.pairs)
+    assert half.pairs.dtype == jnp.int32 and int(half.demand) == len(expected)
+    assert half.capacity == int(np.ceil(1.3 * len(expected)))
+    assert [tuple(p) for p in pairs[:len(expected)].tolist()] == expected  # the pairs, in (i, j) order
+    assert np.all(pairs[len(expected):] == len(radii))  # then padding (n, n)
+    assert not bool(neighbors.half_pairs_overflowed(half))
+    assert len(expected) < 0.75 * len(listed_pairs(nbrs.idx)) / 2  # the size-aware prune keeps fewer
+    # too small: flagged, with the demand the host needs; the kept ones are the first in order
+    tight = jax.jit(neighbors.half_pairs, static_argnums=(3, 4))(nbrs.idx, centres, radii, skin, 50)
+    assert bool(neighbors.half_pairs_overflowed(tight)) and int(tight.demand) == len(expected)
+    assert [tuple(p) for p in np.asarray(tight.pairs).tolist()] == expected[:50]
+
+
+def test_remap_half_pairs_follows_pairs_by_identity():
+    rng = np.random.default_rng(3)
+    n = 40
+    universe = [(i, j) for i in range(n) for j in range(i + 1, n)]
+
+    def random_list(k, capacity):
+        chosen = sorted(universe[p] for p in rng.choice(len(universe), k, replace=False))
+        return np.array(chosen + [(n, n)] * (capacity - k), np.int32)
+
+    old, new = random_list(120, 130), random_list(150, 171)  # overlapping sets, different capacities
+    values = rng.normal(size=(130, 3))
+    reference = {tuple(p): values[k] for k, p in enumerate(old.tolist()) if p[0] < p[1]}
+    out = np.asarray(jax.jit(neighbors.remap_half_pairs)(old, new, values))
+    assert out.shape == (171, 3)
+    carried = 0
+    for k, p in enumerate(new.tolist()):
+        np.testing.assert_array_equal(out[k], reference.get(tuple(p), np.zeros(3)))
+        carried += tuple(p) in reference
+    assert 0 < carried < 150  # some pairs carried, some new
+    empty = neighbors.remap_half_pairs(np.full((1, 2), n, np.int32), new, np.ones((1, 3)))
+    assert not np.any(np.asarray(empty))
+
+
+def test_pair_sum_conserves_to_round_off():
+    rng = np.random.default_rng(5)
+    n = 50
+    pairs = np.array(sorted({tuple(sorted(rng.choice(n, 2, replace=False))) for _ in range(300)}), np.int32)
+    pairs = np.concatenate([pairs, np.full((7, 2), n, np.int32)])  # padding is dropped
+    f = rng.normal(size=(len(pairs), 3)) * 10.0 ** rng.uniform(-3, 3, (len(pairs), 1))
+    total = np.asarray(neighbors.pair_sum(jnp.asarray(f), -jnp.asarray(f), pairs, n))
+    assert total.shape == (n, 3)
+    assert np.max(np.abs(total.sum(axis=0))) < 1e-13 * np.max(np.abs(f))
+    expected = np.zeros((n, 3))
+    for (a, b), v in zip(pairs.tolist(), f):
+        if a < n:
+            expected[a] += v
+            expected[b] -= v
+    np.testing.assert_allclose(total, expected, rtol=1e-12, atol=1e-12 * np.max(np.abs(f)))
