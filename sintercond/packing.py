@@ -547,7 +547,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         dt = min(dt, float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, None)))
         params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
         state = simulate.init_state(particles, contacts, dt,
-                                    mechanics=mechanics.mechanical_state(physics, centres, contacts.neighbors))
+                                    mechanics=mechanics.mechanical_state(physics, centres, contacts))
         sim = simulate.simulator(physics, fns)
         mass, inertia = particles.mass, 0.4 * particles.mass * particles.radii**2
         weight = mass * GRAVITY

@@ -219,7 +219,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                                          v_rel))
         names["mechanical"] = (f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and the symplectic-Euler "
                                f"bounds of the stiffest contact at physics.impact_velocity = {v_rel:g} m/s)")
-        motion = mechanics.mechanical_state(physics, centres, contacts.neighbors)
+        motion = mechanics.mechanical_state(physics, centres, contacts)
         limit = min(thermal_limit, mechanical_limit)
     if run["dt"] == "auto":
         dt = 0.9 * limit if np.isfinite(limit) else run["duration"]
