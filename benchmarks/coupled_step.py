@@ -1,7 +1,7 @@
 """The coupled thermo-mechanical step: particle-steps/s of sintercond against LAMMPS ``pair_style granular``.
 
 Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
-                                         [--no-peers] [--dtypes float64 float32]
+                                         [--no-peers] [--dtypes float64 float32-forces float32]
 
 The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
 radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
@@ -94,12 +94,20 @@ def block(n, seed=0):
     return centres, radii, temperature
 
 
-def sintercond_run(centres, radii, temperature, steps, dtype, dt=None):
+VARIANTS = {"float64": (jnp.float64, "float64"), "float32-forces": (jnp.float64, "float32"),
+            "float32": (jnp.float32, "float32")}
+"""``--dtypes`` names: (the state's float dtype, ``Physics.force_dtype``). ``float32-forces``: contact laws and
+springs in float32, positions, velocities and temperatures in float64."""
+
+
+def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
     """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations)``."""
     t0 = time.perf_counter()
+    dtype, force_dtype = VARIANTS[variant]
     floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "insulated")
     physics = simulate.Physics(law="batchelor_obrien", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                               mechanics=True, walls=(floor,), friction=True, rolling=True, shear="mindlin")
+                               mechanics=True, walls=(floor,), friction=True, rolling=True, shear="mindlin",
+                               force_dtype=force_dtype)
     particles = particle_state(centres, radii, temperature, DENSITY)
     particles = jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x,
                                        particles)
@@ -205,7 +213,7 @@ def main():
     parser.add_argument("--sizes", type=int, nargs="+", default=[10000, 100000])
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
+    parser.add_argument("--dtypes", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument("--lammps", default=None)
     parser.add_argument("--no-peers", action="store_true", help="sintercond only (e.g. on a GPU machine)")
     args = parser.parse_args()
@@ -219,7 +227,7 @@ def main():
         dt = None
         ours = {}
         for name in args.dtypes:
-            result = sintercond_run(centres, radii, temperature, args.steps, getattr(jnp, name), dt)
+            result = sintercond_run(centres, radii, temperature, args.steps, name, dt)
             dt = result[0]
             ours[name] = result
             _, setup, compile_s, run_s, kinetic, mean_t, realloc = result

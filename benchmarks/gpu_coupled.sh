@@ -7,4 +7,4 @@ set -euo pipefail
 cd "$(dirname "$0")"
 PY=${1:-../.venv-gpu/bin/python}
 "$PY" -c "import jax; print(jax.devices()); assert jax.devices()[0].platform == 'gpu', 'no GPU visible to JAX'"
-timeout 540 "$PY" coupled_step.py --sizes 10000 100000 1000000 --steps 200 --dtypes float64 float32 --no-peers
+timeout 540 "$PY" coupled_step.py --sizes 10000 100000 1000000 --steps 200 --no-peers

@@ -90,14 +90,10 @@ EXAMPLE_5_3 = dict(particles=10_000, radius_mean=3e-3, radius_std=0.667e-3, trun
 
 def example_5_3_radii(n, seed=0):
     """``[n]`` radii (m) from N(3 mm, 0.667 mm) truncated at 3 standard deviations (redrawn outside), Example 5.3."""
+    from sintercond.packing import truncated_normal_radii
+
     d = EXAMPLE_5_3
-    rng = np.random.default_rng(seed)
-    radii = rng.normal(d["radius_mean"], d["radius_std"], n)
-    outside = np.abs(radii - d["radius_mean"]) > d["truncation"] * d["radius_std"]
-    while outside.any():
-        radii[outside] = rng.normal(d["radius_mean"], d["radius_std"], int(outside.sum()))
-        outside = np.abs(radii - d["radius_mean"]) > d["truncation"] * d["radius_std"]
-    return radii
+    return truncated_normal_radii(n, d["radius_mean"], d["radius_std"], d["truncation"], seed)
 
 
 def example_5_3_bed(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_size"], seed=0, start="relaxed",

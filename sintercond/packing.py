@@ -116,6 +116,29 @@ def sample_diameters(n, low, high, rng):
     return 1.0 / np.sqrt(1.0 / low**2 - u * (1.0 / low**2 - 1.0 / high**2))
 
 
+def truncated_normal_radii(n, mean, std, truncation=3.0, seed=0):
+    """``[n]`` radii from N(mean, std) truncated at ``truncation`` standard deviations (redrawn outside).
+
+    Quintana-Ruiz & Campello (2020), Example 5.3: N(3 mm, 0.667 mm) truncated
+    at 3 sigma. ``seed``: an int or a NumPy ``Generator``. Raises
+    :class:`PackingError` unless ``0 <= std``, ``truncation > 0`` and every
+    radius the truncation allows is positive (``mean - truncation std > 0``).
+    """
+    if not (np.isfinite(mean) and np.isfinite(std) and std >= 0 and np.isfinite(truncation) and truncation > 0):
+        raise PackingError(f"radius distribution: need finite mean, std >= 0 and truncation > 0; got mean={mean!r}, "
+                           f"std={std!r}, truncation={truncation!r}")
+    if mean - truncation * std <= 0:
+        raise PackingError(f"radius distribution: mean - truncation * std = {mean - truncation * std:.4g} must be > 0 "
+                           "(every radius positive)")
+    rng = np.random.default_rng(seed)
+    radii = rng.normal(mean, std, n)
+    outside = np.abs(radii - mean) > truncation * std
+    while outside.any():
+        radii[outside] = rng.normal(mean, std, int(outside.sum()))
+        outside = np.abs(radii - mean) > truncation * std
+    return radii
+
+
 def mean_sphere_volume(low, high):
     """Mean volume of a sphere whose diameter follows :func:`sample_diameters`: ``(pi/6) E[d^3]``.
 

@@ -72,7 +72,18 @@ def build_packing(scene):
     p = scene["packing"]
     if p["kind"] == "spheres":
         return np.asarray(p["centres"], np.float64), np.asarray(p["radii"], np.float64), {}
-    packed = packing.from_scene(p)
+    if p["kind"] == "poured":
+        rng = np.random.default_rng(p.get("seed", 0))
+        radii = packing.truncated_normal_radii(p["particles"], p["radius_mean"], p.get("radius_std", 0.0),
+                                               p.get("truncation", 3.0), rng)
+        packed = packing.pour(radii, p["lateral_size"], dem_material(scene), seed=rng, start=p.get("start", "relaxed"),
+                              temperature=scene["initial"]["temperature"])
+    elif p.get("method") == "dem":
+        packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0),
+                                    method="dem", material=dem_material(scene))
+        packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p.get("sinter_swelling", 0.0)))
+    else:
+        packed = packing.from_scene(p)
     return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}
 
 
@@ -100,24 +111,37 @@ def mechanics_on(scene) -> bool:
     return bool(scene.get("physics", {}).get("mechanics", False))
 
 
-def mechanical_params(scene) -> mechanics.MechanicalParams | None:
-    """The contact material of a validated scene (``[mechanics]``, ``[softening]``), or None without mechanics.
+def contact_material(scene) -> dict:
+    """The ``[mechanics]`` section as :class:`~sintercond.mechanics.MechanicalParams` names (floats, SI).
 
     ``mechanics.restitution`` e becomes ``xi_con``
-    (:func:`sintercond.scene.restitution_damping_ratio`).
+    (:func:`sintercond.scene.restitution_damping_ratio`); wall coefficients
+    default to the particles'.
     """
-    if not mechanics_on(scene):
-        return None
-    m, soft = scene["mechanics"], scene.get("softening", {})
-    f = lambda x: jnp.asarray(float(x))  # noqa: E731
+    m = scene["mechanics"]
     xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m.get("damping", 1.0)
     mu, mu_r = m.get("friction", 0.0), m.get("rolling_friction", 0.0)
+    return dict(E0=m["young_modulus"], nu=m["poisson_ratio"], xi_con=xi_con, xi_fric=m.get("tangential_damping", 1.0),
+                xi_rol=m.get("rolling_damping", 0.0), mu=mu, mu_r=mu_r, mu_wall=m.get("wall_friction", mu),
+                mu_r_wall=m.get("wall_rolling_friction", mu_r))
+
+
+def mechanical_params(scene) -> mechanics.MechanicalParams | None:
+    """The contact material of a validated scene (:func:`contact_material`, ``[softening]``), or None without mechanics."""
+    if not mechanics_on(scene):
+        return None
+    soft = scene.get("softening", {})
+    f = lambda x: jnp.asarray(float(x))  # noqa: E731
     return mechanics.MechanicalParams(
-        E0=f(m["young_modulus"]), nu=f(m["poisson_ratio"]), xi_con=f(xi_con),
-        xi_fric=f(m.get("tangential_damping", 1.0)), xi_rol=f(m.get("rolling_damping", 0.0)), mu=f(mu), mu_r=f(mu_r),
-        mu_wall=f(m.get("wall_friction", mu)),
-        mu_r_wall=f(m.get("wall_rolling_friction", mu_r)), theta_star=f(soft.get("onset_temperature", 400.0)),
+        **{k: f(v) for k, v in contact_material(scene).items()}, theta_star=f(soft.get("onset_temperature", 400.0)),
         rate=f(soft.get("rate", 1.0)), E_min=f(soft.get("min_modulus", 0.0)))
+
+
+def dem_material(scene) -> packing.DemMaterial:
+    """The contact material a poured packing settles with: :func:`contact_material` and ``material.density``."""
+    c = contact_material(scene)
+    return packing.DemMaterial(density=scene["material"]["density"], **{("E" if k == "E0" else k): float(v)
+                                                                        for k, v in c.items()})
 
 
 def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:

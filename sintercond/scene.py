@@ -59,9 +59,11 @@ def _choice(*options):
 
 
 TEMPERATURE = _within(1.0, 1e4, "K")
-PACKING_KINDS = ("powder_bed", "simple_cubic", "spheres")
-PACKING_METHODS = ("relax",)
-"""How a ``powder_bed`` is made (``packing.method``); pouring with the real DEM joins as ``"pour"``."""
+PACKING_KINDS = ("powder_bed", "simple_cubic", "spheres", "poured")
+PACKING_METHODS = ("relax", "dem")
+"""How a ``powder_bed`` is made (``packing.method``): harmonic relaxation, or poured with the DEM of [mechanics]."""
+MAX_POURED_PARTICLES = 20_000
+"""Spheres of a ``poured`` packing: each costs a DEM settle (~1e4-1e5 steps)."""
 MAX_LISTED_SPHERES = 10_000
 """Most spheres of a ``kind = "spheres"`` packing (they are listed in the scene file)."""
 FRACTION = _within(0.0, 1.0)
@@ -200,7 +202,8 @@ _PACKING = {
         "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed"),
         "method": Key(str, _choice(*PACKING_METHODS), False, default="relax",
                       doc="how the bed is made: relax (spheres dropped and relaxed with harmonic repulsion, "
-                          "sintercond.packing.powder_bed)"),
+                          "sintercond.packing.powder_bed) or dem (poured and settled with the contact laws of "
+                          "the [mechanics] section, which it then needs; sintercond.packing.pour; SI units)"),
         "sinter_swelling": Key(float, _within(0.0, 0.05), False, default=0.0,
                                doc="relative radius increase after settling that turns contacts into sintered "
                                    "necks (overlap h = 2 r s for equal spheres)"),
@@ -214,6 +217,21 @@ _PACKING = {
                       doc="sphere radius; the lattice conducts only for radius > spacing/2 (overlap "
                           "h = 2 radius - spacing > 0), up to the neck model's largest overlap "
                           "(0.75 spacing for the volume-conserving neck)"),
+    },
+    "poured": {
+        "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
+        "particles": Key(int, _within(2, MAX_POURED_PARTICLES), True, doc="number of spheres"),
+        "radius_mean": Key(float, _within(1e-6, 0.1, "m"), True, "m", doc="mean of the normal radius distribution"),
+        "radius_std": Key(float, _within(0.0, 0.1, "m"), False, "m", default=0.0,
+                          doc="standard deviation of the radius distribution (0: equal spheres)"),
+        "truncation": Key(float, _within(0.0, 10.0, low_open=True), False, "standard deviations", default=3.0,
+                          doc="radii beyond mean +- truncation std are redrawn; every radius must stay > 0"),
+        "lateral_size": Key(float, _within(1e-5, 10.0, "m"), True, "m",
+                            doc="side of the open square box [0, L]^2 the spheres are poured into, > 2 max radius"),
+        "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed (radii and the deposit)"),
+        "start": Key(str, _choice("relaxed", "deposit"), False, default="relaxed",
+                     doc="deposit: the DEM collapses the loose pile itself (a real pour); relaxed: the pile is "
+                         "first collapsed without friction, then the DEM settles it (cheaper, denser)"),
     },
     "spheres": {
         "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
@@ -379,7 +397,15 @@ def _check_mechanics(scene):
     """The thermo-mechanical sections: [mechanics] and [softening] only with physics.mechanics, combinations."""
     physics = scene.setdefault("physics", {})
     on = physics.get("mechanics", False)
+    packing = scene["packing"]
+    pours = packing["kind"] == "poured" or packing.get("method") == "dem"
+    if pours and "mechanics" not in scene:
+        raise SceneError("a poured packing (packing.kind = \"poured\" or packing.method = \"dem\") needs a [mechanics] "
+                         "section: the contact material it is poured with (at least mechanics.young_modulus and "
+                         "mechanics.poisson_ratio)")
     for section in ("mechanics", "softening"):
+        if section == "mechanics" and pours:
+            continue
         if section in scene and not on:
             raise SceneError(f"[{section}] needs physics.mechanics = true (the packing moves); without it the run is "
                              "thermal only: drop the section or set physics.mechanics = true")
@@ -418,6 +444,20 @@ def _check_packing(packing, conduction):
         if not isinstance(radii, list):
             radii = [radii] * len(centres)
         packing["radii"] = _numbers("packing.radii", radii, len(centres), radius_rule)
+        return
+    if packing["kind"] == "poured":
+        from sintercond.packing import truncated_normal_radii
+
+        try:
+            radii = truncated_normal_radii(1, packing["radius_mean"], packing.get("radius_std", 0.0),
+                                           packing.get("truncation", 3.0))
+        except PackingError as err:
+            raise SceneError(f"packing: {err}") from None
+        largest = packing["radius_mean"] + packing.get("truncation", 3.0) * packing.get("radius_std", 0.0)
+        if not packing["lateral_size"] > 2 * largest:
+            raise SceneError(f"packing.lateral_size must be > the largest diameter {2 * largest:g} m "
+                             f"(2 (radius_mean + truncation radius_std)); got {packing['lateral_size']:g}")
+        del radii
         return
     if packing["kind"] == "powder_bed":
         packing["diameter_range"] = _numbers("packing.diameter_range", packing["diameter_range"], 2,
@@ -530,6 +570,11 @@ def estimate_run(scene) -> RunEstimate:
     if packing["kind"] == "spheres":
         n, r = len(packing["radii"]), min(packing["radii"])
         h, z = 2 * r * 1e-3, 13
+    elif packing["kind"] == "poured":
+        n = packing["particles"]
+        r = max(packing["radius_mean"] - packing.get("truncation", 3.0) * packing.get("radius_std", 0.0),
+                1e-3 * packing["radius_mean"])
+        h, z = 2 * r * 1e-3, 13
     elif packing["kind"] == "powder_bed":
         n = bed_particle_count(packing["lateral_size"], packing["height"], packing["diameter_range"])
         r = packing["diameter_range"][0] / 2
@@ -636,6 +681,11 @@ def scene_reference() -> str:
           "A random bed settled under gravity (`sintercond.packing.powder_bed`), at most 20000 particles.")
     table("[packing] kind = \"simple_cubic\"", _PACKING["simple_cubic"],
           "Sphere centres at `radius + spacing * (i, j, k)`.")
+    table("[packing] kind = \"poured\"", _PACKING["poured"],
+          "Spheres of normally distributed radii poured into an open square box and settled with the DEM "
+          "(`sintercond.packing.pour`: Hertz, Mindlin, rolling resistance, gravity, the box walls) with the contact "
+          "material of `[mechanics]` and `material.density`; settled means kinetic energy and force balance below "
+          "the thresholds the summary reports. Example 5.3's bed (`quintana2020_5_3`).")
     table("[packing] kind = \"spheres\"", _PACKING["spheres"],
           f"Spheres listed one by one (at most {MAX_LISTED_SPHERES}), e.g. one sphere on a floor.")
     for section in ("material", "conduction"):

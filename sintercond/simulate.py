@@ -690,17 +690,20 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
     with it. Both are sized here with ``capacity_multiplier`` spare room.
     The cell-list region is the packing's extent widened by ``margin`` (m;
     default half the extent plus ``2 r_max`` on every side). Pass
-    ``neighbor_fns`` to :func:`simulator`.
+    ``neighbor_fns`` to :func:`simulator`. The list keeps the float dtype of
+    ``positions`` (float32 positions give a float32 list; others float64).
     """
     from sintercond.neighbors import neighbor_list
 
+    dtype = jnp.float32 if np.asarray(positions).dtype == np.float32 else jnp.float64
     positions = np.asarray(positions, np.float64)
     radii = np.asarray(radii, np.float64)
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     margin = 0.5 * (hi - lo) + 2.0 * radii.max() if margin is None else margin
     fns = neighbor_list(radii, skin, lo - margin, hi + margin, capacity_multiplier=capacity_multiplier)
-    nbrs = fns.allocate(jnp.asarray(positions))
-    half = allocate_half_pairs(nbrs.idx, jnp.asarray(positions), jnp.asarray(radii), fns.skin, capacity_multiplier)
+    nbrs = fns.allocate(jnp.asarray(positions, dtype))
+    half = allocate_half_pairs(nbrs.idx, jnp.asarray(positions, dtype), jnp.asarray(radii, dtype), fns.skin,
+                               capacity_multiplier)
     return Contacts(neighbors=nbrs.idx, neighbor_list=nbrs, pairs=half), fns
 
 

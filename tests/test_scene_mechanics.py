@@ -30,10 +30,10 @@ def _vtp_arrays(path):
 def test_builtin_scenes_are_listed_valid_and_within_limits(capsys):
     assert cli.main(["scenes"]) == 0
     listed = capsys.readouterr().out
-    for name in ("quintana2020_5_1", "quintana2020_5_4_laser"):
+    for name in ("quintana2020_5_1", "quintana2020_5_3", "quintana2020_5_4_laser"):
         assert name in listed and name in builtin_scenes()
         scene = load_scene(name)
-        assert scene["physics"]["mechanics"] is True
+        assert scene.get("physics", {}).get("mechanics", False) is (name != "quintana2020_5_3")  # 5.3 pours, then heats at rest
     assert load_scene("quintana2020_5_1", duration=0.25)["run"]["duration"] == 0.25
 
 
@@ -149,7 +149,7 @@ def test_restitution_gives_the_tsuji_damping_ratio():
     (lambda s: s["walls"][1].update(velocity=[0.0, "fast", 0.0]), r"walls\[1\]\.velocity must be a list of 3"),
     (lambda s: s["packing"].update(radii=[1e-3, 1e-3]), r"packing\.radii must be a list of 5 numbers in \[1e-08, 1\]"),
     (lambda s: s["packing"].update(centres=[[0.0, 0.0]]), r"packing\.centres\[0\] must be a list of 3 numbers"),
-    (lambda s: s["packing"].update(method="pour"), r"unknown key packing\.method"),
+    (lambda s: s["packing"].update(method="pour"), r"unknown key packing\.method"),  # listed spheres: no method
 ])
 def test_bad_mechanics_scenes_name_the_key(mutate, message):
     scene = copy.deepcopy(PILE)
@@ -165,3 +165,39 @@ def test_wall_velocity_needs_mechanics():
     with pytest.raises(SceneError, match=r"walls\[1\]\.velocity needs physics\.mechanics = true"):
         validate_scene(scene)
 
+
+
+def _poured_scene(**packing):
+    scene = copy.deepcopy(load_scene("quintana2020_5_3"))
+    scene["packing"].update(packing)
+    return scene
+
+
+@pytest.mark.parametrize("mutate,message", [
+    (lambda s: s.pop("mechanics"), r"a poured packing .* needs a \[mechanics\] section"),
+    (lambda s: s["packing"].update(radius_std=1.5e-3), r"mean - truncation \* std = -0\.0015 must be > 0"),
+    (lambda s: s["packing"].update(lateral_size=0.01), r"packing\.lateral_size must be > the largest diameter "
+                                                        r"0\.010002 m"),
+    (lambda s: s["packing"].update(particles=1), r"packing\.particles must be an integer in \[2, 20000\]"),
+    (lambda s: s["packing"].update(start="tipped"), r"packing\.start must be one of \"relaxed\", \"deposit\""),
+])
+def test_bad_poured_packings_name_the_key(mutate, message):
+    scene = _poured_scene()
+    mutate(scene)
+    with pytest.raises(SceneError, match=message):
+        validate_scene(scene)
+
+
+def test_the_5_3_scene_pours_with_its_mechanics_section():
+    """The built-in 5.3 scene, shrunk to 12 spheres: the radii are Example 5.3's distribution (the same
+    sampler and seed), the pour uses the scene's contact material and meets its settled thresholds, and the
+    bed's summary carries the settle report."""
+    scene = validate_scene(_poured_scene(particles=12, lateral_size=0.02))
+    material = runner.dem_material(scene)
+    assert (material.E, material.nu, material.mu, material.mu_r, material.mu_wall, material.xi_rol) == \
+        (1e6, 0.3, 0.05, 0.2, 0.0, 0.2)
+    centres, radii, bed = runner.build_packing(scene)
+    np.testing.assert_array_equal(np.sort(radii), np.sort(examples.example_5_3_radii(12, np.random.default_rng(0))))
+    assert bed["settle_kinetic_ratio"] <= bed["settle_kinetic_tol"] and bed["settle_force_ratio"] <= bed["settle_force_tol"]
+    assert np.all(centres[:, :2] - radii[:, None] >= -0.05 * radii[:, None])  # inside the box, up to Hertz overlap
+    assert np.all(centres[:, :2] + radii[:, None] <= 0.02 + 0.05 * radii[:, None])
