@@ -88,8 +88,8 @@ class SofteningExperiment:
       observe: hashable ``fn(state) -> [n_channels]``.
       channels: names of the observed channels; a name starting with
         ``"temperature"`` is a temperature (K), others are lengths (m).
-      load: ``[p]`` static contact loads (N) of the overlap channels (for
-        :func:`oracle_modulus`), or None.
+      load: the static load (N) on the contact whose overlap is observed
+        (``m g`` in Example 5.1; for :func:`oracle_modulus`), or None.
     """
 
     sim: simulate.Simulator
