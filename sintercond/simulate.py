@@ -746,6 +746,10 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     n_saves = n_steps // every
     group = max(1, seg // every)
     if group <= 1 or group >= n_saves:
+        if checkpoint and group <= 1 and 1 < every <= seg < n_steps:
+            # one save per segment: the segment is the save interval (unchecked, reverse mode would keep
+            # every step of the run)
+            return jax.lax.scan(jax.checkpoint(one_save, prevent_cse=False), state, None, length=n_saves)
         return jax.lax.scan(one_save, state, None, length=n_saves)
     q, r = divmod(n_saves, group)
     state, saved = jax.lax.scan(jax.checkpoint(lambda s, _: jax.lax.scan(one_save, s, None, length=group), prevent_cse=False),
