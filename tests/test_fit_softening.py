@@ -277,3 +277,37 @@ def test_gradient_through_the_bed_equals_central_differences(small_bed):
     n = len(small_bed.channels)
     pattern = _check_gradient(small_bed, [[1e-2] * (n - 1) + [1e6]])
     assert pattern.sum(axis=1).min() > small_bed.state.particles.radii.shape[0]  # a contact network
+
+
+def test_notebook_fits_cover_the_truth():
+    """The committed calibrate_softening notebook (cheap: its JSON): every printed fit of Example 5.1 and of the
+    bed lies within 3 printed standard errors of the truth it was made from."""
+    import json
+    import pathlib
+    import re
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "notebooks" / "calibrate_softening.ipynb"
+    text = "".join("".join(o.get("text", "")) for c in json.loads(path.read_text())["cells"]
+                   for o in c.get("outputs", []) if o.get("output_type") == "stream")
+    lines = re.findall(r"(\w+) = ([-\d.e+]+) \+- ([\d.e+]+)\s+95 % \[([\d.e+]+), ([\d.e+]+)\]\s+truth ([\d.e+]+)", text)
+    assert len(lines) == 6, "run `python tests/test_notebooks.py calibrate_softening.ipynb`"  # 5.1 and the bed
+    for name, value, stderr, low, high, truth in lines:
+        value, stderr, low, high, truth = map(float, (value, stderr, low, high, truth))
+        assert abs(value - truth) < 3 * stderr, name
+        assert low < value < high
+
+
+def test_checkpointed_gradient_memory_when_saves_are_segments():
+    """10 000 steps read every 100 (= the sqrt(n) segment): reverse mode keeps ~sqrt(n) states, not every step."""
+    ex = sf.example_5_1_experiment(t_end=0.2, save_every=100)
+
+    def temp_bytes(checkpoint):
+        def loss(e0):
+            params = ex.params_with({"E0": e0})
+            return jnp.sum(simulate.rollout(ex.sim, ex.state, params, ex.n_steps,
+                                            simulate.SaveAt(ex.save_every, ex.observe), checkpoint=checkpoint)[1])
+
+        return jax.jit(jax.grad(loss)).lower(1e6).compile().memory_analysis().temp_size_in_bytes
+
+    assert ex.n_steps == 10_000 and simulate.segment_length(ex.n_steps) == ex.save_every
+    assert temp_bytes(True) < 0.1 * temp_bytes(False)
