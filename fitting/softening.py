@@ -162,7 +162,7 @@ def _overlap_on_floor(state):
 
 def example_5_1_experiment(t_end=3.0, save_every=2500, initial_temperature=None, dt=2e-5, **example) -> \
         SofteningExperiment:
-    """Example 5.1 (one sphere on a 700 K floor, :func:`sintercond.examples.example_5_1`) observed as ``(theta, delta)``.
+    """Example 5.1 (a sphere on a 700 K floor, :func:`sintercond.examples.example_5_1`) observed as ``(theta, delta)``.
 
     Args:
       t_end: duration (s); the paper runs 40 s, thermal equilibrium comes at ~12 s.
