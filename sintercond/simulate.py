@@ -824,8 +824,12 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     def run_steps(s, length):
         if length <= seg:
             return jax.lax.scan(advance, s, None, length=length)[0] if length else s
-        q, r = divmod(length, seg)
-        s = jax.lax.scan(jax.checkpoint(lambda c, _: (run_steps(c, seg), None), prevent_cse=False), s, None, length=q)[0]
+        # ceil(length / seg) checkpointed segments of equal size (<= seg); the unchecked rest is shorter
+        # than their number, so over many saves it stays O(sqrt(n_steps)) steps
+        count = -(-length // seg)
+        size, r = divmod(length, count)
+        s = jax.lax.scan(jax.checkpoint(lambda c, _: (run_steps(c, size), None), prevent_cse=False), s, None,
+                         length=count)[0]
         return run_steps(s, r)
 
     def one_save(s, _):
@@ -857,6 +861,10 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     n_saves = n_steps // every
     group = max(1, seg // every)
     if group <= 1:
+        if checkpoint and 1 < every <= seg < n_steps:
+            # one save per segment: the segment is the save interval (unchecked, reverse mode would keep
+            # every step of the run)
+            return jax.lax.scan(jax.checkpoint(one_save, prevent_cse=False), state, None, length=n_saves)
         return jax.lax.scan(one_save, state, None, length=n_saves)
     if group >= n_saves:
         return saving_steps(state, n_saves)
