@@ -463,7 +463,7 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     dt = 0.8 * limit if dt is None else float(dt)
     mechanics.check_time_step(dt, settle, particles, contacts.neighbors, params.mechanics, 0.05)
     state = simulate.init_state(particles, contacts, dt,
-                                mechanics=mechanics.mechanical_state(settle, x, contacts.neighbors))
+                                mechanics=mechanics.mechanical_state(settle, x, contacts))
     chunk = 500
     run = jax.jit(lambda s, p: simulate.rollout(simulate.simulator(settle, fns), s, p, chunk,
                                                 simulate.SaveAt(chunk, lambda s: jnp.max(jnp.linalg.norm(

@@ -152,7 +152,7 @@ def test_bad_input_is_named(hot_5_1):
 
 def _event_pattern(sim, params, state):
     """The branches the next step takes: per particle, softening on (theta > theta*) and at the floor E_min;
-    per contact (pairs of the table, then walls x particles), touching and slipping.
+    per contact (pairs of the half list, then walls x particles), touching and slipping.
 
     Recomputed here from Eq. 42 and :mod:`sintercond.forces` (the stick-slip
     return map of Eqs. 7-13 on the state's springs), independently of the step.
@@ -161,13 +161,13 @@ def _event_pattern(sim, params, state):
     p, m = state.particles, state.mechanics
     modulus = mechanics.particle_modulus(physics, mp, p.temperature, p.material)
     nu = jnp.broadcast_to(mp.nu, p.radii.shape)
-    g = mechanics.pair_geometry(p.positions, p.radii, state.contacts.neighbors)
+    g = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
     softening = [p.temperature > mp.theta_star,
                  mp.E0 * jnp.exp(jnp.minimum(0.0, mp.rate * (1 - p.temperature / mp.theta_star))) < mp.E_min]
     if not physics.friction:
         return jnp.concatenate(softening + [g.touching.ravel()] + [w.penetration(p.positions, p.radii) > 0
                                                                    for w in physics.walls])
-    lo, hi = g.lo, g.hi
+    lo, hi = g.i, g.j
     rs, ms = forces.effective_radius(p.radii[lo], p.radii[hi]), forces.effective_mass(p.mass[lo], p.mass[hi])
     dd, vt = forces.relative_contact_velocity(m.velocity[lo], m.velocity[hi], m.spin[lo], m.spin[hi], g.normal,
                                               p.radii[lo], p.radii[hi])
@@ -252,7 +252,7 @@ def test_gradient_across_contact_onset_and_stick_slip():
                                                                   rate=f(1.0), E_min=f(0.0)))
     mechanics.check_time_step(1e-5, physics, particles, contacts.neighbors, params.mechanics, 0.05)
     state = simulate.init_state(particles, contacts, 1e-5,
-                                mechanics=mechanics.mechanical_state(physics, x, contacts.neighbors))
+                                mechanics=mechanics.mechanical_state(physics, x, contacts))
     down = jnp.asarray([-math.cos(a), 0.0, -math.sin(a)])
     observe = simulate.Observable(lambda s, d: jnp.concatenate([s.particles.temperature, s.particles.positions @ d,
                                                                 wall.penetration(s.particles.positions,
