@@ -46,7 +46,6 @@ Prints the table and rewrites its section of benchmarks/RESULTS.md.
 """
 
 import argparse
-import math
 import os
 import pathlib
 import subprocess
@@ -62,6 +61,7 @@ from peers_thermal import lammps_executable, loop_time
 
 from sintercond import mechanics, simulate
 from sintercond.run import _compiled_chunk, advance
+from sintercond.scene import restitution_damping_ratio
 from sintercond.state import particle_state
 from sintercond.walls import PlaneWall
 
@@ -72,12 +72,6 @@ MU, MU_R, RESTITUTION = 0.05, 0.2, 0.5
 T_COLD, T_HOT = 300.0, 1000.0
 V_REL = 0.1  # m/s, the approach speed the time step allows for
 K_ROLL = 100.0  # N/m, LAMMPS's constant rolling stiffness: the order of Mindlin's 8 G* a at these overlaps
-
-
-def tsuji_damping_ratio(e):
-    """xi_con of the paper's Eq. 6 equal to LAMMPS's ``damping tsuji`` for a restitution ``e``: sqrt(5/6) beta."""
-    beta = -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
-    return math.sqrt(5.0 / 6.0) * beta
 
 
 def block(n, seed=0):
@@ -115,7 +109,8 @@ def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
     cast = lambda x: jnp.asarray(x, dtype)  # noqa: E731
     params = simulate.Params(
         conductivity=cast([CONDUCTIVITY]), specific_heat=cast([SPECIFIC_HEAT]),
-        mechanics=mechanics.MechanicalParams(E0=cast(E), nu=cast(NU), xi_con=cast(tsuji_damping_ratio(RESTITUTION)),
+        mechanics=mechanics.MechanicalParams(E0=cast(E), nu=cast(NU),
+                                             xi_con=cast(restitution_damping_ratio(RESTITUTION)),
                                              xi_fric=cast(1.0), xi_rol=cast(0.2), mu=cast(MU), mu_r=cast(MU_R),
                                              mu_wall=cast(MU), mu_r_wall=cast(MU_R)))
     limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics, V_REL))

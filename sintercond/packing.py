@@ -46,7 +46,6 @@ as Rizza & Galati (2024, Sect. 3.3) did for their 150 um PB cube with
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import time
 import typing
@@ -116,6 +115,16 @@ def sample_diameters(n, low, high, rng):
     return 1.0 / np.sqrt(1.0 / low**2 - u * (1.0 / low**2 - 1.0 / high**2))
 
 
+def check_radius_distribution(mean, std, truncation=3.0):
+    """Raise :class:`PackingError` unless N(mean, std) truncated at ``truncation`` std gives only positive radii."""
+    if not (np.isfinite(mean) and np.isfinite(std) and std >= 0 and np.isfinite(truncation) and truncation > 0):
+        raise PackingError(f"radius distribution: need finite mean, std >= 0 and truncation > 0; got mean={mean!r}, "
+                           f"std={std!r}, truncation={truncation!r}")
+    if mean - truncation * std <= 0:
+        raise PackingError(f"radius distribution: mean - truncation * std = {mean - truncation * std:.4g} must be > 0 "
+                           "(every radius positive)")
+
+
 def truncated_normal_radii(n, mean, std, truncation=3.0, seed=0):
     """``[n]`` radii from N(mean, std) truncated at ``truncation`` standard deviations (redrawn outside).
 
@@ -124,12 +133,7 @@ def truncated_normal_radii(n, mean, std, truncation=3.0, seed=0):
     :class:`PackingError` unless ``0 <= std``, ``truncation > 0`` and every
     radius the truncation allows is positive (``mean - truncation std > 0``).
     """
-    if not (np.isfinite(mean) and np.isfinite(std) and std >= 0 and np.isfinite(truncation) and truncation > 0):
-        raise PackingError(f"radius distribution: need finite mean, std >= 0 and truncation > 0; got mean={mean!r}, "
-                           f"std={std!r}, truncation={truncation!r}")
-    if mean - truncation * std <= 0:
-        raise PackingError(f"radius distribution: mean - truncation * std = {mean - truncation * std:.4g} must be > 0 "
-                           "(every radius positive)")
+    check_radius_distribution(mean, std, truncation)
     rng = np.random.default_rng(seed)
     radii = rng.normal(mean, std, n)
     outside = np.abs(radii - mean) > truncation * std
@@ -565,7 +569,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         collision = float(hertz_collision_overlap(r_max, effective_mass(m_max, jnp.inf), material.E / (1 - material.nu**2),
                                                   v_rel))
         step_overlap = max(static, collision)
-        step_fn = _jitted_stable_time_step()
+        step_fn = mechanics.stable_time_step
         dt = float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, step_overlap))
         dt = min(dt, float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, None)))
         params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
@@ -616,12 +620,6 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     return DemSettled(final, state, sim, params, fns, report)
 
 
-@functools.cache
-def _jitted_stable_time_step():
-    """:func:`sintercond.mechanics.stable_time_step` compiled once per process (eagerly it compiles ~100 operations)."""
-    from sintercond import mechanics
-
-    return jax.jit(mechanics.stable_time_step, static_argnums=(0,))
 
 
 def _nothing(state):

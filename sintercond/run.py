@@ -239,7 +239,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         sim = simulate.simulator(physics, fns)
         reallocate = simulate.reallocate_neighbors(fns)
         v_rel = scene["physics"].get("impact_velocity", 0.05)
-        mechanical_limit = float(_mechanical_stable_step(physics, particles, contacts.neighbors, params.mechanics,
+        mechanical_limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics,
                                                          v_rel))
         names["mechanical"] = (f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and the symplectic-Euler "
                                f"bounds of the stiffest contact at physics.impact_velocity = {v_rel:g} m/s)")
@@ -261,7 +261,6 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                  {"thermal": thermal_limit, "mechanical": mechanical_limit})
 
 
-_mechanical_stable_step = jax.jit(mechanics.stable_time_step, static_argnums=0)
 """:func:`sintercond.mechanics.stable_time_step` compiled once per spec and size (eager, it dispatches ~100 ops)."""
 
 

@@ -446,18 +446,17 @@ def _check_packing(packing, conduction):
         packing["radii"] = _numbers("packing.radii", radii, len(centres), radius_rule)
         return
     if packing["kind"] == "poured":
-        from sintercond.packing import truncated_normal_radii
+        from sintercond.packing import check_radius_distribution
 
         try:
-            radii = truncated_normal_radii(1, packing["radius_mean"], packing.get("radius_std", 0.0),
-                                           packing.get("truncation", 3.0))
+            check_radius_distribution(packing["radius_mean"], packing.get("radius_std", 0.0),
+                                      packing.get("truncation", 3.0))
         except PackingError as err:
             raise SceneError(f"packing: {err}") from None
         largest = packing["radius_mean"] + packing.get("truncation", 3.0) * packing.get("radius_std", 0.0)
         if not packing["lateral_size"] > 2 * largest:
             raise SceneError(f"packing.lateral_size must be > the largest diameter {2 * largest:g} m "
                              f"(2 (radius_mean + truncation radius_std)); got {packing['lateral_size']:g}")
-        del radii
         return
     if packing["kind"] == "powder_bed":
         packing["diameter_range"] = _numbers("packing.diameter_range", packing["diameter_range"], 2,
