@@ -16,6 +16,7 @@ benchmarks/RESULTS.md.
 import argparse
 import hashlib
 import json
+import os
 import pathlib
 import resource
 import subprocess
@@ -68,7 +69,8 @@ def child(build, n, rev):
 
 
 def update_costs(n, skin_fraction=0.1, repeats=20):
-    """Seconds per jitted ``update`` of a skinned list that only checks, and of one that rebuilds (skin 0)."""
+    """Seconds per jitted ``update`` of a skinned list that only checks, and of one that rebuilds (skin 0):
+    ``{(list, what): s}`` for the sorted cell list (`neighbors.neighbor_list`) and jax-md's Dense list."""
     import jax
     import jax.numpy as jnp
     from _common import best_time
@@ -79,13 +81,13 @@ def update_costs(n, skin_fraction=0.1, repeats=20):
     centres, radii = jittered_packing(n)
     moved = jnp.asarray(centres + 1e-3 * radii.max())  # far below half the skin
     costs = {}
-    for name, skin in (("check only (skin 0.1 r_max)", skin_fraction * radii.max()), ("rebuild (skin 0)", 0.0)):
-        fns = neighbors.neighbor_list(radii, skin, box_lo=centres.min(axis=0) - radii.max(),
-                                      box_hi=centres.max(axis=0) + radii.max())
-        nbrs = fns.allocate(centres)
-        update = jax.jit(fns.update)
-        assert bool(neighbors.did_rebuild(nbrs, update(moved, nbrs))) == (skin == 0.0)
-        costs[name] = best_time(update, moved, nbrs, repeats=repeats)
+    for name, make in (("sorted cell list", neighbors.neighbor_list), ("jax-md Dense", neighbors.jax_md_neighbor_list)):
+        for what, skin in (("check", skin_fraction * radii.max()), ("rebuild", 0.0)):
+            fns = make(radii, skin, box_lo=centres.min(axis=0) - radii.max(), box_hi=centres.max(axis=0) + radii.max())
+            nbrs = fns.allocate(centres)
+            update = jax.jit(fns.update)
+            assert bool(neighbors.did_rebuild(nbrs, update(moved, nbrs))) == (skin == 0.0)
+            costs[name, what] = best_time(update, moved, nbrs, repeats=repeats)
     return costs
 
 
@@ -103,10 +105,14 @@ def main():
     parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000])
     parser.add_argument("--new-sizes", type=int, nargs="*", default=[1_000_000], help="sizes for the new build only")
     parser.add_argument("--old-rev", default=OLD_REV)
+    parser.add_argument("--dynamic-only", type=int, metavar="N", default=None,
+                        help="only the dynamic-list paragraph, at N particles (rewritten inside the section)")
     parser.add_argument("--child", nargs=2, metavar=("BUILD", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         return child(args.child[0], int(args.child[1]), args.old_rev)
+    if args.dynamic_only:
+        return dynamic_only(args.dynamic_only)
     rows = []
     for n in sorted(set(args.sizes) | set(args.new_sizes)):
         results = {build: run_child(build, n, args.old_rev) for build in ("old", "new")
@@ -132,15 +138,39 @@ def main():
                           "peak RSS (GB)"), rows)
     )
     n_update = max(args.sizes)
-    costs = update_costs(n_update)
-    check, rebuild = costs.values()
-    body += (
-        f"\n\nDynamic list (`neighbors.neighbor_list`, jax-md Dense, jitted `update`) at {n_update:,} particles "
-        f"moved by 1e-3 r_max: {check * 1e3:.2f} ms per update that only checks the displacement (skin 0.1 r_max) "
-        f"against {rebuild * 1e3:.1f} ms per rebuild (skin 0, as `moving.py` builds it): {rebuild / check:.0f}x."
-    )
+    body += dynamic_paragraph(n_update)
     print(body.splitlines()[-1])
     write_section("contact_build", "python benchmarks/contact_build.py", body)
+
+
+def dynamic_paragraph(n_update, command=None):
+    """The section's paragraph on the dynamic list at ``n_update`` particles."""
+    costs = update_costs(n_update)
+    ours, theirs = costs["sorted cell list", "rebuild"], costs["jax-md Dense", "rebuild"]
+    body = (
+        f"\n\nDynamic list (`neighbors.neighbor_list`, a Dense table from a sorted cell list, jitted `update`) at "
+        f"{n_update:,} particles moved by 1e-3 r_max: {costs['sorted cell list', 'check'] * 1e3:.2f} ms per update "
+        f"that only checks the displacement (skin 0.1 r_max) against {ours * 1e3:.1f} ms per rebuild (skin 0): "
+        f"{ours / costs['sorted cell list', 'check']:.0f}x. jax-md's own Dense list "
+        f"(`neighbors.jax_md_neighbor_list`, what the step ran on before) in the same process: "
+        f"{costs['jax-md Dense', 'check'] * 1e3:.2f} ms per check, {theirs * 1e3:.1f} ms per rebuild "
+        f"({theirs / ours:.1f}x the sorted cell list's). Taken while other jobs shared the 2 cores "
+        f"(load average {os.getloadavg()[0]:.1f})" + (f"; command: `{command}`." if command else ".")
+    )
+    return body
+
+
+def dynamic_only(n):
+    """Rewrite only the dynamic-list paragraph of the existing section (the static builds are not rerun)."""
+    from _common import RESULTS
+
+    text = RESULTS.read_text()
+    paragraph = dynamic_paragraph(n, f"python benchmarks/contact_build.py --dynamic-only {n}").strip()
+    print(paragraph)
+    begin = text.index("<!-- BEGIN contact_build -->")
+    at = text.index("Dynamic list (", begin)
+    end = text.index("\n\nCommand:", at)
+    RESULTS.write_text(text[:at] + paragraph + text[end:])
 
 
 if __name__ == "__main__":

@@ -22,6 +22,14 @@ time. Pairs per particle: the half list's pairs (within r_i + r_j + skin)
 and the Dense list's candidates (within 2 r_max + skin, each pair on both
 rows) per particle at the start.
 
+List rebuild: one jitted ``update`` of the skinned list that must rebuild
+(its reference positions marked stale), the sorted cell list
+(`neighbors.neighbor_list`) and jax-md's own Dense list
+(`neighbors.jax_md_neighbor_list`, what the step ran on before) alternated
+in this process, compiled ahead, best of 5; both give the same pairs
+(checked). Half list + remap: `half_pairs` from the table and the springs'
+`remap_half_pairs` ([capacity, 3]), timed the same way.
+
 ``--before REV``: the same timings of an earlier revision of the package
 (``git archive REV``, this script's timing in a subprocess with that package
 on the path), e.g. the Dense both-rows implementation before the half list
@@ -30,6 +38,7 @@ Prints the table and rewrites its section of benchmarks/RESULTS.md.
 """
 
 import argparse
+import dataclasses
 import os
 import subprocess
 import sys
@@ -43,7 +52,7 @@ import numpy as np
 from _common import markdown_table, write_section
 from thermal_step import jittered_packing
 
-from sintercond import simulate
+from sintercond import neighbors, simulate
 from sintercond.state import ParticleState
 
 A = 1e-4  # the lattice spacing of thermal_step.jittered_packing (m)
@@ -97,6 +106,38 @@ def time_steps(sim, state, params, steps, reallocate, chunk=100, repeats=3):
 def run(centres, radii, skin, steps, rate, law):
     sim, state, params, fns = setup(centres, radii, skin, rate, law)
     return time_steps(sim, state, params, steps, simulate.reallocate_neighbors(fns))
+
+
+def rebuild_costs(centres, radii, skin, repeats=5):
+    """Seconds per list rebuild: ``{"sorted cell list", "jax-md Dense", "half list + remap"}`` (one process)."""
+    lo, hi = centres.min(axis=0), centres.max(axis=0)
+    margin = 0.5 * (hi - lo) + 2.0 * radii.max()  # simulate.dynamic_contacts' region
+    positions, r = jnp.asarray(centres), jnp.asarray(radii)
+    runs, tables = {}, {}
+    for name, make in (("sorted cell list", neighbors.neighbor_list), ("jax-md Dense", neighbors.jax_md_neighbor_list)):
+        fns = make(radii, skin, lo - margin, hi + margin, capacity_multiplier=1.5)
+        nbrs = fns.allocate(positions)
+        stale = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
+        run = jax.jit(fns.update).lower(positions, stale).compile()
+        tables[name] = np.sort(np.asarray(run(positions, stale).idx), axis=1)
+        runs[name] = (run, positions, stale)
+    if not np.array_equal(*tables.values()):
+        raise AssertionError("the sorted cell list and jax-md's list hold different pairs")
+    half = neighbors.allocate_half_pairs(tables["sorted cell list"], positions, r, skin, 1.5)
+
+    def half_and_remap(idx, old):
+        new = neighbors.half_pairs(idx, positions, r, skin, old.capacity)
+        return new, neighbors.remap_half_pairs(old.pairs, new.pairs, jnp.ones((old.capacity, 3)))
+
+    idx = jnp.asarray(tables["sorted cell list"], jnp.int32)
+    runs["half list + remap"] = (jax.jit(half_and_remap).lower(idx, half).compile(), idx, half)
+    best = dict.fromkeys(runs, float("inf"))
+    for _ in range(repeats):
+        for name, (run, *args) in runs.items():
+            start = time.perf_counter()
+            jax.block_until_ready(run(*args))
+            best[name] = min(best[name], time.perf_counter() - start)
+    return best
 
 
 def count_rebuilds(centres, radii, skin, steps, rate, law):
@@ -155,10 +196,13 @@ def main():
             print("timing", m, law, 1e3 * every, 1e3 * skinned, 1e3 * still, sep="\t", flush=True)
         return
     old = before(args.before, args.sizes, args.steps) if args.before else {}
-    rows = []
+    rows, costs = [], {}
     for m, law, every, skinned, still, final_every, final_skin, start, (centres, radii, rate) in timing_rows(
             args.sizes, args.steps, args.laws):
         rebuilds = count_rebuilds(centres, radii, 0.1 * A, args.steps, rate, law)
+        if m not in costs:
+            costs[m] = rebuild_costs(centres, radii, 0.1 * A)
+        ours, theirs, half_remap = costs[m].values()
         share = rebuilds * max(every - still, 0.0) / (args.steps * skinned)
         diff = float(jnp.max(jnp.abs(final_every.particles.temperature - final_skin.particles.temperature)))
         half = int(start.contacts.pairs.demand) / m
@@ -169,7 +213,8 @@ def main():
                      "-" if was is None else f"{was[1]:.3f} / {was[0]:.3f} / {was[2]:.3f}",
                      "-" if was is None else f"{was[1] / (1e3 * skinned):.1f}x / {was[2] / (1e3 * still):.1f}x",
                      "-" if was is None else f"{was[0] / (1e3 * skinned):.1f}x", f"{rebuilds}",
-                     f"{100 * share:.1f} %", f"{half:.2f} / {dense:.2f}", f"{diff:.1e}"))
+                     f"{100 * share:.1f} %", f"{1e3 * ours:.2f} / {1e3 * theirs:.2f} ({theirs / ours:.1f}x)",
+                     f"{1e3 * half_remap:.2f}", f"{half:.2f} / {dense:.2f}", f"{diff:.1e}"))
         print(*rows[-1], sep="\t", flush=True)
     body = (
         f"Jittered sintered SC packing shrinking affinely (outer particles move ~0.2 a in {args.steps} steps), "
@@ -177,15 +222,19 @@ def main():
         "(Rojek: volume-conserving neck; Batchelor-O'Brien: Hertz neck), jitted chunks of 100 steps compiled "
         "once; ms per step excluding compilation (best of 3). Held still: the skinned setup without motion "
         "(never rebuilds: the step's own kernels). Before: the same timings of revision "
-        f"{args.before or '(not run)'} (Dense list, every pair evaluated on both rows), skinned / every step / "
-        "held still. Rebuild share: rebuilds x (every-step step - held-still step) / skinned run time. Pairs "
-        "per particle: half list (within r_i + r_j + skin) / Dense candidates (within 2 r_max + skin, both "
-        "rows). Figures taken while other jobs shared the 2 cores (load average ~10).\n\n"
+        f"{args.before or '(not run)'}, skinned / every step / held still. Rebuild share: rebuilds x "
+        "(every-step step - held-still step) / skinned run time (the target of issues 9 and 11: < 10 %). List "
+        "rebuild: one jitted rebuild of the skinned list, the sorted cell list the step runs on against jax-md's "
+        "Dense list (same pairs, checked), alternated in one process, best of 5; half list + remap: the half "
+        "pair list built from the table and the springs carried to it, per rebuild. Pairs per particle: half "
+        "list (within r_i + r_j + skin) / Dense table (within 2 r_max + skin, both rows). Figures taken while "
+        f"other jobs shared the 2 cores (load average {os.getloadavg()[0]:.1f} at the end).\n\n"
         + markdown_table(("particles", "law", "rebuild every step (skin 0) ms/step", "skin 0.1 a ms/step",
                           "held still ms/step", "speed-up (every step / skinned)",
                           "before: skinned / every step / held still ms/step", "vs before: skinned / held still",
                           "before every step / skinned (issue 9 target 10x)", "rebuilds (skinned)",
-                          "rebuild + remap share", "pairs per particle (half / Dense)", "max |T_skin - T_every| (K)"),
+                          "rebuild + remap share", "list rebuild ms: sorted cell list / jax-md Dense",
+                          "half list + remap ms", "pairs per particle (half / Dense)", "max |T_skin - T_every| (K)"),
                          rows)
     )
     print(body)

@@ -1,17 +1,22 @@
-"""Who touches whom: jax-md neighbour lists wrapped once, per-pair history, host contact searches.
+"""Who touches whom: skinned Dense neighbour lists, per-pair history, host contact searches.
 
 Three tools, from the fastest path to the reference:
 
-* :func:`neighbor_list`: a jax-md Dense neighbour list with a skin, for
-  packings whose particles move. Candidates are the pairs closer than
-  ``2 r_max + skin`` (``2 r_max`` is the largest contact distance); the list
-  is rebuilt under ``jit`` only once some particle has moved more than half
-  the skin since the last rebuild (jax-md's ``dr_threshold``), so most steps
-  pay only a displacement check. A list that outgrows its capacity sets a
-  flag (:func:`did_buffer_overflow`); the host reallocates and redoes the
-  chunk. Per-pair quantities of a Dense table (a neck, a contact age)
-  follow the pair through rebuilds and reallocations with
-  :func:`remap_pair_history`.
+* :func:`neighbor_list`: a Dense neighbour list (jax-md's format: ``[n, m]``
+  rows padded with ``n``) with a skin, for packings whose particles move.
+  Candidates are the pairs closer than ``2 r_max + skin`` (``2 r_max`` is
+  the largest contact distance); the list is rebuilt under ``jit`` only once
+  some particle has moved more than half the skin since the last rebuild
+  (jax-md's ``dr_threshold`` test), so most steps pay only a displacement
+  check. A rebuild sorts the particles by cell and reads each particle's
+  candidates from contiguous runs of that order (:func:`_dense_rows`): the
+  same pairs as jax-md's own Dense list (:func:`jax_md_neighbor_list`, kept
+  as the reference) at a fraction of its cost, whose build writes, scatters
+  and prunes an ``[n, 27 x cell capacity]`` candidate table. A list that
+  outgrows its rows or its cell ranges sets a flag
+  (:func:`did_buffer_overflow`); the host reallocates and redoes the chunk.
+  Per-pair quantities of a Dense table (a neck, a contact age) follow the
+  pair through rebuilds and reallocations with :func:`remap_pair_history`.
 * :func:`half_pairs`: the pairs the contact laws run on, each ``i < j``
   once, kept within ``r_i + r_j + skin`` (size-aware) and sorted by
   ``(i, j)``, rebuilt from the Dense list whenever it is rebuilt, in a
@@ -24,11 +29,14 @@ Three tools, from the fastest path to the reference:
   vectorised NumPy (a cell list, no per-particle Python loop, no compile).
 * :func:`brute_force_pairs`: the O(n^2) reference for tests.
 
-jax-md is imported only here, under :func:`jax_md_guard`: jax-md 0.2.29
-relies on implicit dtype promotion and scatters int64 into int32 buffers
-under x64 (a FutureWarning of JAX); we run float64 with strict promotion in
-tests and warnings as errors. Float64 positions stay float64 through every
-jax-md call (jax-md casts its box to float32, never the positions).
+jax-md is imported only here, under :func:`jax_md_guard`: its ``space``
+metrics give every distance and skin test of :func:`neighbor_list` (free or
+periodic, minimum image), and :func:`jax_md_neighbor_list` wraps its
+``partition.neighbor_list``. jax-md 0.2.29 relies on implicit dtype
+promotion and scatters int64 into int32 buffers under x64 (a FutureWarning
+of JAX); we run float64 with strict promotion in tests and warnings as
+errors. Float64 positions stay float64 through every list (jax-md casts its
+box to float32, never the positions).
 
 Contact criterion everywhere: spheres ``i, j`` touch when
 ``|c_i - c_j| <= (r_i + r_j)(1 + tolerance)``, distances minimum-image in a
@@ -82,7 +90,7 @@ def minimum_image(delta, periodic_box=None):
 
 
 # --------------------------------------------------------------------------
-# dynamic neighbour list (jax-md, Dense format)
+# dynamic neighbour list (Dense format, built from a sorted cell list)
 
 
 class NeighborListFns(NamedTuple):
@@ -90,8 +98,9 @@ class NeighborListFns(NamedTuple):
 
     Attributes:
       allocate: ``(positions [n, 3], extra_capacity=0) -> NeighborList``
-        (host, not jit-able): sizes the buffer from these positions times
-        ``capacity_multiplier``, plus ``extra_capacity`` slots per row.
+        (host, not jit-able): sizes the buffers from these positions times
+        ``capacity_multiplier``, plus ``extra_capacity`` slots per row and per
+        cell range.
       update: ``(positions [n, 3], nbrs) -> nbrs`` (jit-able): rebuilds only
         once a particle moved more than ``skin / 2`` since the last rebuild.
       cutoff: the contact range ``2 r_max (1 + CANDIDATE_MARGIN)`` (m).
@@ -107,22 +116,207 @@ class NeighborListFns(NamedTuple):
     capacity_multiplier: float = 1.25
 
 
-def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capacity_multiplier=1.25):
-    """A jax-md Dense neighbour list of contact candidates, rebuilt only when the skin is used up.
+@pytree_dataclass
+class NeighborList:
+    """A Dense neighbour table and what its rebuilds need (the state of :func:`neighbor_list`).
 
-    ``nbrs.idx`` is ``[n, m]`` int32, padded with ``n`` (jax-md's convention).
+    Every capacity is the shape of a leaf, so a checkpoint restores it with
+    the arrays.
+
+    Attributes:
+      idx: ``[n, m]`` int32 neighbours of each particle within ``cutoff +
+        skin`` at the last rebuild, each pair on both rows; padding ``n``.
+      reference_position: ``[n, 3]`` the positions of the last rebuild, as
+        the grid sees them (shifted by ``box_lo`` or wrapped into the
+        periodic box; m).
+      overflow: bool scalar, sticky: a row or a cell range ran out of slots
+        at some rebuild since the allocation.
+      range_slots: ``[s]`` int32 ``0 .. s - 1``: ``s`` particles at most in one
+        cell range (a row of five half-reach cells, or one cell in a periodic
+        box).
+    """
+
+    idx: Any
+    reference_position: Any
+    overflow: Any
+    range_slots: Any
+
+    @property
+    def did_buffer_overflow(self):
+        return self.overflow
+
+    @property
+    def max_occupancy(self) -> int:
+        return self.idx.shape[1]
+
+
+class _Grid(NamedTuple):
+    """The static cell grid of a list: ``dims`` cells per axis of side ``cell_size`` (m); the last axis is the
+    fastest of the cell key, so a row of cells along it is a contiguous run of the particles sorted by key.
+    ``ranges``: offsets ``(d0, d1, d2_lo, d2_hi)`` of the neighbour cell ranges of a cell; ``box``: the
+    periodic box's sides (m), or None for free boundaries. Hashable: a static argument of the build."""
+
+    dims: tuple
+    cell_size: tuple
+    box: tuple | None
+    ranges: tuple
+
+    @property
+    def periodic(self) -> bool:
+        return self.box is not None
+
+
+def _grid(region, reach, periodic) -> _Grid:
+    """The cells of a list with candidates within ``reach`` (m) over ``region`` ``[3]`` (m).
+
+    Free boundaries: cells of side >= ``reach / 2``, and the neighbours of a
+    cell are 25 rows of five cells along the last axis (offsets -2..2),
+    clamped at the faces: with half-reach cells a row holds few particles
+    more than its mean (a lattice packing at most three in a row of five),
+    so the fixed slots per row waste little. Periodic: cells of side >=
+    ``reach``, each distinct neighbour cell its own range (a box of one or
+    two cells along an axis counts each cell once).
+    """
+    per_reach = 1 if periodic else 2
+    dims = np.maximum(np.floor(region / (reach / per_reach * (1.0 + 1e-4))).astype(np.int64), 1)
+    cell_size = tuple(float(v) for v in region / dims)
+    if periodic:
+        offsets, _ = _cell_offsets(dims, periodic=True) if np.any(dims < 3) else (
+            np.array(list(itertools.product((-1, 0, 1), repeat=3))), True)
+        ranges = np.concatenate([offsets, offsets[:, 2:]], axis=1)
+    else:
+        rows = np.array(list(itertools.product(range(-per_reach, per_reach + 1), repeat=2)))
+        ranges = np.concatenate([rows, np.tile([[-per_reach, per_reach]], (len(rows), 1))], axis=1)
+    return _Grid(tuple(int(d) for d in dims), cell_size, tuple(float(v) for v in region) if periodic else None,
+                 tuple(tuple(int(v) for v in r) for r in ranges))
+
+
+def _cell_ranges(grid: _Grid, pos_box):
+    """Particles sorted by cell, and each particle's neighbour cell ranges in that order (jit-able).
+
+    Returns ``(order [n], start [n, R], size [n, R])``: the particles of range
+    ``r`` of particle ``i`` are ``order[start[i, r] : start[i, r] + size[i, r]]``.
+    """
+    d0, d1, d2 = grid.dims
+    dims = jnp.asarray(grid.dims, jnp.int32)
+    cell = jnp.floor(pos_box / jnp.asarray(grid.cell_size, pos_box.dtype)).astype(jnp.int32)
+    cell = jnp.clip(cell, 0, dims - 1)  # free: outside the region, into the face cells (still adjacent)
+    key = (cell[:, 0] * d1 + cell[:, 1]) * d2 + cell[:, 2]
+    order = jnp.argsort(key).astype(jnp.int32)
+    first = jnp.concatenate([jnp.zeros(1, jnp.int32),
+                             jnp.cumsum(jnp.zeros(d0 * d1 * d2, jnp.int32).at[key].add(1))])
+    offsets = jnp.asarray(grid.ranges, jnp.int32)
+    o0 = cell[:, None, 0] + offsets[None, :, 0]
+    o1 = cell[:, None, 1] + offsets[None, :, 1]
+    lo2 = cell[:, None, 2] + offsets[None, :, 2]
+    hi2 = cell[:, None, 2] + offsets[None, :, 3]
+    if grid.periodic:
+        o0, o1, lo2, hi2 = o0 % d0, o1 % d1, lo2 % d2, hi2 % d2
+        real = jnp.ones(o0.shape, bool)
+    else:
+        real = (o0 >= 0) & (o0 < d0) & (o1 >= 0) & (o1 < d1)
+        o0, o1 = jnp.clip(o0, 0, d0 - 1), jnp.clip(o1, 0, d1 - 1)
+        lo2, hi2 = jnp.maximum(lo2, 0), jnp.minimum(hi2, d2 - 1)
+    row = (o0 * d1 + o1) * d2
+    start = first[row + lo2]
+    size = jnp.where(real, first[row + hi2 + 1] - start, 0)
+    return order, start, size
+
+
+def _metric_sq(grid: _Grid, a, b):
+    """Squared distances (m^2) of broadcast ``[..., 3]`` positions of the grid's space: jax-md's own metric
+    (``space.free`` / ``space.periodic``, minimum image), one pair at a time."""
+    (space,) = jax_md_modules("space")
+    a, b = jnp.broadcast_arrays(a, b)
+    with jax_md_guard():
+        displacement, _ = space.free() if grid.box is None else space.periodic(jnp.asarray(grid.box, a.dtype))
+        d2 = jax.vmap(lambda x, y: space.square_distance(displacement(x, y)))(a.reshape(-1, 3), b.reshape(-1, 3))
+    return d2.reshape(a.shape[:-1])
+
+
+def _dense_rows(grid: _Grid, reach_sq, pos_box, slots, width):
+    """The Dense table of the pairs closer than ``sqrt(reach_sq)`` from a sorted cell list (jit-able).
+
+    In cell order, every particle tests the ``slots`` first particles of
+    each of its cell ranges (contiguous in that order, so neighbouring rows
+    read the same memory), keeps those within reach as a bit mask per row,
+    and reads the set bits in order into ``width`` slots; the rows then go
+    back to the particles' own order. No ``[n, candidates]`` table is
+    written, sorted or scattered (jax-md's Dense build does all three).
+
+    Returns:
+      ``(idx [n, width] or None, most neighbours of a row, most particles of a range)``; ``width=None``: counts only.
+    """
+    n = pos_box.shape[0]
+    order, start, size = _cell_ranges(grid, pos_box)
+    start, size = start[order], size[order]  # rows in cell order
+    n_ranges = start.shape[1]
+    k = n_ranges * slots
+    offset = jnp.arange(slots, dtype=jnp.int32)
+    inside = offset[None, None, :] < size[:, :, None]
+    at = jnp.where(inside, start[:, :, None] + offset[None, None, :], 0)  # [n, R, slots] in cell order
+    sorted_pos = pos_box[order]
+    d2 = _metric_sq(grid, sorted_pos[:, None, None, :], sorted_pos[at])
+    me = jnp.arange(n, dtype=jnp.int32)
+    keep = (inside & (at != me[:, None, None]) & (d2 < reach_sq)).reshape(n, k)
+    words = -(-k // 32)
+    keep = jnp.pad(keep, ((0, 0), (0, 32 * words - k))).reshape(n, words, 32)
+    bits = jnp.sum(keep.astype(jnp.uint32) << jnp.arange(32, dtype=jnp.uint32), axis=-1, dtype=jnp.uint32)
+    count = jnp.sum(jax.lax.population_count(bits), axis=1, dtype=jnp.int32)
+    most, crowded = jnp.max(count, initial=0), jnp.max(size, initial=0)
+    if width is None:
+        return None, most, crowded
+    column = jnp.arange(words, dtype=jnp.int32)[None, :]
+
+    def next_bit(bits, _):
+        """The lowest set bit of each row (its slot, or ``k``), cleared."""
+        first = jnp.argmax(bits != 0, axis=1).astype(jnp.int32)
+        word = jnp.take_along_axis(bits, first[:, None], axis=1)[:, 0]
+        low = word & (~word + jnp.uint32(1))
+        slot = jnp.where(word != 0, 32 * first + 31 - jax.lax.clz(low).astype(jnp.int32), k)
+        return jnp.where(column == first[:, None], bits & (bits - jnp.uint32(1)), bits), slot
+
+    _, slot = jax.lax.scan(next_bit, bits, None, length=width)
+    slot = slot.T  # [n, width]
+    found = slot < k
+    slot = jnp.where(found, slot, 0)
+    at = jnp.take_along_axis(start, slot // slots, axis=1) + slot % slots
+    idx = jnp.where(found, order[jnp.where(found, at, 0)], n)
+    rank = jnp.zeros(n, jnp.int32).at[order].set(me)  # each particle's row in cell order
+    return idx[rank].astype(jnp.int32), most, crowded
+
+
+_compiled_rows = jax.jit(_dense_rows, static_argnums=(0, 1, 3, 4))
+""":func:`_dense_rows` compiled once per grid, reach and capacities (the allocations on the host)."""
+_compiled_ranges = jax.jit(_cell_ranges, static_argnums=0)
+
+
+def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capacity_multiplier=1.25):
+    """A Dense neighbour list of contact candidates, rebuilt only when the skin is used up.
+
+    ``nbrs.idx`` is ``[n, m]`` int32, padded with ``n`` (jax-md's
+    convention), holding the pairs closer than ``cutoff + skin`` at the last
+    rebuild (each on both rows, in no particular order within a row: the
+    same pairs as jax-md's Dense list, :func:`jax_md_neighbor_list`). A
+    rebuild sorts the particles by cell (:func:`_grid`) and tests each
+    particle against the contiguous runs of particles in its neighbour cell
+    ranges (:func:`_dense_rows`); jax-md's Dense build, which writes,
+    scatters and prunes an ``[n, 27 x cell capacity]`` candidate table,
+    costs several times more (benchmarks/RESULTS.md, ``dynamic_step``). Distances and the skin test are jax-md's own
+    (``space.free`` / ``space.periodic``, threshold ``(skin / 2)^2`` in
+    float32), so the rebuilds happen at the same steps as with jax-md's list.
     Positions are passed as they are (m); the list shifts them by ``box_lo``
-    or wraps them into the periodic box before handing them to jax-md, so
-    ``nbrs.reference_position`` holds those shifted positions.
+    or wraps them into the periodic box, so ``nbrs.reference_position``
+    holds those shifted positions.
 
     Args:
       radii: ``[n]`` particle radii (m); the contact range is ``2 max(radii)``.
       skin: Verlet skin (m), >= 0. The list holds the pairs closer than
         ``2 r_max + skin`` at its last rebuild and is rebuilt once any
         particle moved ``skin / 2``; 0 rebuilds at every update.
-      box_lo, box_hi: ``[3]`` corners (m) of the region of the cell list, for
-        free boundaries. Particles that leave it are still found (jax-md's
-        cells wrap around and the distances are free-space), at the price of
+      box_lo, box_hi: ``[3]`` corners (m) of the region of the cell grid, for
+        free boundaries. Particles that leave it are still found (they fall
+        into the face cells, distances are free-space), at the price of
         crowded cells and, eventually, an overflow flag.
       periodic_box: ``[3]`` side lengths (m) of a periodic box (instead of
         ``box_lo``/``box_hi``); distances are minimum-image.
@@ -140,14 +334,13 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
         raise ValueError("radii must be a non-empty [n] array of positive values")
     if (periodic_box is None) == (box_lo is None or box_hi is None):
         raise ValueError("give either box_lo and box_hi (free boundaries) or periodic_box")
-    partition, space = jax_md_modules("partition", "space")
     cutoff = 2.0 * float(radii.max()) * (1.0 + CANDIDATE_MARGIN)
+    reach = cutoff + float(skin)
     if periodic_box is None:
         lo, hi = np.asarray(box_lo, dtype=np.float64), np.asarray(box_hi, dtype=np.float64)
         if lo.shape != (3,) or hi.shape != (3,) or not np.all(hi > lo):
             raise ValueError("box_lo and box_hi must be [3] with box_hi > box_lo")
-        box = hi - lo
-        displacement, _ = space.free()
+        grid = _grid(hi - lo, reach, periodic=False)
         shift_lo = jnp.asarray(lo)
 
         def to_box(positions):
@@ -156,6 +349,65 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
         box = np.asarray(periodic_box, dtype=np.float64)
         if box.shape != (3,) or not np.all(box > 0):
             raise ValueError("periodic_box must be [3] positive side lengths")
+        grid = _grid(box, reach, periodic=True)
+        box_j = jnp.asarray(box)
+
+        def to_box(positions):
+            return jnp.mod(positions, box_j.astype(positions.dtype))
+
+    reach_sq = reach**2  # jax-md's (r_cutoff + dr_threshold)**2
+    half_skin = np.float32(skin) / np.float32(2)
+    threshold_sq = float(half_skin * half_skin)  # jax-md's (dr_threshold / f32(2))**2, a float32
+
+    def build(pos_box, nbrs):
+        slots, width = nbrs.range_slots.shape[0], nbrs.idx.shape[1]
+        idx, most, crowded = _dense_rows(grid, reach_sq, pos_box, slots, width)
+        return NeighborList(idx, pos_box, nbrs.overflow | (most > width) | (crowded > slots), nbrs.range_slots)
+
+    def allocate(positions, extra_capacity=0):
+        positions = jnp.asarray(positions)
+        pos_box = to_box(positions)
+        n = positions.shape[0]
+        _, start, size = _compiled_ranges(grid, pos_box)
+        slots = max(int(int(jnp.max(size)) * capacity_multiplier) + int(extra_capacity), 1)
+        _, most, _ = _compiled_rows(grid, reach_sq, pos_box, slots, None)
+        width = max(min(int(int(most) * capacity_multiplier + int(extra_capacity)), start.shape[1] * slots, n - 1), 0)
+        idx, most, crowded = _compiled_rows(grid, reach_sq, pos_box, slots, width)
+        overflow = (most > width) | (crowded > slots)
+        return _kept_dtype(NeighborList(idx, pos_box, overflow, jnp.arange(slots, dtype=jnp.int32)), positions)
+
+    def update(positions, nbrs):
+        pos_box = to_box(positions)
+        if skin == 0:
+            return _kept_dtype(build(pos_box, nbrs), positions)
+        moved = _metric_sq(grid, pos_box, nbrs.reference_position)
+        stale = jnp.any(~(moved <= jnp.asarray(threshold_sq, moved.dtype)))  # NaN or inf (forced) rebuild too
+        return _kept_dtype(jax.lax.cond(stale, build, lambda p, nb: nb, pos_box, nbrs), positions)
+
+    return NeighborListFns(allocate, update, cutoff, float(skin), float(capacity_multiplier))
+
+
+def jax_md_neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capacity_multiplier=1.25):
+    """jax-md's own skinned Dense list (``partition.neighbor_list``), with the arguments of :func:`neighbor_list`.
+
+    The reference the sorted cell list is tested and timed against: the same
+    pairs (in another order within a row) and the same rebuild steps.
+    ``nbrs`` is jax-md's ``NeighborList``; :func:`did_buffer_overflow` and
+    :func:`did_rebuild` take it too.
+    """
+    radii = np.asarray(radii, dtype=np.float64)
+    partition, space = jax_md_modules("partition", "space")
+    cutoff = 2.0 * float(radii.max()) * (1.0 + CANDIDATE_MARGIN)
+    if periodic_box is None:
+        lo, hi = np.asarray(box_lo, dtype=np.float64), np.asarray(box_hi, dtype=np.float64)
+        box = hi - lo
+        displacement, _ = space.free()
+        shift_lo = jnp.asarray(lo)
+
+        def to_box(positions):
+            return positions - shift_lo.astype(positions.dtype)
+    else:
+        box = np.asarray(periodic_box, dtype=np.float64)
         displacement, _ = space.periodic(jnp.asarray(box))
         box_j = jnp.asarray(box)
 
@@ -180,15 +432,16 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
 
 
 def _kept_dtype(nbrs, positions):
-    """``nbrs``, after checking (at trace time) that jax-md kept the positions' float dtype."""
+    """``nbrs``, after checking (at trace time) that the list kept the positions' float dtype."""
     if nbrs.reference_position.dtype != positions.dtype:
-        raise TypeError(f"jax-md turned {positions.dtype} positions into {nbrs.reference_position.dtype}")
+        raise TypeError(f"the neighbour list turned {positions.dtype} positions into {nbrs.reference_position.dtype}")
     return nbrs
 
 
 def did_buffer_overflow(nbrs):
     """Scalar bool (jit-able): the list or its cell list ran out of capacity; reallocate and redo."""
-    return nbrs.did_buffer_overflow != 0
+    flag = jnp.asarray(nbrs.did_buffer_overflow)
+    return flag if flag.dtype == bool else flag != 0
 
 
 def did_rebuild(before, after):

@@ -619,7 +619,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         with open(out / "history.csv", "a") as f:
             f.write(_history_row(model, s, obs))
         if step % run["checkpoint_every"] == 0 or step >= model.n_steps:
-            save_checkpoint(out, s, **list_capacity(s))
+            save_checkpoint(out, s)  # the lists' capacities are the shapes of their leaves
         chunks_done += 1
         return stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps
 
@@ -671,31 +671,6 @@ def _write_outputs(scene, out, model, state, obs: Observation):
         append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields)
 
 
-def list_capacity(state) -> dict:
-    """``{"neighbor_capacity": [max_occupancy, cell_list_capacity]}`` of a dynamic contact list, else ``{}``.
-
-    The capacities are static fields of jax-md's list (not leaves): a list
-    reallocated during a run has other ones than the list the scene builds,
-    and a checkpoint records them so that :func:`load_state` restores them.
-    """
-    nbrs = state.contacts.neighbor_list
-    if nbrs is None:
-        return {}
-    cells = -1 if nbrs.cell_list_capacity is None else int(nbrs.cell_list_capacity)
-    return {"neighbor_capacity": np.array([int(nbrs.max_occupancy), cells])}
-
-
-def load_state(path, like):
-    """The state in the checkpoint at ``path``, shaped as ``like`` but with the saved neighbour-list capacities."""
-    saved = np.load(path)
-    if "neighbor_capacity" in saved.files and like.contacts.neighbor_list is not None:
-        occupancy, cells = (int(v) for v in saved["neighbor_capacity"])
-        nbrs = dataclasses.replace(like.contacts.neighbor_list, max_occupancy=occupancy,
-                                   cell_list_capacity=None if cells < 0 else cells)
-        like = dataclasses.replace(like, contacts=dataclasses.replace(like.contacts, neighbor_list=nbrs))
-    return load_checkpoint(path, like)
-
-
 def resume(out_dir, progress=True, stop_after_chunks=None):
     """Continue the run in ``out_dir`` from its last checkpoint (the whole state).
 
@@ -717,7 +692,7 @@ def resume(out_dir, progress=True, stop_after_chunks=None):
     model = build_model(scene, packed["centres"], packed["radii"], log=_log)
     if (out / "bed.json").exists():
         model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
-    state = load_state(out / "checkpoint.npz", model.state)
+    state = load_checkpoint(out / "checkpoint.npz", model.state)
     # outputs written after the checkpoint by the interrupted run are redone
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         if int(f.stem.split("_")[1]) > step:

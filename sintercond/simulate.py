@@ -43,7 +43,8 @@ conductivities are differentiable. Both give the same numbers and gradients
 where both apply (tests/test_simulate.py).
 
 ``contacts="dynamic"``: positions move (a prescribed ``motion(t)``, or the
-thermo-mechanical step); a jax-md neighbour list with a skin is updated
+thermo-mechanical step); a Dense neighbour list with a skin (built from a
+sorted cell list, jax-md's Dense format; :func:`sintercond.neighbors.neighbor_list`) is updated
 inside the step, and whenever it is rebuilt a half pair list (each pair
 ``i < j`` once, within ``r_i + r_j + skin``;
 :class:`sintercond.neighbors.HalfPairs`) is rebuilt from it. The law is
@@ -299,7 +300,7 @@ class Contacts:
 
     Attributes:
       neighbors: ``[n, m]`` int32 neighbour indices (static: padding is the
-        row's own index; dynamic: jax-md's, padding ``n``).
+        row's own index; dynamic: the neighbour list's, padding ``n``).
       conductance: ``[n, m]`` conductances at unit conductivity (W/K per
         W/(m K)) for ``conductance="table"``, else None.
       neck: ``[n, m]`` neck radii (m) for static lifted contacts, else None.
@@ -309,9 +310,10 @@ class Contacts:
       wall_temperature: ``[n]`` (table) or ``[n_walls]`` (lifted) wall temperatures (K).
       wall_neck, wall_overlap: ``[n_walls, n]`` neck radius and penetration (m)
         of each particle on each conducting wall (lifted), else None.
-      neighbor_list: the jax-md neighbour list of dynamic contacts, else None.
+      neighbor_list: the neighbour list of dynamic contacts
+        (:class:`sintercond.neighbors.NeighborList`), else None.
       pairs: the half pair list (:class:`sintercond.neighbors.HalfPairs`,
-        ``[capacity, 2]``) of dynamic contacts, rebuilt with the jax-md
+        ``[capacity, 2]``) of dynamic contacts, rebuilt with the Dense
         list, else None.
     """
 
@@ -453,7 +455,7 @@ def pair_heat_power(conductance, pairs, temperature):
 def follow_contacts(neighbor_fn, positions, radii, contacts: Contacts, history=None):
     """Dynamic contacts at ``positions``: ``(contacts, history, overflow)``.
 
-    Updates the jax-md list (it rebuilds once a particle moved half the
+    Updates the Dense list (it rebuilds once a particle moved half the
     skin); when it rebuilt, rebuilds the half pair list from it and carries
     the per-pair ``history`` (a :class:`sintercond.mechanics.MechanicalState`
     or None) to the new pairs (:func:`sintercond.mechanics.remap_history`),
@@ -480,7 +482,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
 
     Args:
       physics: the spec.
-      neighbor_fn: for ``contacts="dynamic"``, the jax-md neighbour-list
+      neighbor_fn: for ``contacts="dynamic"``, the neighbour-list
         function (``update(positions, nbrs)``) the state's list came from
         (:func:`dynamic_contacts` builds both).
     """
@@ -684,7 +686,7 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
 def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=None):
     """Contacts of ``contacts="dynamic"`` and their neighbour-list functions: ``(contacts, neighbor_fns)``.
 
-    A jax-md Dense list with a Verlet skin (:func:`sintercond.neighbors.neighbor_list`):
+    A Dense list with a Verlet skin from a sorted cell list (:func:`sintercond.neighbors.neighbor_list`):
     inside the step it is rebuilt only once a particle moved ``skin / 2``,
     and the half pair list (``Contacts.pairs``, the pairs the laws run on)
     with it. Both are sized here with ``capacity_multiplier`` spare room.
@@ -710,7 +712,7 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
 def reallocate_neighbors(neighbor_fns):
     """A ``reallocate(start, end)`` for :func:`sintercond.run.advance`: room for the chunk that overflowed.
 
-    The jax-md list is allocated at the chunk's end positions (never
+    The Dense list is allocated at the chunk's end positions (never
     narrower than before); the half pair list grows to
     ``capacity_multiplier`` times the most pairs any build of the chunk
     needed (or the end positions need), if it overflowed. The redone chunk

@@ -1,4 +1,6 @@
-"""Contact searches against brute force; the skinned jax-md list; per-pair history through rebuilds."""
+"""Contact searches against brute force; the skinned Dense list; per-pair history through rebuilds."""
+
+import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -158,6 +160,53 @@ def test_overflow_is_flagged_and_reallocation_recovers():
     nbrs = fns.allocate(squeezed)
     assert not bool(neighbors.did_buffer_overflow(nbrs))
     assert listed_pairs(nbrs.idx) == within(squeezed, fns.cutoff + fns.skin)
+
+
+def test_sorted_cell_list_is_the_brute_force_pairs_free_periodic_and_thin():
+    """The sorted cell list's table against brute force within cutoff + skin (minimum image when periodic):
+    a polydisperse packing with particles on and beyond the region's faces (free: they fall into the face
+    cells), wrapped into a periodic box, and a periodic box only two cells thick (each cell met once)."""
+    centres, radii = random_packing(400, seed=21, polydispersity=0.8)
+    skin = 0.15
+    lo, hi = centres.min(axis=0) + 0.5, centres.max(axis=0) - 0.5  # some particles outside the region
+    centres[:4] = [lo, hi, [lo[0], hi[1], lo[2]], [hi[0], lo[1], hi[2]]]  # and some exactly on its corners
+    fns = neighbors.neighbor_list(radii, skin, box_lo=lo, box_hi=hi)
+    nbrs = fns.allocate(centres)
+    assert not bool(neighbors.did_buffer_overflow(nbrs))
+    assert listed_pairs(nbrs.idx) == within(centres, fns.cutoff + fns.skin)
+    reach = fns.cutoff + fns.skin
+    for box in (np.ptp(centres, axis=0) * 0.9, np.array([9.0, 8.0, 2.2 * reach])):  # the last: two cells in z
+        fns = neighbors.neighbor_list(radii, skin, periodic_box=box)
+        nbrs = fns.allocate(centres)
+        assert listed_pairs(nbrs.idx) == within(centres, reach, periodic_box=box)
+
+
+def test_sorted_cell_list_rebuilds_when_jax_md_does_and_recovers_either_overflow():
+    """Rebuild steps against jax-md's own list (same skin test); a table whose rows, or whose cell ranges, are
+    too small flags the overflow alone, and the reallocated list holds the brute-force pairs."""
+    centres, radii = random_packing(200, seed=22, spread=1.2)
+    velocity = np.random.default_rng(23).normal(0.0, 0.01, centres.shape)
+    box = dict(box_lo=centres.min(axis=0) - 2.0, box_hi=centres.max(axis=0) + 2.0)
+    ours, theirs = neighbors.neighbor_list(radii, 0.3, **box), neighbors.jax_md_neighbor_list(radii, 0.3, **box)
+    a, b = ours.allocate(centres), theirs.allocate(centres)
+    update_a, update_b = jax.jit(ours.update), jax.jit(theirs.update)
+    rebuilt = []
+    for t in range(1, 25):
+        positions = jnp.asarray(centres + t * velocity)
+        a2, b2 = update_a(positions, a), update_b(positions, b)
+        assert bool(neighbors.did_rebuild(a, a2)) == bool(neighbors.did_rebuild(b, b2)), t
+        assert listed_pairs(a2.idx) == listed_pairs(b2.idx), t
+        rebuilt.append(bool(neighbors.did_rebuild(a, a2)))
+        a, b = a2, b2
+    assert 2 <= sum(rebuilt) < 20
+    squeezed = jnp.asarray(centres.mean(axis=0) + 0.8 * (centres - centres.mean(axis=0)))
+    roomy = within(squeezed, ours.cutoff + ours.skin)
+    for name, tight in (("rows", dataclasses.replace(a, idx=a.idx[:, :2])),
+                        ("cell ranges", dataclasses.replace(a, range_slots=jnp.arange(1, dtype=jnp.int32)))):
+        forced = dataclasses.replace(tight, reference_position=jnp.full_like(tight.reference_position, jnp.inf))
+        assert bool(neighbors.did_buffer_overflow(update_a(squeezed, forced))), name
+        again = ours.allocate(squeezed)
+        assert not bool(neighbors.did_buffer_overflow(again)) and listed_pairs(again.idx) == roomy, name
 
 
 def in_contact(positions, radii, idx):
