@@ -97,10 +97,11 @@ class NeighborListFns(NamedTuple):
     """A skinned Dense neighbour list for contacts (see :func:`neighbor_list`).
 
     Attributes:
-      allocate: ``(positions [n, 3], extra_capacity=0) -> NeighborList``
-        (host, not jit-able): sizes the buffers from these positions times
-        ``capacity_multiplier``, plus ``extra_capacity`` slots per row and per
-        cell range.
+      allocate: ``(positions [n, 3], extra_capacity=0, demand=(0, 0)) ->
+        NeighborList`` (host, not jit-able): sizes the buffers from these
+        positions (or the ``demand`` of a list that overflowed, if larger)
+        times ``capacity_multiplier``, plus ``extra_capacity`` slots per row
+        and per cell range.
       update: ``(positions [n, 3], nbrs) -> nbrs`` (jit-able): rebuilds only
         once a particle moved more than ``skin / 2`` since the last rebuild.
       cutoff: the contact range ``2 r_max (1 + CANDIDATE_MARGIN)`` (m).
@@ -129,8 +130,10 @@ class NeighborList:
       reference_position: ``[n, 3]`` the positions of the last rebuild, as
         the grid sees them (shifted by ``box_lo`` or wrapped into the
         periodic box; m).
-      overflow: bool scalar, sticky: a row or a cell range ran out of slots
-        at some rebuild since the allocation.
+      demand: ``[2]`` int32, the most neighbours of a row and the most
+        particles of a cell range any build since the allocation met; above
+        the capacities the list overflowed (:func:`did_buffer_overflow`), and
+        the host reallocates from them.
       range_slots: ``[s]`` int32 ``0 .. s - 1``: ``s`` particles at most in one
         cell range (a row of five half-reach cells, or one cell in a periodic
         box).
@@ -138,12 +141,12 @@ class NeighborList:
 
     idx: Any
     reference_position: Any
-    overflow: Any
+    demand: Any
     range_slots: Any
 
     @property
     def did_buffer_overflow(self):
-        return self.overflow
+        return (self.demand[0] > self.idx.shape[1]) | (self.demand[1] > self.range_slots.shape[0])
 
     @property
     def max_occupancy(self) -> int:
@@ -191,20 +194,33 @@ def _grid(region, reach, periodic) -> _Grid:
                  tuple(tuple(int(v) for v in r) for r in ranges))
 
 
+def _cell_order(key):
+    """The permutation sorting ``key`` ``[n]`` (int32, ascending, ties by index): one sort of ``key n + index``
+    in int64 under x64 (XLA sorts one int64 operand ~5x faster than a key and its index), else an argsort."""
+    n = key.shape[0]
+    if not jax.config.jax_enable_x64:
+        return jnp.argsort(key).astype(jnp.int32)
+    packed = jax.lax.sort(key.astype(jnp.int64) * n + jnp.arange(n, dtype=jnp.int64))
+    return (packed % n).astype(jnp.int32)
+
+
 def _cell_ranges(grid: _Grid, pos_box):
-    """Particles sorted by cell, and each particle's neighbour cell ranges in that order (jit-able).
+    """Particles sorted by cell, and the neighbour cell ranges of each, in that order (jit-able).
 
     Returns ``(order [n], start [n, R], size [n, R])``: the particles of range
-    ``r`` of particle ``i`` are ``order[start[i, r] : start[i, r] + size[i, r]]``.
+    ``r`` of the ``a``-th particle in cell order are
+    ``order[start[a, r] : start[a, r] + size[a, r]]``.
     """
     d0, d1, d2 = grid.dims
     dims = jnp.asarray(grid.dims, jnp.int32)
     cell = jnp.floor(pos_box / jnp.asarray(grid.cell_size, pos_box.dtype)).astype(jnp.int32)
     cell = jnp.clip(cell, 0, dims - 1)  # free: outside the region, into the face cells (still adjacent)
     key = (cell[:, 0] * d1 + cell[:, 1]) * d2 + cell[:, 2]
-    order = jnp.argsort(key).astype(jnp.int32)
-    first = jnp.concatenate([jnp.zeros(1, jnp.int32),
-                             jnp.cumsum(jnp.zeros(d0 * d1 * d2, jnp.int32).at[key].add(1))])
+    order = _cell_order(key)
+    count = jnp.zeros(d0 * d1 * d2, jnp.int32).at[key].add(1)
+    upto = jnp.cumsum(count)  # particles in cells <= c
+    before = upto - count  # particles in cells < c
+    cell = cell[order]
     offsets = jnp.asarray(grid.ranges, jnp.int32)
     o0 = cell[:, None, 0] + offsets[None, :, 0]
     o1 = cell[:, None, 1] + offsets[None, :, 1]
@@ -218,8 +234,8 @@ def _cell_ranges(grid: _Grid, pos_box):
         o0, o1 = jnp.clip(o0, 0, d0 - 1), jnp.clip(o1, 0, d1 - 1)
         lo2, hi2 = jnp.maximum(lo2, 0), jnp.minimum(hi2, d2 - 1)
     row = (o0 * d1 + o1) * d2
-    start = first[row + lo2]
-    size = jnp.where(real, first[row + hi2 + 1] - start, 0)
+    start = before[row + lo2]
+    size = jnp.where(real, upto[row + hi2] - start, 0)
     return order, start, size
 
 
@@ -239,51 +255,49 @@ def _dense_rows(grid: _Grid, reach_sq, pos_box, slots, width):
 
     In cell order, every particle tests the ``slots`` first particles of
     each of its cell ranges (contiguous in that order, so neighbouring rows
-    read the same memory), keeps those within reach as a bit mask per row,
-    and reads the set bits in order into ``width`` slots; the rows then go
-    back to the particles' own order. No ``[n, candidates]`` table is
+    read the same memory), keeps those within reach as bit masks (a 32-bit
+    word per range and 32 slots), and reads the set bits in order into
+    ``width`` slots; the rows then go back to the particles' own order. No ``[n, candidates]`` table is
     written, sorted or scattered (jax-md's Dense build does all three).
 
     Returns:
       ``(idx [n, width] or None, most neighbours of a row, most particles of a range)``; ``width=None``: counts only.
     """
     n = pos_box.shape[0]
-    order, start, size = _cell_ranges(grid, pos_box)
-    start, size = start[order], size[order]  # rows in cell order
+    order, start, size = _cell_ranges(grid, pos_box)  # rows in cell order
     n_ranges = start.shape[1]
-    k = n_ranges * slots
     offset = jnp.arange(slots, dtype=jnp.int32)
     inside = offset[None, None, :] < size[:, :, None]
     at = jnp.where(inside, start[:, :, None] + offset[None, None, :], 0)  # [n, R, slots] in cell order
     sorted_pos = pos_box[order]
     d2 = _metric_sq(grid, sorted_pos[:, None, None, :], sorted_pos[at])
     me = jnp.arange(n, dtype=jnp.int32)
-    keep = (inside & (at != me[:, None, None]) & (d2 < reach_sq)).reshape(n, k)
-    words = -(-k // 32)
-    keep = jnp.pad(keep, ((0, 0), (0, 32 * words - k))).reshape(n, words, 32)
-    bits = jnp.sum(keep.astype(jnp.uint32) << jnp.arange(32, dtype=jnp.uint32), axis=-1, dtype=jnp.uint32)
+    keep = inside & (at != me[:, None, None]) & (d2 < reach_sq)
+    per_range = -(-slots // 32)  # 32-bit words per range
+    if per_range > 1:
+        keep = jnp.pad(keep, ((0, 0), (0, 0), (0, 32 * per_range - slots)))
+    keep = keep.reshape(n, n_ranges * per_range, min(slots, 32))
+    shift = jnp.arange(keep.shape[-1], dtype=jnp.uint32)
+    bits = jnp.sum(keep.astype(jnp.uint32) << shift, axis=-1, dtype=jnp.uint32)  # [n, words]
     count = jnp.sum(jax.lax.population_count(bits), axis=1, dtype=jnp.int32)
     most, crowded = jnp.max(count, initial=0), jnp.max(size, initial=0)
     if width is None:
         return None, most, crowded
-    column = jnp.arange(words, dtype=jnp.int32)[None, :]
+    column = jnp.arange(bits.shape[1], dtype=jnp.int32)[None, :]
 
     def next_bit(bits, _):
-        """The lowest set bit of each row (its slot, or ``k``), cleared."""
+        """Each row's lowest set bit, cleared: the place of its particle in cell order (-1: none left)."""
         first = jnp.argmax(bits != 0, axis=1).astype(jnp.int32)
         word = jnp.take_along_axis(bits, first[:, None], axis=1)[:, 0]
-        low = word & (~word + jnp.uint32(1))
-        slot = jnp.where(word != 0, 32 * first + 31 - jax.lax.clz(low).astype(jnp.int32), k)
-        return jnp.where(column == first[:, None], bits & (bits - jnp.uint32(1)), bits), slot
+        bit = 31 - jax.lax.clz(word & (~word + jnp.uint32(1))).astype(jnp.int32)
+        at = jnp.take_along_axis(start, (first // per_range)[:, None], axis=1)[:, 0] + 32 * (first % per_range) + bit
+        return jnp.where(column == first[:, None], bits & (bits - jnp.uint32(1)), bits), jnp.where(word != 0, at, -1)
 
-    _, slot = jax.lax.scan(next_bit, bits, None, length=width)
-    slot = slot.T  # [n, width]
-    found = slot < k
-    slot = jnp.where(found, slot, 0)
-    at = jnp.take_along_axis(start, slot // slots, axis=1) + slot % slots
-    idx = jnp.where(found, order[jnp.where(found, at, 0)], n)
-    rank = jnp.zeros(n, jnp.int32).at[order].set(me)  # each particle's row in cell order
-    return idx[rank].astype(jnp.int32), most, crowded
+    _, at = jax.lax.scan(next_bit, bits, None, length=width)
+    at = at.T  # [n, width]
+    idx = jnp.where(at >= 0, order[jnp.maximum(at, 0)], n)
+    row_of = jnp.zeros(n, jnp.int32).at[order].set(me)  # each particle's row in cell order
+    return idx[row_of].astype(jnp.int32), most, crowded
 
 
 _compiled_rows = jax.jit(_dense_rows, static_argnums=(0, 1, 3, 4))
@@ -362,19 +376,20 @@ def neighbor_list(radii, skin, box_lo=None, box_hi=None, periodic_box=None, capa
     def build(pos_box, nbrs):
         slots, width = nbrs.range_slots.shape[0], nbrs.idx.shape[1]
         idx, most, crowded = _dense_rows(grid, reach_sq, pos_box, slots, width)
-        return NeighborList(idx, pos_box, nbrs.overflow | (most > width) | (crowded > slots), nbrs.range_slots)
+        return NeighborList(idx, pos_box, jnp.maximum(nbrs.demand, jnp.stack([most, crowded])), nbrs.range_slots)
 
-    def allocate(positions, extra_capacity=0):
+    def allocate(positions, extra_capacity=0, demand=(0, 0)):
         positions = jnp.asarray(positions)
         pos_box = to_box(positions)
         n = positions.shape[0]
         _, start, size = _compiled_ranges(grid, pos_box)
-        slots = max(int(int(jnp.max(size)) * capacity_multiplier) + int(extra_capacity), 1)
+        slots = max(int(max(int(jnp.max(size)), int(demand[1])) * capacity_multiplier) + int(extra_capacity), 1)
         _, most, _ = _compiled_rows(grid, reach_sq, pos_box, slots, None)
-        width = max(min(int(int(most) * capacity_multiplier + int(extra_capacity)), start.shape[1] * slots, n - 1), 0)
+        most = max(int(most), int(demand[0]))
+        width = max(min(int(most * capacity_multiplier + int(extra_capacity)), start.shape[1] * slots, n - 1), 0)
         idx, most, crowded = _compiled_rows(grid, reach_sq, pos_box, slots, width)
-        overflow = (most > width) | (crowded > slots)
-        return _kept_dtype(NeighborList(idx, pos_box, overflow, jnp.arange(slots, dtype=jnp.int32)), positions)
+        nbrs = NeighborList(idx, pos_box, jnp.stack([most, crowded]), jnp.arange(slots, dtype=jnp.int32))
+        return _kept_dtype(nbrs, positions)
 
     def update(positions, nbrs):
         pos_box = to_box(positions)

@@ -712,8 +712,9 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
 def reallocate_neighbors(neighbor_fns):
     """A ``reallocate(start, end)`` for :func:`sintercond.run.advance`: room for the chunk that overflowed.
 
-    The Dense list is allocated at the chunk's end positions (never
-    narrower than before); the half pair list grows to
+    The Dense list is allocated at the chunk's end positions, with room for
+    the most neighbours and cell-range particles any build of the chunk met
+    (never narrower than before); the half pair list grows to
     ``capacity_multiplier`` times the most pairs any build of the chunk
     needed (or the end positions need), if it overflowed. The redone chunk
     starts from ``start``: its pairs and springs are kept (padded to the new
@@ -722,10 +723,10 @@ def reallocate_neighbors(neighbor_fns):
     list would have held them.
     """
     def reallocate(start: SimState, end: SimState) -> SimState:
-        old = start.contacts.neighbor_list
-        nbrs = neighbor_fns.allocate(end.particles.positions)
+        old, demand = start.contacts.neighbor_list, tuple(int(d) for d in end.contacts.neighbor_list.demand)
+        nbrs = neighbor_fns.allocate(end.particles.positions, demand=demand)
         if nbrs.idx.shape[1] < old.idx.shape[1]:
-            nbrs = neighbor_fns.allocate(end.particles.positions, old.idx.shape[1] - nbrs.idx.shape[1])
+            nbrs = neighbor_fns.allocate(end.particles.positions, old.idx.shape[1] - nbrs.idx.shape[1], demand)
         nbrs = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
         half = start.contacts.pairs
         capacity = half.capacity

@@ -174,6 +174,8 @@ def test_sorted_cell_list_is_the_brute_force_pairs_free_periodic_and_thin():
     nbrs = fns.allocate(centres)
     assert not bool(neighbors.did_buffer_overflow(nbrs))
     assert listed_pairs(nbrs.idx) == within(centres, fns.cutoff + fns.skin)
+    wide = fns.allocate(centres, extra_capacity=40)  # over 32 slots per cell range: several bit words each
+    assert wide.range_slots.shape[0] > 32 and listed_pairs(wide.idx) == listed_pairs(nbrs.idx)
     reach = fns.cutoff + fns.skin
     for box in (np.ptp(centres, axis=0) * 0.9, np.array([9.0, 8.0, 2.2 * reach])):  # the last: two cells in z
         fns = neighbors.neighbor_list(radii, skin, periodic_box=box)
