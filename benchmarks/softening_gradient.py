@@ -15,6 +15,7 @@ Variants, each in its own process so that its peak memory is its own:
 * gradient plain: the same without checkpoints (every step's residuals kept): compiled
   for XLA's memory estimate, run only below --max-gb.
 
+All compiled with ``mechanics.COMPILER_OPTIONS`` (as ``run.advance`` compiles a mechanical chunk).
 Times: the variant and the forward program in the same process (best of alternating runs when
 they take under 20 s; one run each beyond).
 Memory: XLA's buffer assignment of the compiled program (temporaries + arguments + outputs)
@@ -66,7 +67,7 @@ def run_one(path, variant, steps, max_gb):
     import jax
     import jax.numpy as jnp
 
-    from sintercond import simulate
+    from sintercond import mechanics, simulate
 
     with open(path, "rb") as f:
         meta = pickle.load(f)
@@ -90,7 +91,8 @@ def run_one(path, variant, steps, max_gb):
         fn = jax.jit(jax.value_and_grad(loss))
     else:
         fn = jax.jit(jax.value_and_grad(lambda logs: loss(logs, checkpoint=False)))
-    compiled = fn.lower(logs0).compile()
+    options = mechanics.compiler_options(ex.sim.physics)  # the same XLA options for every variant
+    compiled = fn.lower(logs0).compile(compiler_options=options)
     mem = compiled.memory_analysis()
     xla_bytes = mem.temp_size_in_bytes + mem.argument_size_in_bytes + mem.output_size_in_bytes
     out = {"xla_gb": xla_bytes / 1e9, "seconds": None, "rss_gb": None, "ratio": None}
@@ -101,7 +103,7 @@ def run_one(path, variant, steps, max_gb):
     result = jax.block_until_ready(compiled(logs0))
     best = time.perf_counter() - t0
     out["rss_gb"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024 / 1e9
-    fwd = forward.lower(logs0).compile()
+    fwd = forward.lower(logs0).compile(compiler_options=options)
     if variant == "forward":
         fwd = compiled
     else:
