@@ -144,8 +144,8 @@ COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 On the CPU, XLA's newer fusion emitters turn the contact laws' many
 elementwise fusions over the pairs into code ~1.5x slower than the classic
-emitters (benchmarks/coupled_step.py; RESULTS.md). A CPU option: other
-backends ignore it."""
+emitters (benchmarks/coupled_step.py; RESULTS.md). The field belongs to
+XLA's DebugOptions and only the CPU compiler reads it (not checked on a GPU)."""
 
 
 def compiler_options(physics):
