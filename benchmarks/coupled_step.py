@@ -46,6 +46,7 @@ Prints the table and rewrites its section of benchmarks/RESULTS.md.
 """
 
 import argparse
+import dataclasses
 import os
 import pathlib
 import subprocess
@@ -94,8 +95,49 @@ VARIANTS = {"float64": (jnp.float64, "float64"), "float32-forces": (jnp.float64,
 springs in float32, positions, velocities and temperatures in float64."""
 
 
+def _reference_sum(state):
+    return jnp.sum(state.contacts.neighbor_list.reference_position)
+
+
+def neighbor_statistics(sim, fns, start, params, steps, run_time):
+    """``(rebuilds, share of rebuild + remap in the timed steps, listed pairs per particle, touching per particle)``.
+
+    Rebuilds: the steps where the jax-md list's reference positions changed
+    (a rollout of the same ``steps`` from ``start`` saving their sum). The
+    cost of one rebuild + remap: :func:`simulate.follow_contacts` with the
+    reference moved away (it rebuilds the list, the half pair list and
+    carries the springs) minus the same call that does not rebuild, each
+    compiled and timed alone (min of 5).
+    """
+    sums = simulate.rollout(sim, start, params, steps, simulate.SaveAt(1, _reference_sum), checkpoint=False)[1]
+    sums = np.concatenate([[float(_reference_sum(start))], np.asarray(sums)])
+    rebuilds = int(np.count_nonzero(np.diff(sums)))
+    positions, radii = start.particles.positions, start.particles.radii
+    nl = start.contacts.neighbor_list
+    moved = dataclasses.replace(start.contacts, neighbor_list=dataclasses.replace(
+        nl, reference_position=nl.reference_position + 10.0 * RADIUS))
+    follow = jax.jit(lambda contacts, history: simulate.follow_contacts(fns, positions, radii, contacts, history))
+    times = []
+    for contacts in (moved, start.contacts):
+        compiled = follow.lower(contacts, start.mechanics).compile()
+        best = np.inf
+        for _ in range(5):
+            t0 = time.perf_counter()
+            jax.block_until_ready(compiled(contacts, start.mechanics))
+            best = min(best, time.perf_counter() - t0)
+        times.append(best)
+    pairs = start.contacts.pairs.pairs
+    n = radii.shape[0]
+    geometry = mechanics.pair_geometry(positions, radii, pairs)
+    return (rebuilds, rebuilds * max(times[0] - times[1], 0.0) / run_time, float(jnp.sum(geometry.valid)) / n,
+            float(jnp.sum(geometry.touching)) / n)
+
+
 def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
-    """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations)``."""
+    """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations, statistics)``.
+
+    ``statistics``: :func:`neighbor_statistics` of the timed steps.
+    """
     t0 = time.perf_counter()
     dtype, force_dtype = VARIANTS[variant]
     floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "insulated")
@@ -139,8 +181,9 @@ def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
     v = np.asarray(final.mechanics.velocity, np.float64)
     mass = np.asarray(final.particles.mass, np.float64)
     kinetic = 0.5 * float(np.sum(mass[:, None] * v**2))
+    statistics = neighbor_statistics(sim, fns, starts[-1], params, steps, run_time)
     return (dt, setup, first - run_time, run_time, kinetic, float(np.mean(final.particles.temperature)),
-            report["reallocations"])
+            report["reallocations"], statistics)
 
 
 def write_data(path, centres, radii):
@@ -225,9 +268,10 @@ def main():
             result = sintercond_run(centres, radii, temperature, args.steps, name, dt)
             dt = result[0]
             ours[name] = result
-            _, setup, compile_s, run_s, kinetic, mean_t, realloc = result
+            _, setup, compile_s, run_s, kinetic, mean_t, realloc, (rebuilds, share, listed, touching) = result
             rows.append((f"{n:,}", f"sintercond ({name})", f"{n * args.steps / run_s:.3g}", f"{1e3 * run_s / args.steps:.2f}",
-                         f"{setup:.1f} + {compile_s:.1f}", f"{kinetic:.3e}", f"{mean_t:.4f}", f"{realloc}"))
+                         f"{setup:.1f} + {compile_s:.1f}", f"{kinetic:.3e}", f"{mean_t:.4f}", f"{realloc}",
+                         f"{rebuilds} ({100 * share:.1f} %)", f"{listed:.2f} / {touching:.2f}"))
             print(*rows[-1], sep="\t", flush=True)
         if found is not None:
             lmp, env = found
@@ -235,17 +279,24 @@ def main():
                 wall, loop, kinetic, mean_t = lammps_run(lmp, env, centres, radii, temperature, args.steps, dt, ranks)
                 rows.append((f"{n:,}", f"LAMMPS ({ranks} rank{'s' * (ranks > 1)})", f"{n * args.steps / loop:.3g}",
                              f"{1e3 * loop / args.steps:.2f}", f"whole process {wall:.1f}", f"{kinetic:.3e}",
-                             f"{mean_t:.4f}", "-"))
+                             f"{mean_t:.4f}", "-", "-", "-"))
                 print(*rows[-1], sep="\t", flush=True)
     body = (
         f"{args.steps} steps of the coupled step (Hertz + tsuji damping, Mindlin with history, rolling with history, "
         "Hertz-radius heat conduction, gravity, a floor) on a jittered SC block of 3 mm spheres dropping onto the "
         "floor (module docstring: the same laws in both codes and where their conventions differ), the same dt "
         f"(0.5 of sintercond's automatic mechanical step). Particle-steps/s from the timed loop (sintercond: second "
-        "run of the compiled chunk; LAMMPS: its Loop time); set-up + compile (s) or LAMMPS's whole process; the "
-        "final kinetic energy and mean temperature of each as a same-regime check.\n\n"
+        "run of the compiled chunk, compiled with `mechanics.COMPILER_OPTIONS`; LAMMPS: its Loop time); set-up + "
+        "compile (s) or LAMMPS's whole process; the final kinetic energy and mean temperature of each as a "
+        "same-regime check. Rebuilds: of the neighbour list in the timed steps, and the share of the timed steps "
+        "that the rebuilds and the spring remap take (one rebuild timed alone, times the count). Pairs per "
+        "particle: in the half pair list at the start of the timed steps (within r_i + r_j + skin) / touching. "
+        "The particles are in the block's lattice order (x-major), not re-sorted (LAMMPS sorts its atoms "
+        "spatially by default).\n\n"
         + markdown_table(("particles", "code", "particle-steps/s", "ms/step", "set-up + compile (s)",
-                          "final kinetic energy (J)", "final mean T (K)", "reallocations"), rows)
+                          "final kinetic energy (J)", "final mean T (K)", "reallocations",
+                          "rebuilds (share of rebuild + remap in the steps)", "pairs per particle: listed / touching"),
+                         rows)
     )
     print(body)
     write_section("coupled_step", "python benchmarks/coupled_step.py " + " ".join(sys.argv[1:]), body)

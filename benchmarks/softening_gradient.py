@@ -1,6 +1,7 @@
 """Gradient of the softening fit's loss through the coupled thermo-mechanical scan: time and memory, and fit times.
 
-Usage: python benchmarks/softening_gradient.py [--lateral-size 0.012] [--height 0.008] [--steps 1000 10000 100000]
+Usage: python benchmarks/softening_gradient.py [--lateral-size 0.012] [--height 0.008] [--settle-time 0.3]
+                                              [--steps 1000 10000 100000]
 
 A bed (fitting.softening.bed_experiment: powder_bed piled, settled by the coupled
 simulation with friction, then heated by its floor at 700 K; float64), read
@@ -15,6 +16,7 @@ Variants, each in its own process so that its peak memory is its own:
 * gradient plain: the same without checkpoints (every step's residuals kept): compiled
   for XLA's memory estimate, run only below --max-gb.
 
+All compiled with ``mechanics.COMPILER_OPTIONS`` (as ``run.advance`` compiles a mechanical chunk).
 Times: the variant and the forward program in the same process (best of alternating runs when
 they take under 20 s; one run each beyond).
 Memory: XLA's buffer assignment of the compiled program (temporaries + arguments + outputs)
@@ -41,14 +43,16 @@ VARIANTS = ("forward", "gradient checkpointed", "gradient plain")
 SIGMA = (0.5, 0.5, 0.5, 2e-8)
 
 
-def build(path, lateral_size, height):
+def build(path, lateral_size, height, settle_time=0.3):
     from fitting import softening as sf
 
     t0 = time.perf_counter()
-    ex = sf.bed_experiment(lateral_size=lateral_size, height=height, t_end=0.01, save_every=10)
+    ex = sf.bed_experiment(lateral_size=lateral_size, height=height, t_end=0.01, save_every=10,
+                           settle_time=settle_time)
     state = ex.state
     with open(path, "wb") as f:
-        pickle.dump({"lateral_size": lateral_size, "height": height, "seconds": time.perf_counter() - t0,
+        pickle.dump({"lateral_size": lateral_size, "height": height, "settle_time": settle_time,
+                     "seconds": time.perf_counter() - t0,
                      "n": int(state.particles.radii.shape[0]), "dt": float(state.dt)}, f)
     return ex
 
@@ -59,14 +63,14 @@ def experiment(meta, steps):
 
     dt = meta["dt"]
     return sf.bed_experiment(lateral_size=meta["lateral_size"], height=meta["height"], t_end=steps * dt,
-                             save_every=max(1, steps // 100))
+                             save_every=max(1, steps // 100), settle_time=meta["settle_time"])
 
 
 def run_one(path, variant, steps, max_gb):
     import jax
     import jax.numpy as jnp
 
-    from sintercond import simulate
+    from sintercond import mechanics, simulate
 
     with open(path, "rb") as f:
         meta = pickle.load(f)
@@ -90,7 +94,8 @@ def run_one(path, variant, steps, max_gb):
         fn = jax.jit(jax.value_and_grad(loss))
     else:
         fn = jax.jit(jax.value_and_grad(lambda logs: loss(logs, checkpoint=False)))
-    compiled = fn.lower(logs0).compile()
+    options = mechanics.compiler_options(ex.sim.physics)  # the same XLA options for every variant
+    compiled = fn.lower(logs0).compile(compiler_options=options)
     mem = compiled.memory_analysis()
     xla_bytes = mem.temp_size_in_bytes + mem.argument_size_in_bytes + mem.output_size_in_bytes
     out = {"xla_gb": xla_bytes / 1e9, "seconds": None, "rss_gb": None, "ratio": None}
@@ -101,7 +106,7 @@ def run_one(path, variant, steps, max_gb):
     result = jax.block_until_ready(compiled(logs0))
     best = time.perf_counter() - t0
     out["rss_gb"] = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024 / 1e9
-    fwd = forward.lower(logs0).compile()
+    fwd = forward.lower(logs0).compile(compiler_options=options)
     if variant == "forward":
         fwd = compiled
     else:
@@ -161,6 +166,8 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--lateral-size", type=float, default=0.008)
     parser.add_argument("--height", type=float, default=0.006)
+    parser.add_argument("--settle-time", type=float, default=0.3,
+                        help="s of settling allowed (a 20 x 20 x 12 mm bed of ~770 spheres needs more than 0.3)")
     parser.add_argument("--steps", type=int, nargs="+", default=[1000, 10_000, 100_000])
     parser.add_argument("--fit-steps", type=int, default=3800)
     parser.add_argument("--max-gb", type=float, default=8.0)
@@ -178,7 +185,7 @@ def main():
 
     with tempfile.TemporaryDirectory() as tmp:
         path = pathlib.Path(tmp) / "bed.pkl"
-        build(path, args.lateral_size, args.height)
+        build(path, args.lateral_size, args.height, args.settle_time)
         with open(path, "rb") as f:
             meta = pickle.load(f)
         rows = []

@@ -180,7 +180,8 @@ def effective_rolling_inertia(m_i, r_i, m_j, r_j):
 
 def _damping_coefficient(xi, stiffness_modulus, inertia, r_star, delta):
     """``2 xi sqrt(c inertia sqrt(r*)) delta^(1/4)``, the shared form of Eqs. 6, 11 and 18."""
-    return 2.0 * xi * safe_sqrt(stiffness_modulus * inertia * safe_sqrt(r_star)) * safe_power(delta, 0.25)
+    # delta^(1/4) as two square roots: cheaper than a power, NaN-safe at 0 (both roots are safe_sqrt)
+    return 2.0 * xi * safe_sqrt(stiffness_modulus * inertia * safe_sqrt(r_star)) * safe_sqrt(safe_sqrt(delta))
 
 
 def normal_damping_coefficient(delta, r_star, m_star, e_star, xi_con):
@@ -217,7 +218,7 @@ def hertz_normal_force(delta, delta_dot, r_star, m_star, e_star, xi_con, *, no_t
     """
     delta, delta_dot, r_star, m_star, e_star, xi_con = as_float_arrays(
         delta, delta_dot, r_star, m_star, e_star, xi_con)
-    elastic = (4.0 / 3.0) * safe_sqrt(r_star) * e_star * safe_power(delta, 1.5)
+    elastic = (4.0 / 3.0) * safe_sqrt(r_star) * e_star * (delta * safe_sqrt(delta))  # delta^(3/2) without a power
     force = elastic + normal_damping_coefficient(delta, r_star, m_star, e_star, xi_con) * delta_dot
     if no_tension:
         force = jnp.where(force > 0, force, 0.0)
@@ -271,6 +272,13 @@ def _dot(a, b):
     return jnp.sum(a * b, axis=-1)
 
 
+def _cross(a, b):
+    """``a x b`` over the trailing axis, stacked there (``jnp.cross`` stacks in front, then transposes)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def tangential_part(vectors, normal):
     """``v - (v . n) n``: the part of ``vectors [..., 3]`` in the plane normal to the unit ``n``."""
     return vectors - _dot(vectors, normal)[..., None] * normal
@@ -314,7 +322,7 @@ def relative_contact_velocity(v_i, v_j, omega_i, omega_j, normal, r_i, r_j):
     (v_i, v_j, omega_i, omega_j, normal), (r_i, r_j) = _contact_arrays(
         (v_i, v_j, omega_i, omega_j, normal), (r_i, r_j))
     spin = r_i[..., None] * omega_i + r_j[..., None] * omega_j
-    u = v_i - v_j + jnp.cross(spin, normal)
+    u = v_i - v_j + _cross(spin, normal)
     return _dot(u, normal), tangential_part(u, normal)
 
 
@@ -497,7 +505,7 @@ def friction_torque(friction_force, normal, r_i, r_j):
       ``(torque_i [..., 3], torque_j [..., 3])`` (N m).
     """
     (friction_force, normal), (r_i, r_j) = _contact_arrays((friction_force, normal), (r_i, r_j))
-    moment = jnp.cross(normal, friction_force)
+    moment = _cross(normal, friction_force)
     return r_i[..., None] * moment, r_j[..., None] * moment
 
 

@@ -139,6 +139,20 @@ def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> 
                            wall if physics.friction else None, wall if physics.rolling else None)
 
 
+COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+"""XLA options for compiling a mechanical step (``jax.jit(f, compiler_options=...)``, per executable).
+
+On the CPU, XLA's newer fusion emitters turn the contact laws' many
+elementwise fusions over the pairs into code ~1.5x slower than the classic
+emitters (benchmarks/coupled_step.py; RESULTS.md). The field belongs to
+XLA's DebugOptions and only the CPU compiler reads it (not checked on a GPU)."""
+
+
+def compiler_options(physics):
+    """:data:`COMPILER_OPTIONS` for a mechanical ``physics`` (``Physics(mechanics=True)``), else None."""
+    return dict(COMPILER_OPTIONS) if physics.mechanics else None
+
+
 # --------------------------------------------------------------------------
 # geometry
 

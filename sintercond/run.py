@@ -409,7 +409,7 @@ def _compiled_chunk(sim, chunk):
     def run_chunk(state, params):
         return simulate.rollout(sim, state, params, chunk, simulate.SaveAt(chunk, _nothing), checkpoint=False)[0]
 
-    return jax.jit(run_chunk)
+    return jax.jit(run_chunk, compiler_options=mechanics.compiler_options(sim.physics))
 
 
 def _nothing(state):
