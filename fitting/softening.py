@@ -106,7 +106,8 @@ class SofteningExperiment:
                 and self.n_steps >= self.save_every and self.n_steps % self.save_every == 0):
             raise ValueError(f"n_steps ({self.n_steps!r}) must be a positive multiple of save_every "
                              f"({self.save_every!r})")
-        object.__setattr__(self, "_predict", jax.jit(self.predict))
+        object.__setattr__(self, "_predict", jax.jit(self.predict, compiler_options=mechanics.compiler_options(
+            self.sim.physics)))
 
     def readings(self, values: Mapping) -> np.ndarray:
         """:meth:`predict` compiled once per experiment, as a NumPy array."""
@@ -465,9 +466,9 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     state = simulate.init_state(particles, contacts, dt,
                                 mechanics=mechanics.mechanical_state(settle, x, contacts))
     chunk = 500
-    run = jax.jit(lambda s, p: simulate.rollout(simulate.simulator(settle, fns), s, p, chunk,
-                                                simulate.SaveAt(chunk, lambda s: jnp.max(jnp.linalg.norm(
-                                                    s.mechanics.velocity, axis=1)))))
+    fastest = simulate.SaveAt(chunk, lambda s: jnp.max(jnp.linalg.norm(s.mechanics.velocity, axis=1)))
+    run = jax.jit(lambda s, p: simulate.rollout(simulate.simulator(settle, fns), s, p, chunk, fastest),
+                  compiler_options=mechanics.compiler_options(settle))
     for _ in range(max(1, int(math.ceil(settle_time / (chunk * dt))))):
         state, speed = run(state, params)
         if bool(state.overflow):

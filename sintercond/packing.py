@@ -589,7 +589,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
             force = mass[:, None] * (probe.mechanics.velocity - v) / s.dt
             return s, kinetic / energy_scale, jnp.max(jnp.linalg.norm(force, axis=1) / weight), probe.overflow
 
-        compiled = jax.jit(chunk)
+        compiled = jax.jit(chunk, compiler_options=mechanics.compiler_options(sim.physics))
         reallocate = simulate.reallocate_neighbors(fns)
         max_steps = check_every * int(math.ceil(max_time / dt / check_every))
         reallocations, kinetic, force = 0, math.inf, math.inf
