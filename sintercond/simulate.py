@@ -795,6 +795,13 @@ def mean_temperature(state: SimState):
     return jnp.sum(weight * p.temperature) / jnp.sum(weight)
 
 
+def _small_observable(shapes, state) -> bool:
+    """Whether the observable holds at most 1/16 of the temperatures' elements (e.g. a few probes):
+    cheap enough to write after every step."""
+    size = sum(math.prod(x.shape) for x in jax.tree.leaves(shapes))
+    return 16 * size <= math.prod(state.particles.temperature.shape)
+
+
 def segment_length(n_steps: int) -> int:
     """``ceil(sqrt(n_steps))``: steps between the states reverse mode keeps."""
     return max(1, math.isqrt(max(n_steps, 1) - 1) + 1)
@@ -821,8 +828,24 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     prep = sim.prepare_fn(state, params)
     seg = segment_length(n_steps) if checkpoint else n_steps
 
+    # leaves the step passes through unchanged (a static table, radii, masses) stay out of the loops' carries:
+    # reverse mode would keep a copy of them at every checkpoint
+    leaves, treedef = jax.tree.flatten(state)
+    still = _unchanged_leaves(sim, prep, leaves, treedef)
+
+    def full(moving):
+        moving = iter(moving)
+        return treedef.unflatten([x if kept else next(moving) for x, kept in zip(leaves, still)])
+
+    def moving(s):
+        return [x for x, kept in zip(treedef.flatten_up_to(s), still) if not kept]
+
+    observe_state = observe
+    observe = lambda m: observe_state(full(m))  # noqa: E731
+    state = moving(state)
+
     def advance(s, _):
-        return sim.advance_fn(s, prep), None
+        return moving(sim.advance_fn(full(s), prep)), None
 
     def run_steps(s, length):
         if length <= seg:
@@ -855,7 +878,12 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
         def step(carry, k):
             s, buffer = carry
             s = advance(s, None)[0]
-            buffer = jax.lax.cond((k + 1) % every == 0, save, lambda s, b, k: b, s, buffer, k)
+            if _small_observable(shapes, full(s)):
+                # written after every step, the last write of an interval standing: no branch, whose transpose
+                # adds a zero field to the state's cotangent at every step
+                buffer = save(s, buffer, k)
+            else:
+                buffer = jax.lax.cond((k + 1) % every == 0, save, lambda s, b, k: b, s, buffer, k)
             return (s, buffer), None
 
         (s, buffer), _ = jax.lax.scan(step, (s, buffer), jnp.arange(n_saved * every))
@@ -867,10 +895,13 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
         if checkpoint and 1 < every <= seg < n_steps:
             # one save per segment: the segment is the save interval (unchecked, reverse mode would keep
             # every step of the run)
-            return jax.lax.scan(jax.checkpoint(one_save, prevent_cse=False), state, None, length=n_saves)
-        return jax.lax.scan(one_save, state, None, length=n_saves)
+            state, saved = jax.lax.scan(jax.checkpoint(one_save, prevent_cse=False), state, None, length=n_saves)
+        else:
+            state, saved = jax.lax.scan(one_save, state, None, length=n_saves)
+        return full(state), saved
     if group >= n_saves:
-        return saving_steps(state, n_saves)
+        state, saved = saving_steps(state, n_saves)
+        return full(state), saved
     q, r = divmod(n_saves, group)
     state, saved = jax.lax.scan(jax.checkpoint(lambda s, _: saving_steps(s, group), prevent_cse=False), state, None,
                                 length=q)
@@ -878,4 +909,10 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     if r:
         state, tail = saving_steps(state, r)
         saved = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), saved, tail)
-    return state, saved
+    return full(state), saved
+
+
+def _unchanged_leaves(sim, prep, leaves, treedef):
+    """Per leaf of the flattened state: whether one step returns it unchanged (the same value, untouched)."""
+    jaxpr = jax.make_jaxpr(lambda *xs: jax.tree.leaves(sim.advance_fn(treedef.unflatten(xs), prep)))(*leaves).jaxpr
+    return [out is var for var, out in zip(jaxpr.invars, jaxpr.outvars)]

@@ -217,26 +217,31 @@ def source_power(physics, state, params):
     particles = state.particles
     positions, radii, temperature = particles.positions, particles.radii, particles.temperature
     t = state.time
-    power = jnp.zeros_like(temperature)
+    # a sum of the terms present, without a field of zeros to start from: inside a differentiated scan JAX
+    # hoists such loop-invariant fields out of the loop, and the step then reads them from memory
+    terms = []
     if physics.beam is not None:
         b = params.beam
         spot = heat_sources.beam_position(t, b.path, b.speed)
         surface = jnp.max(positions[:, 2] + radii)
         depth = heat_sources.beam_depth(positions, radii, spot, b.spot_radius, surface)
         law = heat_sources.laser_power if physics.beam == "laser" else heat_sources.nozzle_power
-        power = power + law(radii, depth, b.intensity, b.reach, b.absorptance)
+        terms.append(law(radii, depth, b.intensity, b.reach, b.absorptance))
     if physics.convection:
         c = params.convection
-        power = power + heat_sources.convection_power(radii, temperature, c.environment_temperature,
-                                                      c.environment_conductivity, c.nusselt)
+        terms.append(heat_sources.convection_power(radii, temperature, c.environment_temperature,
+                                                   c.environment_conductivity, c.nusselt))
     if physics.radiation:
         r = params.radiation
-        power = power + heat_sources.radiation_power(radii, temperature, r.environment_temperature, r.emissivity)
-    if physics.pulse:
-        power = power + jnp.where(t < params.pulse.duration, params.pulse.power, 0.0)
+        terms.append(heat_sources.radiation_power(radii, temperature, r.environment_temperature, r.emissivity))
+    if physics.pulse:  # the pulse's switch a scalar factor (no field of zeros for where's other branch)
+        terms.append(params.pulse.power * (t < params.pulse.duration).astype(temperature.dtype))
     if physics.source is not None:
-        power = power + physics.source(state, t, params)
-    return power
+        terms.append(physics.source(state, t, params))
+    if not terms:
+        return jnp.zeros_like(temperature)
+    return jnp.broadcast_to(functools.reduce(jnp.add, terms), temperature.shape).astype(
+        jnp.result_type(temperature, *terms))
 
 
 def source_conductance(physics, radii, params, temperature_bound):
