@@ -58,6 +58,7 @@ driver (:func:`sintercond.run.advance` with :func:`reallocate_neighbors`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -589,11 +590,15 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         particles = state.particles
         fixed = particles.fixed if physics.held else None
         if physics.integrator == "explicit" and physics.contacts == "static":
-            # the network term inside the update, whose reverse mode is written for the CPU
-            power = conduction_power(state, prep, particles.temperature, None, None)
-            power = power + thermal.source_power(physics, state, prep.params)
+            # the network term inside the update, whose reverse mode is written for the CPU; the pulse apart (its
+            # switch, a scalar, is what reverse mode stores per step) and no field of zeros without walls or sources
+            terms, pulse = thermal.source_power_parts(physics, state, prep.params)
+            if physics.conducting_walls:
+                terms = [conduction_power(state, prep, particles.temperature, None, None)] + terms
+            power = functools.reduce(jnp.add, terms) if terms else jnp.zeros((), particles.temperature.dtype)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
-                                                  particles.fixed_temperature, (prep.scale, conductance, neighbors))
+                                                  particles.fixed_temperature, (prep.scale, conductance, neighbors),
+                                                  pulse)
         elif physics.integrator == "explicit":
             power = heat_power_fn(state, prep, conductance, neighbors)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,

@@ -70,7 +70,8 @@ def check_time_step(dt, capacity, table: ContactTable) -> float:
     return limit
 
 
-def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_temperature=None, network=None):
+def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_temperature=None, network=None,
+                    pulse=None):
     """The explicit Euler update ``T + dt P / C``, held particles reset to their values.
 
     The one explicit step of the package: every caller (the simulator of
@@ -83,20 +84,31 @@ def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_tem
     padded table, ``P - scale L T`` (:func:`sintercond.network.network_laplacian`;
     ``scale`` a scalar or ``[n]``), inside the update: the same numbers as
     passing that power, with a derivative written for reverse mode
-    (:func:`_conduction_update`).
+    (:func:`_conduction_update`). ``pulse=(field, switch)`` adds
+    ``switch * field`` (W; a loop-invariant ``[n]`` field and a scalar, as
+    :func:`source_power_parts` returns them) to ``power``: the same numbers,
+    and with a network reverse mode keeps the scalar per step, not the sum.
     """
     if network is None:
+        if pulse is not None:
+            power = power + pulse[1] * pulse[0]
         new = temperature + dt * power / capacity
     else:
-        new = _conduction_update(temperature, power, capacity, dt, *network)
+        field, switch = (jnp.zeros((), temperature.dtype), jnp.zeros((), temperature.dtype)) if pulse is None else pulse
+        new = _conduction_update(temperature, power, field, switch, capacity, dt, *network)
     if fixed_mask is None:
         return new
     return jnp.where(fixed_mask, fixed_temperature, new)
 
 
 @jax.custom_jvp
-def _conduction_update(temperature, power, capacity, dt, scale, conductance, neighbors):
-    """``T + dt (P - s L T) / C`` (K) with a derivative cheap in reverse mode.
+def _conduction_update(temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors):
+    """``T + dt (P + w Q - s L T) / C`` (K) with a derivative cheap in reverse mode.
+
+    ``Q`` is a loop-invariant pulse field and ``w`` its scalar switch at this
+    step (zeros without one): kept apart so that a differentiated scan stores
+    ``w`` per step and ``Q`` once, as a hand adjoint recomputes the pulse
+    from the step index.
 
     JAX's own transpose of this update runs about ten kernels per step on a
     CPU (each cotangent its own pass, and a gather of ``dt / C * ct`` that
@@ -106,67 +118,74 @@ def _conduction_update(temperature, power, capacity, dt, scale, conductance, nei
     symmetric: the same gather as the forward, of one materialised array),
     ``ct_P = v``, ``ct_s = -v L T`` and ``ct_C = -v (P - s L T) / C``. The
     residuals per step are ``L T`` (when ``s`` or ``C`` is differentiated)
-    and ``P`` (when ``C`` is). A tangent of ``dt`` or of the conductances
-    (lifted conductances) falls back to JAX's derivative of the same formula.
+    and ``P``, ``w`` (when ``C`` is; ``Q`` is loop-invariant). A tangent of
+    ``dt``, of the switch or of the conductances (lifted conductances) falls
+    back to JAX's derivative of the same formula.
     """
-    return _conduction_formula(temperature, power, capacity, dt, scale, conductance, neighbors)
+    return _conduction_formula(temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors)
 
 
-def _conduction_formula(temperature, power, capacity, dt, scale, conductance, neighbors):
-    return temperature + dt * (power - scale * network_laplacian(conductance, neighbors, temperature)) / capacity
+def _conduction_formula(temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors):
+    lt = network_laplacian(conductance, neighbors, temperature)
+    return temperature + dt * (power + switch * pulse - scale * lt) / capacity
 
 
 def _conduction_update_jvp(primals, tangents):
-    temperature, power, capacity, dt, scale, conductance, neighbors = primals
-    d_t, d_p, d_c, d_dt, d_s, d_k, _ = tangents
+    temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors = primals
+    d_t, d_p, d_q, d_w, d_c, d_dt, d_s, d_k, _ = tangents
     zero = lambda x: isinstance(x, jax.custom_derivatives.SymbolicZero)  # noqa: E731
-    if not (zero(d_dt) and zero(d_k)):
-        instantiate = [jnp.zeros(x.shape, x.dtype) if zero(d) else d for x, d in zip(primals[:6], tangents[:6])]
-        return jax.jvp(lambda *a: _conduction_formula(*a, neighbors), tuple(primals[:6]), tuple(instantiate))
+    if not (zero(d_dt) and zero(d_k) and zero(d_w)):
+        instantiate = [jnp.zeros(x.shape, x.dtype) if zero(d) else d for x, d in zip(primals[:8], tangents[:8])]
+        return jax.jvp(lambda *a: _conduction_formula(*a, neighbors), tuple(primals[:8]), tuple(instantiate))
     lt = network_laplacian(conductance, neighbors, temperature)
-    out = temperature + dt * (power - scale * lt) / capacity
-    present = [(k, d) for k, d in zip("tpcs", (d_t, d_p, d_c, d_s)) if not zero(d)]
+    out = temperature + dt * (power + switch * pulse - scale * lt) / capacity
+    present = [(k, d) for k, d in zip("tpqcs", (d_t, d_p, d_q, d_c, d_s)) if not zero(d)]
     if not present:
         return out, jnp.zeros_like(out)
     names = "".join(k for k, _ in present)
-    # per-step residuals only as needed: L T (derivatives in s or C), P (in C)
-    residuals = (lt if ("s" in names or "c" in names) else None, power if "c" in names else None, capacity, dt, scale,
-                 conductance, neighbors)
+    # per-step residuals only as needed: L T (derivatives in s or C), P and w (in C); Q is loop-invariant
+    in_c = "c" in names
+    residuals = (lt if ("s" in names or in_c) else None, power if in_c else None, pulse if in_c else None,
+                 switch if (in_c or "q" in names) else None, capacity, dt, scale, conductance, neighbors)
     tangent, = linear_call(functools.partial(_conduction_tangent, names),
                            functools.partial(_conduction_transpose, names), residuals, [d for _, d in present])
     return out, tangent
 
 
 def _conduction_tangent(names, residuals, linear):
-    lt, power, capacity, dt, scale, conductance, neighbors = residuals
+    lt, power, pulse, switch, capacity, dt, scale, conductance, neighbors = residuals
     d = dict(zip(names, linear))
     d_power = 0.0
     if "t" in d:
         d_power = -scale * network_laplacian(conductance, neighbors, d["t"])
     if "p" in d:
         d_power = d_power + d["p"]
+    if "q" in d:
+        d_power = d_power + switch * d["q"]
     if "s" in d:
         d_power = d_power - d["s"] * lt
     tangent = dt * d_power / capacity
     if "c" in d:
-        tangent = tangent - dt * (power - scale * lt) / capacity * d["c"] / capacity
+        tangent = tangent - dt * (power + switch * pulse - scale * lt) / capacity * d["c"] / capacity
     if "t" in d:
         tangent = tangent + d["t"]
     return [jnp.broadcast_to(tangent, capacity.shape)]
 
 
 def _conduction_transpose(names, residuals, cotangents):
-    lt, power, capacity, dt, scale, conductance, neighbors = residuals
+    lt, power, pulse, switch, capacity, dt, scale, conductance, neighbors = residuals
     (ct,) = cotangents
     v = dt * ct / capacity  # the cotangent of the power
     out = {"p": _unbroadcast(v, jnp.shape(power) if power is not None else ct.shape)}
+    if "q" in names:
+        out["q"] = _unbroadcast(switch * v, jnp.shape(pulse))
     if "t" in names:  # L symmetric: L^T (s v) = L (s v), one gather of one array
         sv = scale * v if jnp.ndim(scale) == 0 else materialized(scale * v)
         out["t"] = ct - gather_laplacian(conductance, neighbors, sv)
     if "s" in names:
         out["s"] = _unbroadcast(-v * lt, jnp.shape(scale))
     if "c" in names:
-        out["c"] = _unbroadcast(-v * (power - scale * lt) / capacity, jnp.shape(capacity))
+        out["c"] = _unbroadcast(-v * (power + switch * pulse - scale * lt) / capacity, jnp.shape(capacity))
     return [out[k] for k in names]
 
 
@@ -214,6 +233,25 @@ def source_power(physics, state, params):
     prescribed pulse, and a user term. Zero (and nothing traced) when the
     physics has none.
     """
+    varying, pulse = source_power_parts(physics, state, params)
+    terms = varying if pulse is None else varying + [pulse[1] * pulse[0]]
+    temperature = state.particles.temperature
+    if not terms:
+        return jnp.zeros_like(temperature)
+    return jnp.broadcast_to(functools.reduce(jnp.add, terms), temperature.shape).astype(
+        jnp.result_type(temperature, *terms))
+
+
+def source_power_parts(physics, state, params):
+    """The terms of :func:`source_power`: ``(terms, pulse)``.
+
+    ``terms``: a list of ``[n]`` (or scalar) powers (W) of the beam,
+    convection, radiation and user sources; ``pulse``: None, or
+    ``(field, switch)``, the prescribed pulse's loop-invariant ``[n]`` power
+    (W) and its scalar on/off factor at the state's time. Kept apart for
+    :func:`explicit_update`, whose reverse mode then stores one scalar per
+    step for the pulse.
+    """
     particles = state.particles
     positions, radii, temperature = particles.positions, particles.radii, particles.temperature
     t = state.time
@@ -234,14 +272,12 @@ def source_power(physics, state, params):
     if physics.radiation:
         r = params.radiation
         terms.append(heat_sources.radiation_power(radii, temperature, r.environment_temperature, r.emissivity))
-    if physics.pulse:  # the pulse's switch a scalar factor (no field of zeros for where's other branch)
-        terms.append(params.pulse.power * (t < params.pulse.duration).astype(temperature.dtype))
     if physics.source is not None:
         terms.append(physics.source(state, t, params))
-    if not terms:
-        return jnp.zeros_like(temperature)
-    return jnp.broadcast_to(functools.reduce(jnp.add, terms), temperature.shape).astype(
-        jnp.result_type(temperature, *terms))
+    pulse = None
+    if physics.pulse:  # the pulse's switch a scalar factor (no field of zeros for where's other branch)
+        pulse = (params.pulse.power, (t < params.pulse.duration).astype(temperature.dtype))
+    return terms, pulse
 
 
 def source_conductance(physics, radii, params, temperature_bound):
