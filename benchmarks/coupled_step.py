@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
                                          [--no-peers] [--dtypes float64 float32-forces float32]
+                                         [--order lattice|morton]
 
 The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
 radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
@@ -42,6 +43,10 @@ reallocated if it overflows), timed on the second run of the compiled chunk
 run, and its whole process. Both report the final kinetic energy and mean
 temperature as a sanity check that they simulate the same regime (the
 conventions above differ, so they agree in magnitude, not to round-off).
+``--order``: sintercond's particles left in the block's lattice order
+(x-major; the default, already local in memory), or renumbered along a
+Morton curve (``network.morton_order``, its time in the set-up) as LAMMPS
+sorts its atoms spatially on its own (``atom_modify sort``).
 Prints the table and rewrites its section of benchmarks/RESULTS.md.
 """
 
@@ -60,7 +65,7 @@ import numpy as np
 from _common import markdown_table, write_section
 from peers_thermal import lammps_executable, loop_time
 
-from sintercond import mechanics, simulate
+from sintercond import mechanics, network, simulate
 from sintercond.run import _compiled_chunk, advance
 from sintercond.scene import restitution_damping_ratio
 from sintercond.state import particle_state
@@ -133,12 +138,16 @@ def neighbor_statistics(sim, fns, start, params, steps, run_time):
             float(jnp.sum(geometry.touching)) / n)
 
 
-def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
+def sintercond_run(centres, radii, temperature, steps, variant, dt=None, order="lattice"):
     """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations, statistics)``.
 
-    ``statistics``: :func:`neighbor_statistics` of the timed steps.
+    ``statistics``: :func:`neighbor_statistics` of the timed steps. ``order``: ``"morton"`` renumbers the
+    particles along a Morton curve first (in the set-up time), ``"lattice"`` keeps the block's order.
     """
     t0 = time.perf_counter()
+    if order == "morton":
+        permutation = network.morton_order(centres)
+        centres, radii, temperature = centres[permutation], radii[permutation], temperature[permutation]
     dtype, force_dtype = VARIANTS[variant]
     floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "insulated")
     physics = simulate.Physics(law="batchelor_obrien", neck_model="hertz", conductance="lifted", contacts="dynamic",
@@ -253,6 +262,9 @@ def main():
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--dtypes", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument("--lammps", default=None)
+    parser.add_argument("--order", default="lattice", choices=("lattice", "morton"),
+                        help="sintercond's particle numbering (LAMMPS sorts its atoms spatially on its own); "
+                             "Morton order ran no faster than the lattice order (benchmarks/RESULTS.md)")
     parser.add_argument("--no-peers", action="store_true", help="sintercond only (e.g. on a GPU machine)")
     args = parser.parse_args()
     found = None if args.no_peers else lammps_executable(args.lammps)
@@ -265,7 +277,7 @@ def main():
         dt = None
         ours = {}
         for name in args.dtypes:
-            result = sintercond_run(centres, radii, temperature, args.steps, name, dt)
+            result = sintercond_run(centres, radii, temperature, args.steps, name, dt, args.order)
             dt = result[0]
             ours[name] = result
             _, setup, compile_s, run_s, kinetic, mean_t, realloc, (rebuilds, share, listed, touching) = result
@@ -291,8 +303,10 @@ def main():
         "same-regime check. Rebuilds: of the neighbour list in the timed steps, and the share of the timed steps "
         "that the rebuilds and the spring remap take (one rebuild timed alone, times the count). Pairs per "
         "particle: in the half pair list at the start of the timed steps (within r_i + r_j + skin) / touching. "
-        "The particles are in the block's lattice order (x-major), not re-sorted (LAMMPS sorts its atoms "
-        "spatially by default).\n\n"
+        + ("The particles are in the block's lattice order (x-major), not re-sorted (LAMMPS sorts its atoms "
+           "spatially by default; a Morton order ran no faster, see the notes).\n\n" if args.order == "lattice" else
+           "sintercond's particles renumbered in Morton order (`network.morton_order`, in the set-up time), as "
+           "LAMMPS sorts its atoms spatially on its own.\n\n")
         + markdown_table(("particles", "code", "particle-steps/s", "ms/step", "set-up + compile (s)",
                           "final kinetic energy (J)", "final mean T (K)", "reallocations",
                           "rebuilds (share of rebuild + remap in the steps)", "pairs per particle: listed / touching"),
