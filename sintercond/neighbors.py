@@ -531,7 +531,7 @@ class HalfPairs:
 
 
 def _kept_neighbors(idx, positions, radii, skin):
-    """``[n, m]`` rows of ``idx`` keeping ``j > i`` within ``r_i + r_j + skin`` (in the table's slots; ``n`` elsewhere)."""
+    """``[n, m]``: the ``j > i`` of ``idx`` within ``r_i + r_j + skin`` in their slots of the table, ``n`` elsewhere."""
     n = radii.shape[0]
     rows = jnp.arange(n, dtype=idx.dtype)[:, None]
     ahead = (idx < n) & (idx > rows)
@@ -632,7 +632,9 @@ def remap_half_pairs(old_pairs, new_pairs, values, fill=0):
     c_old = old_pairs.shape[0]
     oi, oj, ni, nj = old_pairs[:, 0], old_pairs[:, 1], new_pairs[:, 0], new_pairs[:, 1]
     if jax.config.jax_enable_x64:  # (i, j) as one int64 key i 2^32 + j (never overflows): one gather a step
-        key = lambda i, j: (i.astype(jnp.int64) << 32) | j.astype(jnp.int64)  # noqa: E731
+        def key(i, j):
+            return (i.astype(jnp.int64) << 32) | j.astype(jnp.int64)
+
         lo = jnp.searchsorted(key(oi, oj), key(ni, nj)).astype(jnp.int32)
     else:
         def bisect(_, bounds):
