@@ -110,12 +110,11 @@ def run(centres, radii, skin, steps, rate, law):
 
 def rebuild_costs(centres, radii, skin, repeats=5):
     """Seconds per list rebuild: ``{"sorted cell list", "jax-md Dense", "half list + remap"}`` (one process)."""
-    lo, hi = centres.min(axis=0), centres.max(axis=0)
-    margin = 0.5 * (hi - lo) + 2.0 * radii.max()  # simulate.dynamic_contacts' region
+    lo, hi = simulate.list_region(centres, radii)  # simulate.dynamic_contacts' region
     positions, r = jnp.asarray(centres), jnp.asarray(radii)
     runs, tables = {}, {}
     for name, make in (("sorted cell list", neighbors.neighbor_list), ("jax-md Dense", neighbors.jax_md_neighbor_list)):
-        fns = make(radii, skin, lo - margin, hi + margin, capacity_multiplier=1.5)
+        fns = make(radii, skin, lo, hi, capacity_multiplier=1.5)
         nbrs = fns.allocate(positions)
         stale = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
         run = jax.jit(fns.update).lower(positions, stale).compile()

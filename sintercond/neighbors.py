@@ -279,23 +279,25 @@ def _dense_rows(grid: _Grid, reach_sq, pos_box, slots, width):
     keep = keep.reshape(n, n_ranges * per_range, min(slots, 32))
     shift = jnp.arange(keep.shape[-1], dtype=jnp.uint32)
     bits = jnp.sum(keep.astype(jnp.uint32) << shift, axis=-1, dtype=jnp.uint32)  # [n, words]
-    count = jnp.sum(jax.lax.population_count(bits), axis=1, dtype=jnp.int32)
+    per_word = jax.lax.population_count(bits).astype(jnp.int32)
+    count = jnp.sum(per_word, axis=1, dtype=jnp.int32)
     most, crowded = jnp.max(count, initial=0), jnp.max(size, initial=0)
     if width is None:
         return None, most, crowded
-    column = jnp.arange(bits.shape[1], dtype=jnp.int32)[None, :]
-
-    def next_bit(bits, _):
-        """Each row's lowest set bit, cleared: the place of its particle in cell order (-1: none left)."""
-        first = jnp.argmax(bits != 0, axis=1).astype(jnp.int32)
-        word = jnp.take_along_axis(bits, first[:, None], axis=1)[:, 0]
-        bit = 31 - jax.lax.clz(word & (~word + jnp.uint32(1))).astype(jnp.int32)
-        at = jnp.take_along_axis(start, (first // per_range)[:, None], axis=1)[:, 0] + 32 * (first % per_range) + bit
-        return jnp.where(column == first[:, None], bits & (bits - jnp.uint32(1)), bits), jnp.where(word != 0, at, -1)
-
-    _, at = jax.lax.scan(next_bit, bits, None, length=width)
-    at = at.T  # [n, width]
-    idx = jnp.where(at >= 0, order[jnp.maximum(at, 0)], n)
+    # the k-th set bit of a row (k < width): in the word whose running popcount first exceeds k, the bit
+    # below which that word holds k - (the popcount of the words before) set bits; all by comparisons, no loop
+    upto = jnp.cumsum(per_word, axis=1)
+    k = jnp.arange(width, dtype=jnp.int32)[None, :, None]
+    word = jnp.sum(upto[:, None, :] <= k, axis=2, dtype=jnp.int32)  # [n, width]
+    found = word < bits.shape[1]
+    word = jnp.minimum(word, bits.shape[1] - 1)
+    below = jnp.take_along_axis(upto - per_word, word, axis=1)
+    value = jnp.take_along_axis(bits, word, axis=1)[:, :, None]
+    low = jnp.uint32(0xFFFFFFFF) >> (31 - shift)  # bits 0 .. b of a word
+    rank = (k[:, :, 0] - below)[:, :, None]
+    bit = jnp.sum(jax.lax.population_count(value & low).astype(jnp.int32) <= rank, axis=2, dtype=jnp.int32)
+    at = jnp.take_along_axis(start, word // per_range, axis=1) + 32 * (word % per_range) + bit
+    idx = jnp.where(found, order[jnp.where(found, at, 0)], n)
     row_of = jnp.zeros(n, jnp.int32).at[order].set(me)  # each particle's row in cell order
     return idx[row_of].astype(jnp.int32), most, crowded
 
@@ -529,7 +531,7 @@ class HalfPairs:
 
 
 def _kept_neighbors(idx, positions, radii, skin):
-    """``[n, m]`` rows of ``idx`` keeping ``j > i`` within ``r_i + r_j + skin`` (ascending; ``n`` after them)."""
+    """``[n, m]``: the ``j > i`` of ``idx`` within ``r_i + r_j + skin`` in their slots of the table, ``n`` elsewhere."""
     n = radii.shape[0]
     rows = jnp.arange(n, dtype=idx.dtype)[:, None]
     ahead = (idx < n) & (idx > rows)
@@ -539,7 +541,7 @@ def _kept_neighbors(idx, positions, radii, skin):
     # a pair beyond r_i + r_j + skin at the rebuild cannot touch before the next one
     reach = (radii[:, None] + radii[j] + skin) * (1.0 + CANDIDATE_MARGIN)
     keep = ahead & (jnp.sum(delta * delta, axis=-1) < reach * reach)
-    return jnp.sort(jnp.where(keep, idx, n), axis=1)
+    return jnp.where(keep, idx, n)
 
 
 def half_pairs(idx, positions, radii, skin, capacity, demand=0) -> HalfPairs:
@@ -564,14 +566,22 @@ def half_pairs(idx, positions, radii, skin, capacity, demand=0) -> HalfPairs:
       :class:`HalfPairs`; ``demand > capacity`` flags an overflow.
     """
     n, m = idx.shape
-    kept = _kept_neighbors(idx, positions, radii, skin)
-    real = kept < n
-    count = jnp.sum(real, dtype=jnp.int32)
-    flat = jnp.nonzero(real.ravel(), size=capacity, fill_value=n * m)[0].astype(idx.dtype)
-    inside = flat < n * m
-    i = jnp.where(inside, flat // max(m, 1), n)
-    j = jnp.where(inside, jnp.append(kept.ravel(), n)[flat], n)  # flat == n m: the appended padding
-    return HalfPairs(jnp.stack([i, j], axis=1).astype(jnp.int32), jnp.maximum(count, jnp.asarray(demand, jnp.int32)))
+    kept = jnp.sort(_kept_neighbors(idx, positions, radii, skin), axis=1)  # each row's pairs by j, then n
+    per_row = jnp.sum(kept < n, axis=1, dtype=jnp.int32)
+    count = jnp.sum(per_row, dtype=jnp.int32)
+    if m == 0:
+        return HalfPairs(jnp.full((capacity, 2), n, jnp.int32), jnp.maximum(count, jnp.asarray(demand, jnp.int32)))
+    # the rows laid end to end: place q holds row i's (q - first[i])-th pair, i the last row starting at or
+    # before q (first: an exclusive cumsum of the rows' counts; an empty row starts where the next one
+    # does), i.e. the rows starting at or before q, less one; gathers, no compaction of the [n m] slots
+    first = jnp.cumsum(per_row) - per_row
+    starts = jnp.zeros(capacity, jnp.int32).at[first].add(1, mode="drop")
+    i = jnp.clip(jnp.cumsum(starts) - 1, 0, n - 1)
+    place = jnp.arange(capacity, dtype=jnp.int32)
+    j = kept[i, jnp.clip(place - first[i], 0, m - 1)]
+    inside = place < count
+    pairs = jnp.stack([jnp.where(inside, i, n), jnp.where(inside, j, n)], axis=1).astype(jnp.int32)
+    return HalfPairs(pairs, jnp.maximum(count, jnp.asarray(demand, jnp.int32)))
 
 
 def half_pair_count(idx, positions, radii, skin) -> int:
@@ -604,8 +614,9 @@ def remap_half_pairs(old_pairs, new_pairs, values, fill=0):
     """Carry per-pair values from one half pair list to another by ``(i, j)`` identity (jit-able).
 
     Both lists sorted by ``(i, j)`` (:func:`half_pairs`): each new pair is
-    found by a lexicographic binary search in the old list
-    (``O(capacity log capacity)``, no integer key that could overflow);
+    found by a binary search in the old list (``O(capacity log capacity)``;
+    under x64 on the int64 key ``i 2^32 + j``, one gather a step, else
+    lexicographically on ``(i, j)``: no int32 key that could overflow);
     a pair absent from the old list, and padding (``i == j``), gets
     ``fill``. The lists may differ in capacity (a reallocation).
 
@@ -620,17 +631,22 @@ def remap_half_pairs(old_pairs, new_pairs, values, fill=0):
     old_pairs, new_pairs, values = jnp.asarray(old_pairs), jnp.asarray(new_pairs), jnp.asarray(values)
     c_old = old_pairs.shape[0]
     oi, oj, ni, nj = old_pairs[:, 0], old_pairs[:, 1], new_pairs[:, 0], new_pairs[:, 1]
+    if jax.config.jax_enable_x64:  # (i, j) as one int64 key i 2^32 + j (never overflows): one gather a step
+        def key(i, j):
+            return (i.astype(jnp.int64) << 32) | j.astype(jnp.int64)
 
-    def bisect(_, bounds):
-        lo, hi = bounds
-        mid = (lo + hi) // 2
-        at = jnp.minimum(mid, c_old - 1)
-        before = (oi[at] < ni) | ((oi[at] == ni) & (oj[at] < nj))
-        active = lo < hi
-        return jnp.where(active & before, mid + 1, lo), jnp.where(active & ~before, mid, hi)
+        lo = jnp.searchsorted(key(oi, oj), key(ni, nj)).astype(jnp.int32)
+    else:
+        def bisect(_, bounds):
+            lo, hi = bounds
+            mid = (lo + hi) // 2
+            at = jnp.minimum(mid, c_old - 1)
+            before = (oi[at] < ni) | ((oi[at] == ni) & (oj[at] < nj))
+            active = lo < hi
+            return jnp.where(active & before, mid + 1, lo), jnp.where(active & ~before, mid, hi)
 
-    lo = jnp.zeros(ni.shape, jnp.int32)
-    lo, _ = jax.lax.fori_loop(0, max(c_old, 1).bit_length() + 1, bisect, (lo, jnp.full_like(lo, c_old)))
+        lo = jnp.zeros(ni.shape, jnp.int32)
+        lo, _ = jax.lax.fori_loop(0, max(c_old, 1).bit_length() + 1, bisect, (lo, jnp.full_like(lo, c_old)))
     at = jnp.minimum(lo, max(c_old - 1, 0))
     found = (ni < nj) & (lo < c_old) & (oi[at] == ni) & (oj[at] == nj)
     found = found.reshape(found.shape + (1,) * (values.ndim - 1))

@@ -688,6 +688,19 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
     return contacts
 
 
+def list_region(positions, radii, margin=None):
+    """``(lo, hi)`` ``[3]`` corners (m) of the cell grid of :func:`dynamic_contacts`: the packing's extent
+    widened by ``margin`` (m, scalar or ``[3]``; default a tenth of the extent plus ``2 r_max`` on every side).
+
+    A particle that leaves the region is still found (it falls into the face cells), so the margin only
+    trades crowded face cells against empty ones: a rebuild's cell counts run over the whole region.
+    """
+    positions, radii = np.asarray(positions, np.float64), np.asarray(radii, np.float64)
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    margin = 0.1 * (hi - lo) + 2.0 * radii.max() if margin is None else margin
+    return lo - margin, hi + margin
+
+
 def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=None):
     """Contacts of ``contacts="dynamic"`` and their neighbour-list functions: ``(contacts, neighbor_fns)``.
 
@@ -695,8 +708,7 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
     inside the step it is rebuilt only once a particle moved ``skin / 2``,
     and the half pair list (``Contacts.pairs``, the pairs the laws run on)
     with it. Both are sized here with ``capacity_multiplier`` spare room.
-    The cell-list region is the packing's extent widened by ``margin`` (m;
-    default half the extent plus ``2 r_max`` on every side). Pass
+    The cell-list region is :func:`list_region` (the packing's extent widened by ``margin``, m). Pass
     ``neighbor_fns`` to :func:`simulator`. The list keeps the float dtype of
     ``positions`` (float32 positions give a float32 list; others float64).
     """
@@ -705,9 +717,7 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
     dtype = jnp.float32 if np.asarray(positions).dtype == np.float32 else jnp.float64
     positions = np.asarray(positions, np.float64)
     radii = np.asarray(radii, np.float64)
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
-    margin = 0.5 * (hi - lo) + 2.0 * radii.max() if margin is None else margin
-    fns = neighbor_list(radii, skin, lo - margin, hi + margin, capacity_multiplier=capacity_multiplier)
+    fns = neighbor_list(radii, skin, *list_region(positions, radii, margin), capacity_multiplier=capacity_multiplier)
     nbrs = fns.allocate(jnp.asarray(positions, dtype))
     half = allocate_half_pairs(nbrs.idx, jnp.asarray(positions, dtype), jnp.asarray(radii, dtype), fns.skin,
                                capacity_multiplier)
