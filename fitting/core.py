@@ -72,6 +72,8 @@ class FitResult:
       loss_history: loss per step (NaN after the stop).
       steps: optimiser steps taken.
       residual_std: ``s``, the residual standard deviation (weighted units).
+      converged: the optimiser stopped on its tolerance (``grad_tol`` or ``loss_tol``), not on
+        ``max_steps``; False means the fit may not be at the optimum (raise ``max_steps``).
     """
 
     params: dict
@@ -81,6 +83,7 @@ class FitResult:
     loss_history: np.ndarray
     steps: int
     residual_std: float
+    converged: bool = True
 
 
 def least_squares(model: Callable, x, y, params0: Mapping[str, float], transforms: Mapping | None = None,
@@ -153,7 +156,8 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
         covariance = s2 * np.linalg.inv(jtj)
     params = {n: float(theta[k]) for k, n in enumerate(names)}
     stderr = {n: float(np.sqrt(covariance[k, k])) for k, n in enumerate(names)}
-    return FitResult(params, stderr, covariance, names, np.asarray(history), int(steps), float(np.sqrt(s2)))
+    return FitResult(params, stderr, covariance, names, np.asarray(history), int(steps), float(np.sqrt(s2)),
+                     int(steps) < int(max_steps))
 
 
 def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method):

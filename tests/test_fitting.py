@@ -62,6 +62,12 @@ def test_nonlinear_fit_and_stopping():
     for k, v in truth.items():
         assert lm.params[k] == pytest.approx(v, rel=1e-9)
     assert lm.steps < 40  # against thousands of Adam steps
+    assert result.converged and lm.converged
+    capped = least_squares(model, x, y, {"amplitude": 1.0, "rate": 1.0, "offset": 0.0},
+                           {"amplitude": Positive(), "rate": Bounded(0.1, 10.0)}, method="levenberg_marquardt",
+                           max_steps=3, polish_steps=0)
+    assert capped.steps == 3 and not capped.converged  # stopped by the cap, far from the truth
+    assert abs(capped.params["rate"] - truth["rate"]) > 1e-3
     with pytest.raises(ValueError, match="method"):
         least_squares(model, x, y, {"rate": 1.0}, method="bfgs")
 
