@@ -303,12 +303,16 @@ def _value(name, value, key: Key):
     return value
 
 
-def _check_section(name, table, schema):
-    if not isinstance(table, dict):
-        raise SceneError(f"[{name}] must be a table of keys {sorted(schema)}; got {table!r}")
+def _check_keys(name, table, schema):
     for key in table:
         if key not in schema:
             raise SceneError(f"unknown key {name}.{key}{_suggest(key, schema)}; allowed keys: {sorted(schema)}")
+
+
+def _check_section(name, table, schema):
+    if not isinstance(table, dict):
+        raise SceneError(f"[{name}] must be a table of keys {sorted(schema)}; got {table!r}")
+    _check_keys(name, table, schema)
     out = {key: _value(f"{name}.{key}", table[key], spec) for key, spec in schema.items() if key in table}
     for key, spec in schema.items():
         if key not in table and spec.required:
@@ -338,6 +342,8 @@ def validate_scene(raw: dict) -> dict:
     packing = raw["packing"]
     kind = packing.get("kind") if isinstance(packing, dict) else None
     if kind not in _PACKING:
+        if isinstance(packing, dict):  # a misspelt key (kindx = ...) is named before the kind it hides
+            _check_keys("packing", packing, {key: None for schema in _PACKING.values() for key in schema})
         raise SceneError(f"packing.kind must be one of {sorted(_PACKING)}; got {kind!r}")
     scene["packing"] = _check_section("packing", packing, _PACKING[kind])
     walls = raw.get("walls", [])

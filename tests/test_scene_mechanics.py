@@ -150,6 +150,7 @@ def test_restitution_gives_the_tsuji_damping_ratio():
     (lambda s: s["packing"].update(radii=[1e-3, 1e-3]), r"packing\.radii must be a list of 5 numbers in \[1e-08, 1\]"),
     (lambda s: s["packing"].update(centres=[[0.0, 0.0]]), r"packing\.centres\[0\] must be a list of 3 numbers"),
     (lambda s: s["packing"].update(method="pour"), r"unknown key packing\.method"),  # listed spheres: no method
+    (lambda s: s["packing"].update(kindx=s["packing"].pop("kind")), r"unknown key packing\.kindx \(did you mean 'kind'\?\)"),
 ])
 def test_bad_mechanics_scenes_name_the_key(mutate, message):
     scene = copy.deepcopy(PILE)
