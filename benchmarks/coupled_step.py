@@ -3,7 +3,6 @@
 Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
                                          [--no-peers] [--dtypes float64 float32-forces float32]
                                          [--order lattice|morton] [--compare-orders REPEATS]
-                                         [--compare-incidence REPEATS]
 
 The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
 radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
@@ -66,7 +65,7 @@ import numpy as np
 from _common import markdown_table, write_section
 from peers_thermal import lammps_executable, loop_time
 
-from sintercond import mechanics, neighbors, network, simulate
+from sintercond import mechanics, network, simulate
 from sintercond.run import _compiled_chunk, advance
 from sintercond.scene import restitution_damping_ratio
 from sintercond.state import particle_state
@@ -214,52 +213,21 @@ def compare_orders(centres, radii, temperature, steps, repeats, variant="float64
     runs = {}
     for order in ("lattice", "morton"):
         sim, _, state, params, _ = sintercond_setup(centres, radii, temperature, variant, None, order)
-        runs[order] = _compiled_run(sim, state, params, steps)
-    back = np.argsort(network.morton_order(centres))
-    return _alternate(runs, steps, repeats), _differences(runs["lattice"][3], runs["morton"][3], back)
-
-
-def compare_incidence(centres, radii, temperature, steps, repeats, variant="float64"):
-    """Min ms/step (wall, process CPU) of the compiled chunk with and without the half list's incidence table.
-
-    ``scatter``: ``neighbors.INCIDENCE = False``, the pair gathers' reverse mode a scatter-add (the forward
-    is the same program but for the table's build at each rebuild); ``incidence``: the default. Also the
-    largest differences of the final positions, velocities and temperatures between the two.
-    """
-    runs = {}
-    try:
-        for name, flag in (("scatter", False), ("incidence", True)):
-            neighbors.INCIDENCE = flag  # read when the list is allocated and when the chunk is traced
-            sim, _, state, params, _ = sintercond_setup(centres, radii, temperature, variant)
-            runs[name] = _compiled_run(sim, state, params, steps)
-    finally:
-        neighbors.INCIDENCE = True
-    return _alternate(runs, steps, repeats), _differences(runs["scatter"][3], runs["incidence"][3])
-
-
-def _compiled_run(sim, state, params, steps):
-    """``(chunk, state, params, final state)``: the compiled chunk of ``steps`` steps, traced and run once."""
-    chunk = _compiled_chunk(sim, steps)  # traced by its first call, here
-    return chunk, state, params, jax.block_until_ready(chunk(state, params))
-
-
-def _alternate(runs, steps, repeats):
-    """``{(name, "wall" | "cpu"): min ms/step}`` of the compiled ``runs`` run one after the other ``repeats`` times."""
-    best = {(name, clock): np.inf for name in runs for clock in ("wall", "cpu")}
+        chunk = _compiled_chunk(sim, steps)
+        runs[order] = (chunk, state, params, jax.block_until_ready(chunk(state, params)))
+    best = {(order, clock): np.inf for order in runs for clock in ("wall", "cpu")}
     for _ in range(repeats):
-        for name, (chunk, state, params, _) in runs.items():
+        for order, (chunk, state, params, _) in runs.items():
             wall, cpu = time.perf_counter(), time.process_time()
             jax.block_until_ready(chunk(state, params))
-            best[name, "wall"] = min(best[name, "wall"], time.perf_counter() - wall)
-            best[name, "cpu"] = min(best[name, "cpu"], time.process_time() - cpu)
-    return {key: 1e3 * value / steps for key, value in best.items()}
-
-
-def _differences(a, b, back=slice(None)):
-    """Largest differences of final positions (m), velocities (m/s), temperatures (K); ``b`` renumbered by ``back``."""
-    return [float(np.max(np.abs(np.asarray(x) - np.asarray(y)[back]))) for x, y in (
+            best[order, "wall"] = min(best[order, "wall"], time.perf_counter() - wall)
+            best[order, "cpu"] = min(best[order, "cpu"], time.process_time() - cpu)
+    back = np.argsort(network.morton_order(centres))
+    a, b = runs["lattice"][3], runs["morton"][3]
+    differences = [float(np.max(np.abs(np.asarray(x) - np.asarray(y)[back]))) for x, y in (
         (a.particles.positions, b.particles.positions), (a.mechanics.velocity, b.mechanics.velocity),
         (a.particles.temperature, b.particles.temperature))]
+    return {key: 1e3 * value / steps for key, value in best.items()}, differences
 
 
 def write_data(path, centres, radii):
@@ -336,18 +304,7 @@ def main():
     parser.add_argument("--compare-orders", type=int, default=0, metavar="REPEATS",
                         help="only time lattice against Morton order (float64, alternating, min of REPEATS); "
                              "prints, writes nothing")
-    parser.add_argument("--compare-incidence", type=int, default=0, metavar="REPEATS",
-                        help="only time the step without and with the half list's incidence table (float64, "
-                             "alternating, min of REPEATS); prints, writes nothing")
     args = parser.parse_args()
-    if args.compare_incidence:
-        for n in args.sizes:
-            centres, radii, temperature = block(n)
-            best, differences = compare_incidence(centres, radii, temperature, args.steps, args.compare_incidence)
-            print(f"{len(radii):,} spheres, {args.steps} steps: ms/step (wall, CPU) " + ", ".join(
-                f"{name} {best[name, 'wall']:.2f}, {best[name, 'cpu']:.2f}" for name in ("scatter", "incidence"))
-                + "; max differences: positions %.2g m, velocities %.2g m/s, temperatures %.2g K" % tuple(differences))
-        return
     if args.compare_orders:
         for n in args.sizes:
             centres, radii, temperature = block(n)

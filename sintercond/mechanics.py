@@ -50,7 +50,7 @@ import jax.numpy as jnp
 
 from sintercond import forces
 from sintercond.materials import softened_modulus
-from sintercond.neighbors import HalfPairs, pair_gather, pair_sum, remap_half_pairs
+from sintercond.neighbors import HalfPairs, pair_sum, remap_half_pairs
 from sintercond.state import pytree_dataclass
 
 
@@ -164,10 +164,7 @@ class PairGeometry(NamedTuple):
     ``j``: its ends, padding replaced by particle 0 (safe to gather);
     ``valid`` (a real pair); ``touching`` (overlap > 0); ``normal``
     ``[c, 3]`` unit vector from ``i`` to ``j`` (``e_z`` for padding);
-    ``overlap`` (m, 0 where not touching); ``incidence``: the list's
-    :func:`sintercond.neighbors.pair_incidence` table, whose
-    :func:`sintercond.neighbors.incidence_sum` is the reverse mode of the
-    pair gathers (:meth:`gather`; None: JAX's scatter-add).
+    ``overlap`` (m, 0 where not touching).
     """
 
     pairs: Any
@@ -177,32 +174,22 @@ class PairGeometry(NamedTuple):
     touching: Any
     normal: Any
     overlap: Any
-    incidence: Any = None
-
-    def gather(self, values):
-        """``(values[i], values[j])`` of per-particle ``values`` ``[n, ...]`` (:func:`neighbors.pair_gather`)."""
-        return pair_gather(values, self.pairs, self.incidence)
 
 
-def pair_geometry(positions, radii, pairs, incidence=None) -> PairGeometry:
-    """Overlaps ``delta = r_i + r_j - |x_j - x_i|`` (Eq. 4) and normals (Eq. 5) of every pair of a half list ``[c, 2]``.
-
-    ``incidence``: the list's ``HalfPairs.incidence``, for gathers whose reverse mode has no scatter.
-    """
+def pair_geometry(positions, radii, pairs) -> PairGeometry:
+    """Overlaps ``delta = r_i + r_j - |x_j - x_i|`` (Eq. 4) and normals (Eq. 5) of every pair of a half list ``[c, 2]``."""
     valid = pairs[:, 0] < pairs[:, 1]
     i, j = jnp.where(valid, pairs[:, 0], 0), jnp.where(valid, pairs[:, 1], 0)
-    x_i, x_j = pair_gather(positions, pairs, incidence)
-    r_i, r_j = pair_gather(radii, pairs, incidence)
-    delta = x_j - x_i
+    delta = positions[j] - positions[i]
     distance_sq = jnp.sum(delta * delta, axis=-1)
-    contact_range = (r_i + r_j) ** 2
+    contact_range = (radii[i] + radii[j]) ** 2
     touching = valid & (distance_sq < contact_range)
     apart = valid & (distance_sq > 0)
     distance = jnp.sqrt(jnp.where(apart, distance_sq, contact_range))
-    overlap = jnp.where(touching, r_i + r_j - distance, 0.0)
+    overlap = jnp.where(touching, radii[i] + radii[j] - distance, 0.0)
     e_z = jnp.zeros_like(delta).at[..., 2].set(1.0)
     normal = jnp.where(apart[..., None], delta / distance[..., None], e_z)
-    return PairGeometry(pairs, i, j, valid, touching, normal, overlap, incidence)
+    return PairGeometry(pairs, i, j, valid, touching, normal, overlap)
 
 
 def wall_penetration(walls, positions, radii, t):
@@ -289,12 +276,11 @@ def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, pos
     radii_f, mass_f, modulus, nu = cast(radii), cast(mass), cast(modulus), cast(nu)
     n = radii.shape[0]
     v, omega = cast(state.velocity), cast(state.spin)
-    gather = geometry.gather
-    (r_i, r_j), (m_i, m_j), (e_i, e_j), (nu_i, nu_j) = gather(radii_f), gather(mass_f), gather(modulus), gather(nu)
-    (v_i, v_j), (omega_i, omega_j) = gather(v), gather(omega)
+    i, j = geometry.i, geometry.j
     f, t_i, t_j, spring, rolling, _ = _contact_laws(
-        physics, params, dt, cast(geometry.normal), cast(geometry.overlap), r_i, r_j, m_i, m_j, e_i, nu_i, e_j, nu_j,
-        v_i, v_j, omega_i, omega_j, r_j, state.spring, state.rolling, params.mu, params.mu_r)
+        physics, params, dt, cast(geometry.normal), cast(geometry.overlap), radii_f[i], radii_f[j], mass_f[i],
+        mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], state.spring,
+        state.rolling, params.mu, params.mu_r)
     # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
     f, t_i, t_j = f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype)
     force = pair_sum(f, -f, geometry.pairs, n)

@@ -55,15 +55,8 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.custom_derivatives import linear_call
 
-import sintercond._symmetric  # noqa: F401  (registers linear_call's batching rule)
 from sintercond.state import pytree_dataclass
-
-INCIDENCE = True
-"""Whether :func:`half_pairs` builds the incidence table (:func:`pair_incidence`) that makes the pair sums and
-gathers scatter-free, forward and reverse; False restores JAX's scatters (read at trace time: for benchmarks and
-tests comparing the two)."""
 
 CANDIDATE_MARGIN = 1e-6
 """Relative margin on the contact range ``2 r_max`` of :func:`neighbor_list`:
@@ -527,14 +520,10 @@ class HalfPairs:
       demand: int32 scalar, the most pairs any build since the allocation
         kept; above ``capacity`` the list overflowed (pairs were dropped):
         :func:`half_pairs_overflowed`, and the host reallocates from it.
-      incidence: ``[n, m]`` int32, the pairs of each particle
-        (:func:`pair_incidence`), ``m`` the Dense table's width; None for a
-        list built without one (the sums then scatter).
     """
 
     pairs: Any
     demand: Any
-    incidence: Any = None
 
     @property
     def capacity(self) -> int:
@@ -581,8 +570,7 @@ def half_pairs(idx, positions, radii, skin, capacity, demand=0) -> HalfPairs:
     per_row = jnp.sum(kept < n, axis=1, dtype=jnp.int32)
     count = jnp.sum(per_row, dtype=jnp.int32)
     if m == 0:
-        return HalfPairs(jnp.full((capacity, 2), n, jnp.int32), jnp.maximum(count, jnp.asarray(demand, jnp.int32)),
-                         jnp.full((n, 0), -1, jnp.int32) if INCIDENCE else None)
+        return HalfPairs(jnp.full((capacity, 2), n, jnp.int32), jnp.maximum(count, jnp.asarray(demand, jnp.int32)))
     # the rows laid end to end: place q holds row i's (q - first[i])-th pair, i the last row starting at or
     # before q (first: an exclusive cumsum of the rows' counts; an empty row starts where the next one
     # does), i.e. the rows starting at or before q, less one; gathers, no compaction of the [n m] slots
@@ -593,8 +581,7 @@ def half_pairs(idx, positions, radii, skin, capacity, demand=0) -> HalfPairs:
     j = kept[i, jnp.clip(place - first[i], 0, m - 1)]
     inside = place < count
     pairs = jnp.stack([jnp.where(inside, i, n), jnp.where(inside, j, n)], axis=1).astype(jnp.int32)
-    return HalfPairs(pairs, jnp.maximum(count, jnp.asarray(demand, jnp.int32)),
-                     pair_incidence(pairs, n, m) if INCIDENCE else None)
+    return HalfPairs(pairs, jnp.maximum(count, jnp.asarray(demand, jnp.int32)))
 
 
 def half_pair_count(idx, positions, radii, skin) -> int:
@@ -614,23 +601,13 @@ def half_pairs_overflowed(half: HalfPairs):
     return half.demand > half.capacity
 
 
-def padded_half_pairs(half: HalfPairs, capacity: int, n: int, width: int | None = None) -> HalfPairs:
-    """``half`` with room for ``capacity`` pairs (>= its own): padding ``(n, n)`` appended (host).
-
-    Its incidence table keeps its values (they do not depend on the
-    capacity), widened to ``width`` slots (a reallocated Dense table's ``m``;
-    None: as it is) with padding ``-1``.
-    """
+def padded_half_pairs(half: HalfPairs, capacity: int, n: int) -> HalfPairs:
+    """``half`` with room for ``capacity`` pairs (>= its own): padding ``(n, n)`` appended (host)."""
     extra = capacity - half.capacity
     if extra < 0:
         raise ValueError(f"capacity {capacity} is below the list's {half.capacity}")
     pad = jnp.full((extra, 2), n, half.pairs.dtype)
-    incidence = half.incidence
-    if incidence is not None and width is not None:
-        if width < incidence.shape[1]:
-            raise ValueError(f"width {width} is below the incidence table's {incidence.shape[1]}")
-        incidence = jnp.pad(incidence, ((0, 0), (0, width - incidence.shape[1])), constant_values=-1)
-    return HalfPairs(jnp.concatenate([half.pairs, pad]), half.demand, incidence)
+    return HalfPairs(jnp.concatenate([half.pairs, pad]), half.demand)
 
 
 def remap_half_pairs(old_pairs, new_pairs, values, fill=0):
@@ -676,102 +653,13 @@ def remap_half_pairs(old_pairs, new_pairs, values, fill=0):
     return jnp.where(found, values[at], jnp.asarray(fill, values.dtype))
 
 
-def pair_incidence(pairs, n, width):
-    """``[n, width]`` int32: the slots of every particle's pairs in a sorted half list (jit-able; with the list).
-
-    Row ``p`` holds ``2 k`` for each pair ``k = (p, j)`` (``p`` its first
-    end), by ``j``, then ``2 k + 1`` for each pair ``k = (i, p)``, by ``i``,
-    then padding ``-1``. The values do not depend on the list's capacity (a
-    padded list keeps its table), and neither does the order of a row. With
-    ``width`` the Dense table's ``m`` a row never overflows: the pairs of
-    ``p`` are partners on the Dense row of ``p`` (the table is symmetric), so
-    only a table that overflowed itself (:func:`did_buffer_overflow`, the
-    chunk redone) can have more; those are cut.
-
-    Args:
-      pairs: ``[c, 2]`` int32 ``(i, j)``, ``i < j``, sorted by ``(i, j)``, padding ``(n, n)`` at the end.
-      n: particles (static). width: slots per particle (static).
-    """
-    c = pairs.shape[0]
-    if c == 0 or width == 0:
-        return jnp.full((n, width), -1, jnp.int32)
-    particle = jnp.arange(n, dtype=jnp.int32)
-    first, second = pairs[:, 0].astype(jnp.int32), pairs[:, 1].astype(jnp.int32)
-    start_i = jnp.searchsorted(first, particle, side="left").astype(jnp.int32)
-    count_i = jnp.searchsorted(first, particle, side="right").astype(jnp.int32) - start_i
-    by_j = _cell_order(second)  # pairs by j, ties (the same j) by index, i.e. by i
-    sorted_j = second[by_j]
-    start_j = jnp.searchsorted(sorted_j, particle, side="left").astype(jnp.int32)
-    count_j = jnp.searchsorted(sorted_j, particle, side="right").astype(jnp.int32) - start_j
-    k = jnp.arange(width, dtype=jnp.int32)[None, :]
-    as_j = k - count_i[:, None]
-    slot_j = by_j[jnp.clip(start_j[:, None] + as_j, 0, c - 1)]
-    return jnp.where(k < count_i[:, None], 2 * (start_i[:, None] + k),
-                     jnp.where((as_j >= 0) & (as_j < count_j[:, None]), 2 * slot_j + 1, -1)).astype(jnp.int32)
-
-
-def _pair_ends(pairs):
-    """``(i, j)`` of a half list: its ends, padding (``i >= j``) replaced by particle 0 (safe to gather)."""
-    valid = pairs[:, 0] < pairs[:, 1]
-    return jnp.where(valid, pairs[:, 0], 0), jnp.where(valid, pairs[:, 1], 0)
-
-
-def incidence_sum(incidence, on_i, on_j):
-    """``[n, ...]``: per-pair values ``[c, ...]`` summed onto the particles by gathers, without a scatter.
-
-    Particle ``p`` adds, in its row's order of ``incidence``
-    (:func:`pair_incidence`), ``on_i[k]`` of each pair ``k = (p, j)``,
-    then ``on_j[k]`` of each pair ``k = (i, p)``: the order in which
-    :func:`pair_sum` scatters them, so the sums are the same bitwise.
-    One gather per slot and end, added slot after slot: XLA fuses them
-    into one loop over the particles (a gather feeding a reduce over the
-    slots ran tens of times slower on the CPU, and a table of both ends
-    would be written first). The reverse mode of :func:`pair_gather`.
-    """
-    n, width = incidence.shape
-    dtype = jnp.result_type(on_i, on_j)
-    total = jnp.zeros((n,) + on_i.shape[1:], dtype)
-    if on_i.shape[0] == 0:
-        return total
-    trailing = (slice(None),) + (None,) * (on_i.ndim - 1)
-    on_i, on_j, zero = on_i.astype(dtype), on_j.astype(dtype), jnp.zeros((), dtype)
-    for k in range(width):
-        slot = incidence[:, k]
-        pair = jnp.maximum(slot >> 1, 0)  # padding reads pair 0, then drops it
-        real, as_j = (slot >= 0)[trailing], ((slot & 1) == 1)[trailing]
-        at_i = on_i.at[pair].get(mode="promise_in_bounds")
-        at_j = on_j.at[pair].get(mode="promise_in_bounds")
-        total = total + jnp.where(real, jnp.where(as_j, at_j, at_i), zero)
-    return total
-
-
-def pair_gather(values, pairs, incidence=None):
-    """``(values[i], values[j])`` ``[c, ...]`` per pair of a half list ``[c, 2]`` (padding reads particle 0).
-
-    JAX's reverse mode of a gather is a scatter-add (on the CPU a serial
-    loop XLA does not fuse); with the list's ``incidence``
-    (:func:`pair_incidence`) the reverse mode is :func:`incidence_sum`
-    instead (``jax.custom_derivatives.linear_call``, so forward mode and
-    ``vmap`` work too). The cotangents of padding pairs are dropped: every
-    law masks padding with its ``valid`` pairs, so they are zero.
-    ``values``: ``[n, ...]``.
-    """
-    i, j = _pair_ends(pairs)
-    if incidence is None:
-        return values[i], values[j]
-    return linear_call(lambda res, x: (x[res[0]], x[res[1]]), lambda res, ct: incidence_sum(res[2], *ct),
-                       (i, j, incidence), values)
-
-
 def pair_sum(on_i, on_j, pairs, n):
     """``[n, ...]``: per-pair values scattered to both ends, ``on_i`` to ``pairs[:, 0]``, ``on_j`` to ``pairs[:, 1]``.
 
     With ``on_j = -on_i`` (a force, a heat flow) the total is zero to
     round-off by construction. Padding pairs (index ``n``) are dropped.
     The additions run in pair order, so sorted lists give sums independent
-    of the capacity. Its reverse mode is a gather. (:func:`incidence_sum`
-    gives the same sums without a scatter, but in the coupled step it ran
-    a few per cent slower: benchmarks/RESULTS.md, "Scatter-free pairs".)
+    of the capacity.
     """
     out = jnp.zeros((n,) + on_i.shape[1:], jnp.result_type(on_i, on_j))
     return out.at[pairs[:, 0]].add(on_i, mode="drop").at[pairs[:, 1]].add(on_j, mode="drop")

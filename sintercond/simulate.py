@@ -72,7 +72,7 @@ from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState
 from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import (HalfPairs, allocate_half_pairs, did_buffer_overflow, did_rebuild, half_pair_count,
-                                  half_pairs, half_pairs_overflowed, pair_gather, pair_sum, padded_half_pairs)
+                                  half_pairs, half_pairs_overflowed, pair_sum, padded_half_pairs)
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -439,19 +439,17 @@ def pair_conductance(physics: Physics, radii, material, geometry, conductivity, 
 
 def _pair_neck(physics, radii, g):
     """Neck radii ``[c]`` (m) of the touching pairs of a :class:`sintercond.mechanics.PairGeometry`."""
-    return jnp.where(g.touching, NECK_MODELS[physics.neck](*g.gather(radii), g.overlap), 0.0)
+    return jnp.where(g.touching, NECK_MODELS[physics.neck](radii[g.i], radii[g.j], g.overlap), 0.0)
 
 
-def pair_heat_power(conductance, pairs, temperature, incidence=None):
+def pair_heat_power(conductance, pairs, temperature):
     """Heat power ``[n]`` (W) into each particle through the pairs ``[c, 2]`` of a half list, ``K (T_j - T_i)`` into ``i``.
 
     Each pair's flow is added to one end and taken from the other: the total is zero to round-off.
-    ``incidence``: the list's ``HalfPairs.incidence`` (the temperature gathers' reverse mode then has no
-    scatter, :func:`sintercond.neighbors.pair_gather`), or None.
     """
     n = temperature.shape[0]
-    t_i, t_j = pair_gather(temperature, pairs, incidence)  # padding conducts nothing (K = 0)
-    q = conductance * (t_j - t_i)
+    i, j = jnp.minimum(pairs[:, 0], n - 1), jnp.minimum(pairs[:, 1], n - 1)
+    q = conductance * (temperature[j] - temperature[i])
     return pair_sum(q, -q, pairs, n)
 
 
@@ -516,11 +514,11 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
     def conduction_power(state: SimState, prep: Prepared, temperature, conductance, neighbors):
         """Heat into each particle through the contacts (None: walls only) and conducting walls (W).
 
-        Dynamic contacts: a half pair list (:class:`HalfPairs`) and its conductances ``[c]``; static: the table.
+        Dynamic contacts: a half pair list ``[c, 2]`` and its conductances ``[c]``; static: the table.
         """
         power = jnp.zeros_like(temperature)
         if conductance is not None and physics.contacts == "dynamic":
-            power = pair_heat_power(conductance, neighbors.pairs, temperature, neighbors.incidence)
+            power = pair_heat_power(conductance, neighbors, temperature)
         elif conductance is not None:
             power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
         if physics.conducting_walls:
@@ -528,7 +526,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         return power
 
     def current_network(state: SimState, prep: Prepared):
-        """``(state, conductance, neighbors)`` at this step: static tables, or the dynamic list updated (HalfPairs)."""
+        """``(state, conductance, neighbors)`` at this step: static tables, or the dynamic list updated."""
         if physics.contacts == "static":
             return state, prep.conductance, state.contacts.neighbors
         particles, contacts = state.particles, state.contacts
@@ -536,13 +534,12 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             positions = physics.motion(state.time).astype(particles.positions.dtype)
             particles = dataclasses.replace(particles, positions=positions)
         contacts, _, overflow = follow_contacts(neighbor_fn, particles.positions, particles.radii, contacts)
-        geometry = mechanics.pair_geometry(particles.positions, particles.radii, contacts.pairs.pairs,
-                                           contacts.pairs.incidence)
+        geometry = mechanics.pair_geometry(particles.positions, particles.radii, contacts.pairs.pairs)
         kappa = jnp.atleast_1d(jnp.asarray(prep.params.conductivity))
         conductance = pair_conductance(physics, particles.radii, particles.material, geometry, kappa,
                                        merged_law_params(physics, prep.params))
         state = dataclasses.replace(state, particles=particles, overflow=state.overflow | overflow, contacts=contacts)
-        return state, conductance, contacts.pairs
+        return state, conductance, contacts.pairs.pairs
 
     def heat_power_fn(state: SimState, prep: Prepared, conductance=None, neighbors=None):
         """Heat power into every particle (W): conduction, walls and sources at the state's time."""
@@ -559,7 +556,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         positions, radii, mass, t = particles.positions, particles.radii, particles.mass, state.time
         contacts, motion, overflow = follow_contacts(neighbor_fn, positions, radii, contacts, state.mechanics)
         state = dataclasses.replace(state, overflow=state.overflow | overflow, contacts=contacts)
-        geometry = mechanics.pair_geometry(positions, radii, contacts.pairs.pairs, contacts.pairs.incidence)
+        geometry = mechanics.pair_geometry(positions, radii, contacts.pairs.pairs)
         modulus = mechanics.particle_modulus(physics, mp, particles.temperature, particles.material)
         nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, positions.dtype))[particles.material], radii.shape)
         loads = mechanics.contact_loads(physics, mp, geometry, positions, radii, mass, modulus, nu, motion, t,
@@ -568,7 +565,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
         law_params = merged_law_params(physics, params)
         conductance = pair_conductance(physics, radii, particles.material, geometry, kappa, law_params)
-        power = pair_heat_power(conductance, geometry.pairs, particles.temperature, geometry.incidence)
+        power = pair_heat_power(conductance, geometry.pairs, particles.temperature)
         for w, wall in enumerate(physics.walls):
             if wall.mode == "conducting":
                 h = loads.wall_penetration[w]
@@ -732,8 +729,7 @@ def reallocate_neighbors(neighbor_fns):
 
     The Dense list is allocated at the chunk's end positions, with room for
     the most neighbours and cell-range particles any build of the chunk met
-    (never narrower than before), and the half pair list's incidence table
-    widened to its rows; the half pair list grows to
+    (never narrower than before); the half pair list grows to
     ``capacity_multiplier`` times the most pairs any build of the chunk
     needed (or the end positions need), if it overflowed. The redone chunk
     starts from ``start``: its pairs and springs are kept (padded to the new
@@ -755,7 +751,7 @@ def reallocate_neighbors(neighbor_fns):
             capacity = max(capacity + 1, int(math.ceil(neighbor_fns.capacity_multiplier * need)))
         n = start.particles.radii.shape[0]
         contacts = dataclasses.replace(start.contacts, neighbor_list=nbrs, neighbors=nbrs.idx,
-                                       pairs=padded_half_pairs(half, capacity, n, nbrs.idx.shape[1]))
+                                       pairs=padded_half_pairs(half, capacity, n))
         motion = start.mechanics
         if motion is not None and capacity > half.capacity:  # the springs stay with their pairs, zeros after them
             pad = lambda x: None if x is None else jnp.concatenate(  # noqa: E731

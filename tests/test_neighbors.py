@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from jax.test_util import check_grads
 
 from sintercond import geometry, network, neighbors
 
@@ -316,21 +315,7 @@ def size_aware_pairs(positions, radii, skin):
     return list(zip(i.tolist(), j.tolist()))
 
 
-def incidence_by_dictionary(pairs, n, width):
-    """Each particle's pair slots from a Python dictionary: ``2 k`` for its pairs ``k = (p, j)`` by ``j``, then
-    ``2 k + 1`` for its pairs ``k = (i, p)`` by ``i``, then ``-1``."""
-    as_i, as_j = {p: [] for p in range(n)}, {p: [] for p in range(n)}
-    for k, (a, b) in enumerate(pairs.tolist()):
-        if a < b:
-            as_i[a].append((b, 2 * k))
-            as_j[b].append((a, 2 * k + 1))
-    rows = [[s for _, s in sorted(as_i[p])] + [s for _, s in sorted(as_j[p])] for p in range(n)]
-    assert max(map(len, rows)) <= width
-    return np.array([r + [-1] * (width - len(r)) for r in rows], np.int32)
-
-
 def test_half_pairs_are_the_size_aware_brute_force_pairs_sorted():
-    """The kept pairs against brute force, sorted; their incidence table against a per-particle dictionary."""
     centres, radii = random_packing(300, seed=9, polydispersity=0.8)  # polydisperse: far fewer than 2 r_max + skin
     skin = 0.15
     fns = free_list(radii, centres, skin)
@@ -348,14 +333,6 @@ def test_half_pairs_are_the_size_aware_brute_force_pairs_sorted():
     tight = jax.jit(neighbors.half_pairs, static_argnums=(3, 4))(nbrs.idx, centres, radii, skin, 50)
     assert bool(neighbors.half_pairs_overflowed(tight)) and int(tight.demand) == len(expected)
     assert [tuple(p) for p in np.asarray(tight.pairs).tolist()] == expected[:50]
-    # the incidence tables: each particle's pairs, as a dictionary lists them, in the Dense table's width; the
-    # list that overflowed lists only the pairs it kept; a padded list keeps its table, widened
-    n, m = nbrs.idx.shape
-    assert half.incidence.shape == (n, m) and half.incidence.dtype == jnp.int32
-    np.testing.assert_array_equal(half.incidence, incidence_by_dictionary(pairs, n, m))
-    np.testing.assert_array_equal(tight.incidence, incidence_by_dictionary(np.asarray(tight.pairs), n, m))
-    padded = neighbors.padded_half_pairs(half, half.capacity + 9, n, m + 2)
-    np.testing.assert_array_equal(padded.incidence, incidence_by_dictionary(np.asarray(padded.pairs), n, m + 2))
 
 
 def test_remap_half_pairs_follows_pairs_by_identity():
@@ -396,59 +373,3 @@ def test_pair_sum_conserves_to_round_off():
             expected[a] += v
             expected[b] -= v
     np.testing.assert_allclose(total, expected, rtol=1e-12, atol=1e-12 * np.max(np.abs(f)))
-
-
-incidence_table = jax.jit(neighbors.pair_incidence, static_argnums=(1, 2))
-
-
-def _random_half_list(n, rng, extra_padding=7, draws=300):
-    pairs = np.array(sorted({tuple(sorted(rng.choice(n, 2, replace=False))) for _ in range(draws)}), np.int32)
-    return np.concatenate([pairs, np.full((extra_padding, 2), n, np.int32)])
-
-
-def test_incidence_sum_is_pair_sum_bitwise_and_conserves():
-    rng = np.random.default_rng(5)
-    n = 50
-    pairs = _random_half_list(n, rng)
-    width = int(np.max(np.bincount(pairs[pairs[:, 0] < n].ravel()))) + 1  # one padding slot
-    incidence = incidence_table(jnp.asarray(pairs), n, width)
-    f = rng.normal(size=(len(pairs), 3)) * 10.0 ** rng.uniform(-3, 3, (len(pairs), 1))
-    g = rng.normal(size=(len(pairs), 3))
-    summed = jax.jit(neighbors.incidence_sum)
-    flows = np.asarray(summed(incidence, f, -f))
-    np.testing.assert_array_equal(flows, neighbors.pair_sum(jnp.asarray(f), -jnp.asarray(f), pairs, n))  # same order
-    assert np.max(np.abs(flows.sum(axis=0))) < 1e-13 * np.max(np.abs(f))  # momentum to round-off
-    np.testing.assert_array_equal(summed(incidence, f, g), neighbors.pair_sum(jnp.asarray(f), jnp.asarray(g), pairs, n))
-    # the capacity changes nothing: more padding, the same table and sums
-    more = np.concatenate([pairs, np.full((30, 2), n, np.int32)])
-    np.testing.assert_array_equal(incidence_table(jnp.asarray(more), n, width), incidence)
-    np.testing.assert_array_equal(summed(incidence, np.concatenate([f, np.ones((30, 3))]),
-                                         np.concatenate([-f, np.ones((30, 3))])), flows)
-    scalar = rng.normal(size=len(pairs))
-    np.testing.assert_array_equal(summed(incidence, scalar, -scalar),
-                                  neighbors.pair_sum(jnp.asarray(scalar), -jnp.asarray(scalar), pairs, n))
-
-
-def test_pair_gather_derivatives_are_jax_own_without_a_scatter():
-    """pair_gather with the incidence table: value, reverse mode (incidence_sum), forward mode and vmap equal
-    the plain gather's (JAX's scatter-add), padding masked as the laws mask it; no scatter is compiled."""
-    rng = np.random.default_rng(8)
-    n = 30
-    pairs = _random_half_list(n, rng, extra_padding=4, draws=60)
-    valid = jnp.asarray(pairs[:, 0] < pairs[:, 1])
-    incidence = incidence_table(jnp.asarray(pairs), n, int(np.max(np.bincount(pairs[pairs[:, 0] < n].ravel()))))
-    x = jnp.asarray(rng.normal(size=(n, 3)))
-
-    @jax.jit
-    def loss(x, incidence):
-        a, b = neighbors.pair_gather(x, pairs, incidence)
-        return jnp.sum(jnp.where(valid[:, None], jnp.sin(a) * b ** 2, 0.0))
-
-    ours = jax.jit(jax.grad(loss))
-    np.testing.assert_allclose(ours(x, incidence), jax.grad(loss)(x, None), rtol=1e-13, atol=1e-13)
-    assert "stablehlo.scatter" not in ours.lower(x, incidence).as_text()
-    assert "stablehlo.scatter" in jax.jit(jax.grad(loss)).lower(x, None).as_text()  # JAX's own transpose
-    check_grads(lambda x: loss(x, incidence), (x,), order=1, modes=("fwd", "rev"))
-    batch = jnp.stack([x, 2.0 * x])
-    np.testing.assert_allclose(jax.vmap(jax.grad(loss), (0, None))(batch, incidence),
-                               jax.vmap(jax.grad(loss), (0, None))(batch, None), rtol=1e-13, atol=1e-13)
