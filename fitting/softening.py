@@ -95,9 +95,10 @@ class SofteningExperiment:
         (:func:`sintercond.simulate.rollout`'s ``step_checkpoint``). The
         coupled step has hundreds of small intermediates per step: storing
         them (one write each per step, then a read) costs more than
-        running the step once more, so the gradient is ~1.4x faster on a
-        62-sphere bed (benchmarks/RESULTS.md, softening_gradient). The same
-        numbers either way (round-off); forward mode is unaffected.
+        running the step once more: the gradient is 1.4x faster on a
+        62-sphere bed at 1e3-1e4 steps and 2x at 1e5 (benchmarks/RESULTS.md,
+        softening gradient). The same numbers either way (round-off);
+        forward mode is unaffected.
     """
 
     sim: simulate.Simulator
