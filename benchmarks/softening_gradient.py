@@ -11,9 +11,11 @@ Variants, each in its own process so that its peak memory is its own:
 
 * forward: the readings alone (jit).
 * gradient checkpointed: value and d/d(log E0, log theta*, log rate) by JAX's reverse
-  mode through `sintercond.simulate.rollout` (jax.checkpoint around segments of
-  ~sqrt(steps) steps, each recomputed once on the way back).
-* gradient plain: the same without checkpoints (every step's residuals kept): compiled
+  mode through `sintercond.simulate.rollout` as the experiment runs it (jax.checkpoint
+  around segments of ~sqrt(steps) steps, each recomputed once on the way back, and
+  around every step: `SofteningExperiment.step_checkpoint`, the states of a segment
+  kept and each step run once more on the way back instead of storing its intermediates).
+* gradient plain: no checkpoints at all (every step's intermediates kept): compiled
   for XLA's memory estimate, run only below --max-gb.
 
 All compiled with ``mechanics.COMPILER_OPTIONS`` (as ``run.advance`` compiles a mechanical chunk).
@@ -28,6 +30,7 @@ Prints the tables and rewrites its section of benchmarks/RESULTS.md.
 """
 
 import argparse
+import dataclasses
 import json
 import pathlib
 import pickle
@@ -70,11 +73,13 @@ def run_one(path, variant, steps, max_gb):
     import jax
     import jax.numpy as jnp
 
-    from sintercond import mechanics, simulate
+    from sintercond import mechanics
 
     with open(path, "rb") as f:
         meta = pickle.load(f)
     ex = experiment(meta, steps)
+    if variant == "gradient plain":
+        ex = dataclasses.replace(ex, step_checkpoint=False)
     names = ("E0", "theta_star", "rate")
     nominal = ex.nominal()
     logs0 = jnp.log(jnp.asarray([nominal[k] for k in names]))
@@ -83,8 +88,7 @@ def run_one(path, variant, steps, max_gb):
 
     def loss(logs, checkpoint=True):
         params = ex.params_with(dict(zip(names, jnp.exp(logs))))
-        saved = simulate.rollout(ex.sim, ex.state, params, ex.n_steps, simulate.SaveAt(ex.save_every, ex.observe),
-                                 checkpoint=checkpoint)[1]
+        saved = ex.run(params, checkpoint=checkpoint)[1]
         return 0.5 * jnp.sum(((saved - target) * weights) ** 2)
 
     forward = jax.jit(loss)

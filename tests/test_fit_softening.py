@@ -198,15 +198,16 @@ def _check_gradient(ex, readings_weights, names=("E0", "theta_star", "rate")):
     off, the floor, contact open or closed, stick or slip: :func:`_event_pattern`). The FD step ``h`` (in the
     log) is the largest of 1e-5, 3e-6, 1e-6, ... for which the pattern of every step is the same at
     ``log p - h``, ``log p`` and ``log p + h``: the difference quotient then does not straddle an event (a
-    branch that flipped and flipped back within ``h`` would not be seen; at these step sizes none was)."""
+    branch that flipped and flipped back within ``h`` would not be seen; at these step sizes none was).
+    The rollout is the experiment's own (``SofteningExperiment.step_checkpoint``: the bed and Example 5.1
+    recompute every step on the way back, the incline stores its steps' intermediates)."""
     nominal = ex.nominal()
     logs0 = jnp.log(jnp.asarray([nominal[k] for k in names]))
     weights = jnp.asarray(readings_weights)
 
     def loss_and_events(logs):
         params = ex.params_with(dict(zip(names, jnp.exp(logs))))
-        saved = simulate.rollout(ex.sim, ex.state, params, ex.n_steps, simulate.SaveAt(1, lambda s: (
-            ex.observe(s), _event_pattern(ex.sim, params, s))))[1]
+        saved = ex.run(params, simulate.SaveAt(1, lambda s: (ex.observe(s), _event_pattern(ex.sim, params, s))))[1]
         readings = saved[0][ex.save_every - 1::ex.save_every]  # what ex.predict reads
         return jnp.sum(readings * weights), saved[1]
 
@@ -258,7 +259,7 @@ def test_gradient_across_contact_onset_and_stick_slip():
                                                                 wall.penetration(s.particles.positions,
                                                                                  s.particles.radii)]), down)
     ex = sf.SofteningExperiment(simulate.simulator(physics, fns), state, params, 2000, 1, observe,
-                                ("temperature", "along", "penetration"))
+                                ("temperature", "along", "penetration"), step_checkpoint=False)  # the plain rollout
     pattern = _check_gradient(ex, [[1e-2, 1e4, 1e6]])
     touching, slipping = pattern[:, -2], pattern[:, -1]
     assert not touching[0] and touching[-1]  # contact onset inside the window
