@@ -3,6 +3,7 @@
 Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
                                          [--no-peers] [--dtypes float64 float32-forces float32]
                                          [--order lattice|morton] [--compare-orders REPEATS]
+                                         [--compare-options REPEATS]
 
 The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
 radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
@@ -230,6 +231,41 @@ def compare_orders(centres, radii, temperature, steps, repeats, variant="float64
     return {key: 1e3 * value / steps for key, value in best.items()}, differences
 
 
+OPTION_VARIANTS = {"kept": {}, "vector width 256": {"xla_cpu_prefer_vector_width": 256}}
+"""``--compare-options`` variants: overrides of ``mechanics.COMPILER_OPTIONS`` (256: XLA's default width)."""
+
+
+def compare_options(centres, radii, temperature, steps, repeats, variant="float64"):
+    """Min ms/step (wall, process CPU) of the chunk compiled with each of :data:`OPTION_VARIANTS`, run alternately.
+
+    Also the largest differences of the final positions (m), velocities (m/s), temperatures (K), spins (rad/s)
+    and springs (m) of each variant from the first one.
+    """
+    sim, _, state, params, _ = sintercond_setup(centres, radii, temperature, variant, None)
+
+    def run_chunk(state, params):
+        return simulate.rollout(sim, state, params, steps, simulate.SaveAt(steps, lambda s: ()), checkpoint=False)[0]
+
+    runs = {}
+    for name, overrides in OPTION_VARIANTS.items():
+        compiled = jax.jit(run_chunk, compiler_options={**mechanics.COMPILER_OPTIONS, **overrides}).lower(
+            state, params).compile()
+        runs[name] = (compiled, jax.block_until_ready(compiled(state, params)))
+    best = {(name, clock): np.inf for name in runs for clock in ("wall", "cpu")}
+    for _ in range(repeats):
+        for name, (compiled, _) in runs.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            jax.block_until_ready(compiled(state, params))
+            best[name, "wall"] = min(best[name, "wall"], time.perf_counter() - wall)
+            best[name, "cpu"] = min(best[name, "cpu"], time.process_time() - cpu)
+    first = next(iter(runs.values()))[1]
+    differences = {name: [float(np.max(np.abs(np.asarray(x) - np.asarray(y)))) for x, y in (
+        (first.particles.positions, b.particles.positions), (first.mechanics.velocity, b.mechanics.velocity),
+        (first.particles.temperature, b.particles.temperature), (first.mechanics.spin, b.mechanics.spin),
+        (first.mechanics.spring, b.mechanics.spring))] for name, (_, b) in runs.items()}
+    return {key: 1e3 * value / steps for key, value in best.items()}, differences
+
+
 def write_data(path, centres, radii):
     lo = centres.min(axis=0) - 4 * RADIUS
     hi = centres.max(axis=0) + 4 * RADIUS
@@ -304,7 +340,21 @@ def main():
     parser.add_argument("--compare-orders", type=int, default=0, metavar="REPEATS",
                         help="only time lattice against Morton order (float64, alternating, min of REPEATS); "
                              "prints, writes nothing")
+    parser.add_argument("--compare-options", type=int, default=0, metavar="REPEATS",
+                        help="only time the chunk compiled with mechanics.COMPILER_OPTIONS against OPTION_VARIANTS "
+                             "(float64, alternating, min of REPEATS); prints, writes nothing")
     args = parser.parse_args()
+    if args.compare_options:
+        for n in args.sizes:
+            centres, radii, temperature = block(n)
+            best, differences = compare_options(centres, radii, temperature, args.steps, args.compare_options)
+            kept = best[next(iter(OPTION_VARIANTS)), "wall"]
+            for name in OPTION_VARIANTS:
+                print(f"{len(radii):,} spheres, {args.steps} steps, {name}: ms/step wall {best[name, 'wall']:.2f}, "
+                      f"CPU {best[name, 'cpu']:.2f}; wall / kept's {best[name, 'wall'] / kept:.3f}; max differences "
+                      "from kept: positions %.2g m, velocities %.2g m/s, temperatures %.2g K, spins %.2g rad/s, "
+                      "springs %.2g m" % tuple(differences[name]), flush=True)
+        return
     if args.compare_orders:
         for n in args.sizes:
             centres, radii, temperature = block(n)

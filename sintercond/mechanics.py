@@ -139,13 +139,15 @@ def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> 
                            wall if physics.friction else None, wall if physics.rolling else None)
 
 
-COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_cpu_prefer_vector_width": 512}
 """XLA options for compiling a mechanical step (``jax.jit(f, compiler_options=...)``, per executable).
 
 On the CPU, XLA's newer fusion emitters turn the contact laws' many
 elementwise fusions over the pairs into code ~1.5x slower than the classic
-emitters (benchmarks/coupled_step.py; RESULTS.md). The field belongs to
-XLA's DebugOptions and only the CPU compiler reads it (not checked on a GPU)."""
+emitters, and LLVM's 512-bit vectors (a preference: CPUs without AVX-512
+keep their widest) run the step 2-5 % faster than XLA's default of 256
+(benchmarks/coupled_step.py; RESULTS.md). The fields belong to XLA's
+DebugOptions and only the CPU compiler reads them (not checked on a GPU)."""
 
 
 def compiler_options(physics):
