@@ -1,7 +1,7 @@
 """Gradient of the softening fit's loss through the coupled thermo-mechanical scan: time and memory, and fit times.
 
 Usage: python benchmarks/softening_gradient.py [--lateral-size 0.012] [--height 0.008] [--settle-time 0.3]
-                                              [--steps 1000 10000 100000]
+                                              [--steps 1000 10000 100000] [--no-fits] [--section NAME]
 
 A bed (fitting.softening.bed_experiment: powder_bed piled, settled by the coupled
 simulation with friction, then heated by its floor at 700 K; float64), read
@@ -32,6 +32,7 @@ Prints the tables and rewrites its section of benchmarks/RESULTS.md.
 import argparse
 import dataclasses
 import json
+import os
 import pathlib
 import pickle
 import resource
@@ -176,6 +177,9 @@ def main():
     parser.add_argument("--steps", type=int, nargs="+", default=[1000, 10_000, 100_000])
     parser.add_argument("--fit-steps", type=int, default=3800)
     parser.add_argument("--max-gb", type=float, default=8.0)
+    parser.add_argument("--no-fits", action="store_true", help="time the gradient only (a large bed's fits take long)")
+    parser.add_argument("--section", default="softening_gradient",
+                        help="RESULTS.md section to rewrite (another name keeps the default bed's section)")
     parser.add_argument("--one", nargs=3, help=argparse.SUPPRESS)
     parser.add_argument("--fits", nargs=1, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -187,7 +191,10 @@ def main():
         return
 
     from _common import markdown_table, write_section
+    from thermal_step import load_line
 
+    load_start = os.getloadavg()[0]
+    fit_rows = []
     with tempfile.TemporaryDirectory() as tmp:
         path = pathlib.Path(tmp) / "bed.pkl"
         build(path, args.lateral_size, args.height, args.settle_time)
@@ -206,12 +213,13 @@ def main():
                              f"{r['ratio']:.2f}x" if r["ratio"] else "-", f"{r['xla_gb']:.4f}",
                              f"{r['rss_gb']:.3f}" if r["rss_gb"] is not None else "-"])
                 print(rows[-1], flush=True)
-        proc = subprocess.run([sys.executable, __file__, "--fits", str(path), "--fit-steps", str(args.fit_steps)],
-                              capture_output=True, text=True)
-        if proc.returncode:
-            print(proc.stderr[-3000:], file=sys.stderr)
-            raise SystemExit("the fits failed")
-        fit_rows = json.loads(proc.stdout.strip().splitlines()[-1])
+        if not args.no_fits:
+            proc = subprocess.run([sys.executable, __file__, "--fits", str(path), "--fit-steps",
+                                   str(args.fit_steps)], capture_output=True, text=True)
+            if proc.returncode:
+                print(proc.stderr[-3000:], file=sys.stderr)
+                raise SystemExit("the fits failed")
+            fit_rows = json.loads(proc.stdout.strip().splitlines()[-1])
     header = ["steps", "variant", "seconds", "/ forward (same process)", "XLA memory GB", "peak RSS growth GB"]
     fit_header = ["data", "method", "optimiser steps", "seconds (first call, compile incl.)", "seconds (second call)",
                   "max |error| / stderr"]
@@ -220,13 +228,13 @@ def main():
             f"{meta['seconds']:.0f} s), friction and softening on, dt = {meta['dt']:.3g} s, float64; loss on "
             f"3 probe temperatures and the mean height read every steps/100 steps; gradient in the logs of "
             f"E0, theta*, rate.\n\n" + markdown_table(header, rows) +
-            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\nFits (start E0 1.3 MPa, theta* 450 K, rate "
-            f"0.7; truth 1 MPa, 400 K, 1; synthetic noise 0.5 K, 20 nm on the bed, 2 nm on the overlap):\n\n"
-            + markdown_table(fit_header, fit_rows) +
-            "\n\nFigures taken while other jobs shared the machine's 2 cores: times scatter by up to 2x; the ratios "
-            "come from alternating runs in one process.")
+            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.")
+    if fit_rows:
+        body += ("\n\nFits (start E0 1.3 MPa, theta* 450 K, rate 0.7; truth 1 MPa, 400 K, 1; synthetic noise "
+                 "0.5 K, 20 nm on the bed, 2 nm on the overlap):\n\n" + markdown_table(fit_header, fit_rows))
+    body += ("\n\nThe ratios come from alternating runs in one process. " + load_line(load_start))
     print(body)
-    write_section("softening_gradient", "python benchmarks/softening_gradient.py " + " ".join(sys.argv[1:]), body)
+    write_section(args.section, "python benchmarks/softening_gradient.py " + " ".join(sys.argv[1:]), body)
 
 
 if __name__ == "__main__":
