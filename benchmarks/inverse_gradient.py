@@ -12,7 +12,9 @@ Variants, each in its own process so that its peak memory is its own:
 * autodiff checkpointed: JAX's own reverse mode through `sintercond.simulate.rollout`
   (jax.checkpoint around segments of ~sqrt(steps) steps; the explicit table step's
   derivative is written out, `thermal._conduction_update`: its transpose is the same
-  gather as the forward, and it keeps L T per step).
+  gather as the forward, it keeps L T per step, and the conductivity and capacity enter
+  through the rates s / C and 1 / C formed once per rollout, whose cotangents it
+  accumulates per particle).
 * autodiff plain: the same rollout without checkpoints (every step's residuals kept).
 
 Times: the best of alternating runs of the variant and the forward program in the same process

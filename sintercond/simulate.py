@@ -372,6 +372,7 @@ class Prepared(NamedTuple):
     scale: jax.Array  # multiplies the table (the conductivity, table mode) or 1
     wall_conductance: jax.Array | None  # [n_walls or 1, n] (W/K)
     wall_temperature: jax.Array | None  # [n_walls or 1, n] broadcastable (K)
+    rates: tuple | None = None  # thermal.conduction_rates(scale, capacity) of the static explicit step, or None
 
 
 class Simulator(NamedTuple):
@@ -509,7 +510,11 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             if physics.conducting_walls:
                 wall_k = _wall_lift(physics, particles, contacts, kappa, law_params)
                 wall_t = contacts.wall_temperature[:, None]
-        return Prepared(params, capacity, conductance, scale, wall_k, wall_t)
+        rates = None
+        if physics.integrator == "explicit" and physics.contacts == "static" and not physics.mechanics:
+            # computed once per rollout: reverse mode then accumulates their cotangents per particle
+            rates = thermal.conduction_rates(scale, capacity)
+        return Prepared(params, capacity, conductance, scale, wall_k, wall_t, rates)
 
     def conduction_power(state: SimState, prep: Prepared, temperature, conductance, neighbors):
         """Heat into each particle through the contacts (None: walls only) and conducting walls (W).
@@ -598,7 +603,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             power = functools.reduce(jnp.add, terms) if terms else jnp.zeros((), particles.temperature.dtype)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
                                                   particles.fixed_temperature, (prep.scale, conductance, neighbors),
-                                                  pulse)
+                                                  pulse, prep.rates)
         elif physics.integrator == "explicit":
             power = heat_power_fn(state, prep, conductance, neighbors)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,

@@ -71,7 +71,7 @@ def check_time_step(dt, capacity, table: ContactTable) -> float:
 
 
 def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_temperature=None, network=None,
-                    pulse=None):
+                    pulse=None, rates=None):
     """The explicit Euler update ``T + dt P / C``, held particles reset to their values.
 
     The one explicit step of the package: every caller (the simulator of
@@ -88,6 +88,11 @@ def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_tem
     ``switch * field`` (W; a loop-invariant ``[n]`` field and a scalar, as
     :func:`source_power_parts` returns them) to ``power``: the same numbers,
     and with a network reverse mode keeps the scalar per step, not the sum.
+    With a network the derivative in ``scale`` and ``capacity`` goes through
+    ``rates``, :func:`conduction_rates` of them (computed here if None): a
+    loop computed once outside its steps (:func:`sintercond.simulate.rollout`
+    does) then accumulates per-particle cotangents of the rates in reverse
+    mode instead of reducing one for ``scale`` at every step.
     """
     if network is None:
         if pulse is not None:
@@ -95,14 +100,25 @@ def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_tem
         new = temperature + dt * power / capacity
     else:
         field, switch = (jnp.zeros((), temperature.dtype), jnp.zeros((), temperature.dtype)) if pulse is None else pulse
-        new = _conduction_update(temperature, power, field, switch, capacity, dt, *network)
+        scale, conductance, neighbors = network
+        rate, inverse_capacity = conduction_rates(scale, capacity) if rates is None else rates
+        # scale and capacity set the numbers; their derivative is that of the rates
+        new = _conduction_update(temperature, power, field, switch, jax.lax.stop_gradient(capacity), dt,
+                                 jax.lax.stop_gradient(scale), conductance, neighbors, rate, inverse_capacity)
     if fixed_mask is None:
         return new
     return jnp.where(fixed_mask, fixed_temperature, new)
 
 
+def conduction_rates(scale, capacity):
+    """``(scale / C, 1 / C)``: the factors of the conduction and of the heat power in :func:`explicit_update`
+    with a network (``scale`` in units of the table's, ``C`` in J/K)."""
+    return scale / capacity, 1.0 / capacity
+
+
 @jax.custom_jvp
-def _conduction_update(temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors):
+def _conduction_update(temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors, rate,
+                       inverse_capacity):
     """``T + dt (P + w Q - s L T) / C`` (K) with a derivative cheap in reverse mode.
 
     ``Q`` is a loop-invariant pulse field and ``w`` its scalar switch at this
@@ -110,17 +126,25 @@ def _conduction_update(temperature, power, pulse, switch, capacity, dt, scale, c
     ``w`` per step and ``Q`` once, as a hand adjoint recomputes the pulse
     from the step index.
 
+    The value uses ``s`` and ``C``; the derivative in them comes through
+    ``rate = s / C`` and ``inverse_capacity = 1 / C`` (``s`` and ``C``
+    themselves must carry no tangent: :func:`explicit_update` stops them), as
+    ``T + dt (P + w Q) / C - dt (s / C) L T``. A loop that computes the two
+    once outside its steps then accumulates their cotangents per particle,
+    ``-dt ct L T`` and ``dt ct (P + w Q)``, one pass each that reads ``L T``
+    once, where a scalar ``s`` would need a reduction at every step.
+
     JAX's own transpose of this update runs about ten kernels per step on a
     CPU (each cotangent its own pass, and a gather of ``dt / C * ct`` that
     XLA fuses so that it reads two arrays per slot). Here the tangent is one
     ``linear_call`` whose transpose (:func:`_conduction_transpose`) is
     written out: with ``v = dt ct / C``, ``ct_T = ct - L (s v)`` (``L``
     symmetric: the same gather as the forward, of one materialised array),
-    ``ct_P = v``, ``ct_s = -v L T`` and ``ct_C = -v (P - s L T) / C``. The
-    residuals per step are ``L T`` (when ``s`` or ``C`` is differentiated)
-    and ``P``, ``w`` (when ``C`` is; ``Q`` is loop-invariant). A tangent of
-    ``dt``, of the switch or of the conductances (lifted conductances) falls
-    back to JAX's derivative of the same formula.
+    ``ct_P = v``. The residuals per step are ``L T`` (when the rate is
+    differentiated) and ``P``, ``w`` (when ``1 / C`` is; ``Q`` is
+    loop-invariant). A tangent of ``dt``, of the switch or of the
+    conductances (lifted conductances) falls back to JAX's derivative of the
+    same formula.
     """
     return _conduction_formula(temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors)
 
@@ -130,25 +154,41 @@ def _conduction_formula(temperature, power, pulse, switch, capacity, dt, scale, 
     return temperature + dt * (power + switch * pulse - scale * lt) / capacity
 
 
+def _factored_formula(temperature, power, pulse, switch, dt, conductance, neighbors, rate, inverse_capacity):
+    """:func:`_conduction_formula` in the rates (its derivative; the value differs in rounding)."""
+    lt = network_laplacian(conductance, neighbors, temperature)
+    return temperature + dt * (power + switch * pulse) * inverse_capacity - dt * rate * lt
+
+
 def _conduction_update_jvp(primals, tangents):
-    temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors = primals
-    d_t, d_p, d_q, d_w, d_c, d_dt, d_s, d_k, _ = tangents
+    temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors, rate, inverse_capacity = primals
+    d_t, d_p, d_q, d_w, d_c, d_dt, d_s, d_k, _, d_r, d_b = tangents
     zero = lambda x: isinstance(x, jax.custom_derivatives.SymbolicZero)  # noqa: E731
-    if not (zero(d_dt) and zero(d_k) and zero(d_w)):
-        instantiate = [jnp.zeros(x.shape, x.dtype) if zero(d) else d for x, d in zip(primals[:8], tangents[:8])]
-        return jax.jvp(lambda *a: _conduction_formula(*a, neighbors), tuple(primals[:8]), tuple(instantiate))
+    if not (zero(d_c) and zero(d_s)):
+        raise ValueError("_conduction_update: differentiate scale and capacity through the rates "
+                         "(thermal.explicit_update stops them)")
     lt = network_laplacian(conductance, neighbors, temperature)
     out = temperature + dt * (power + switch * pulse - scale * lt) / capacity
-    present = [(k, d) for k, d in zip("tpqcs", (d_t, d_p, d_q, d_c, d_s)) if not zero(d)]
+    if not (zero(d_dt) and zero(d_k) and zero(d_w)):
+        args = (temperature, power, pulse, switch, dt, conductance)
+        arg_tangents = (d_t, d_p, d_q, d_w, d_dt, d_k)
+        rest = (rate, inverse_capacity)
+        instantiate = [jnp.zeros(x.shape, x.dtype) if zero(d) else d
+                       for x, d in zip(args + rest, arg_tangents + (d_r, d_b))]
+        _, tangent = jax.jvp(lambda t, p, q, w, h, k, r, b: _factored_formula(t, p, q, w, h, k, neighbors, r, b),
+                             args + rest, tuple(instantiate))
+        return out, tangent
+    present = [(k, d) for k, d in zip("tpqrb", (d_t, d_p, d_q, d_r, d_b)) if not zero(d)]
     if not present:
         return out, jnp.zeros_like(out)
     names = "".join(k for k, _ in present)
-    # per-step residuals only as needed: L T (derivatives in s or C), P and w (in C); Q is loop-invariant
-    in_c = "c" in names
-    residuals = (lt if ("s" in names or in_c) else None, power if in_c else None, pulse if in_c else None,
-                 switch if (in_c or "q" in names) else None, capacity, dt, scale, conductance, neighbors)
+    # per-step residuals only as needed: L T (derivative in the rate), P and w (in 1 / C); Q is loop-invariant
+    in_b = "b" in names
+    residuals = (lt if "r" in names else None, power if in_b else None, pulse if in_b else None,
+                 switch if (in_b or "q" in names) else None, capacity, dt, scale, conductance, neighbors)
+    shapes = (jnp.shape(rate), jnp.shape(inverse_capacity))
     tangent, = linear_call(functools.partial(_conduction_tangent, names),
-                           functools.partial(_conduction_transpose, names), residuals, [d for _, d in present])
+                           functools.partial(_conduction_transpose, names, shapes), residuals, [d for _, d in present])
     return out, tangent
 
 
@@ -162,18 +202,19 @@ def _conduction_tangent(names, residuals, linear):
         d_power = d_power + d["p"]
     if "q" in d:
         d_power = d_power + switch * d["q"]
-    if "s" in d:
-        d_power = d_power - d["s"] * lt
     tangent = dt * d_power / capacity
-    if "c" in d:
-        tangent = tangent - dt * (power + switch * pulse - scale * lt) / capacity * d["c"] / capacity
+    if "r" in d:
+        tangent = tangent - dt * d["r"] * lt
+    if "b" in d:
+        tangent = tangent + dt * (power + switch * pulse) * d["b"]
     if "t" in d:
         tangent = tangent + d["t"]
     return [jnp.broadcast_to(tangent, capacity.shape)]
 
 
-def _conduction_transpose(names, residuals, cotangents):
+def _conduction_transpose(names, shapes, residuals, cotangents):
     lt, power, pulse, switch, capacity, dt, scale, conductance, neighbors = residuals
+    rate_shape, inverse_shape = shapes
     (ct,) = cotangents
     v = dt * ct / capacity  # the cotangent of the power
     out = {"p": _unbroadcast(v, jnp.shape(power) if power is not None else ct.shape)}
@@ -182,10 +223,10 @@ def _conduction_transpose(names, residuals, cotangents):
     if "t" in names:  # L symmetric: L^T (s v) = L (s v), one gather of one array
         sv = scale * v if jnp.ndim(scale) == 0 else materialized(scale * v)
         out["t"] = ct - gather_laplacian(conductance, neighbors, sv)
-    if "s" in names:
-        out["s"] = _unbroadcast(-v * lt, jnp.shape(scale))
-    if "c" in names:
-        out["c"] = _unbroadcast(-v * (power + switch * pulse - scale * lt) / capacity, jnp.shape(capacity))
+    if "r" in names:
+        out["r"] = _unbroadcast(-dt * ct * lt, rate_shape)
+    if "b" in names:
+        out["b"] = _unbroadcast(dt * ct * (power + switch * pulse), inverse_shape)
     return [out[k] for k in names]
 
 
