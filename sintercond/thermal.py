@@ -151,6 +151,11 @@ def _conduction_update(temperature, power, pulse, switch, capacity, dt, scale, c
 
 def _conduction_formula(temperature, power, pulse, switch, capacity, dt, scale, conductance, neighbors):
     lt = network_laplacian(conductance, neighbors, temperature)
+    return _conduction_value(temperature, power, pulse, switch, capacity, dt, scale, lt)
+
+
+def _conduction_value(temperature, power, pulse, switch, capacity, dt, scale, lt):
+    """``T + dt (P + w Q - s L T) / C`` from ``L T`` (``lt``): the value of :func:`_conduction_update`."""
     return temperature + dt * (power + switch * pulse - scale * lt) / capacity
 
 
@@ -168,7 +173,7 @@ def _conduction_update_jvp(primals, tangents):
         raise ValueError("_conduction_update: differentiate scale and capacity through the rates "
                          "(thermal.explicit_update stops them)")
     lt = network_laplacian(conductance, neighbors, temperature)
-    out = temperature + dt * (power + switch * pulse - scale * lt) / capacity
+    out = _conduction_value(temperature, power, pulse, switch, capacity, dt, scale, lt)
     if not (zero(d_dt) and zero(d_k) and zero(d_w)):
         args = (temperature, power, pulse, switch, dt, conductance)
         arg_tangents = (d_t, d_p, d_q, d_w, d_dt, d_k)
