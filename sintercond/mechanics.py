@@ -258,6 +258,23 @@ class Loads(NamedTuple):
     wall_normal_force: Any  # [n_walls, n] (N)
 
 
+def pair_loads(physics, params: MechanicalParams, geometry: PairGeometry, radii, mass, modulus, nu, velocity, spin,
+               spring, rolling, dt, dtype):
+    """Per pair: force on ``i``, torques on ``i`` and ``j`` (in ``dtype``), and the new springs."""
+    fd = force_dtype(physics, dtype)
+    cast = lambda x: x if x is None else jnp.asarray(x).astype(fd)  # noqa: E731
+    params, dt = jax.tree.map(cast, params), cast(dt)
+    radii_f, mass_f, modulus, nu = cast(radii), cast(mass), cast(modulus), cast(nu)
+    v, omega = cast(velocity), cast(spin)
+    i, j = geometry.i, geometry.j
+    f, t_i, t_j, spring, rolling, _ = _contact_laws(
+        physics, params, dt, cast(geometry.normal), cast(geometry.overlap), radii_f[i], radii_f[j], mass_f[i],
+        mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], spring,
+        rolling, params.mu, params.mu_r)
+    # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
+    return f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype), spring, rolling
+
+
 def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, positions, radii, mass, modulus, nu,
                   state: MechanicalState, t, dt) -> Loads:
     """Forces and torques on every particle from its pair and wall contacts and gravity, at time ``t``.
@@ -271,23 +288,24 @@ def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, pos
       state: velocities, spins and springs at ``t`` (springs on ``geometry``'s pairs).
       t, dt: time and step (s).
     """
+    n = radii.shape[0]
+    f, t_i, t_j, spring, rolling = pair_loads(physics, params, geometry, radii, mass, modulus, nu, state.velocity,
+                                              state.spin, state.spring, state.rolling, dt, positions.dtype)
+    state = dataclasses.replace(state, spring=spring, rolling=rolling)
+    return body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, dt,
+                      pair_sum(f, -f, geometry.pairs, n), pair_sum(t_i, t_j, geometry.pairs, n))
+
+
+def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, dt, force, torque) -> Loads:
+    """:class:`Loads` from the pair sums ``force``, ``torque`` ``[n, 3]``: the walls' and gravity's loads added."""
     dtype = positions.dtype
     fd = force_dtype(physics, dtype)
     cast = lambda x: x if x is None else jnp.asarray(x).astype(fd)  # noqa: E731
     params, dt = jax.tree.map(cast, params), cast(dt)
     radii_f, mass_f, modulus, nu = cast(radii), cast(mass), cast(modulus), cast(nu)
-    n = radii.shape[0]
     v, omega = cast(state.velocity), cast(state.spin)
-    i, j = geometry.i, geometry.j
-    f, t_i, t_j, spring, rolling, _ = _contact_laws(
-        physics, params, dt, cast(geometry.normal), cast(geometry.overlap), radii_f[i], radii_f[j], mass_f[i],
-        mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], state.spring,
-        state.rolling, params.mu, params.mu_r)
-    # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
-    f, t_i, t_j = f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype)
-    force = pair_sum(f, -f, geometry.pairs, n)
-    torque = pair_sum(t_i, t_j, geometry.pairs, n)
-    new = dataclasses.replace(state, spring=spring, rolling=rolling)
+    n = radii.shape[0]
+    new = state
     h = wall_n = None
     if physics.walls:
         h = wall_penetration(physics.walls, positions, radii, t)  # in the positions' precision

@@ -72,7 +72,8 @@ from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState
 from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import (HalfPairs, allocate_half_pairs, did_buffer_overflow, did_rebuild, half_pair_count,
-                                  half_pairs, half_pairs_overflowed, pair_sum, padded_half_pairs)
+                                  half_pair_capacity, half_pairs, half_pairs_overflowed, map_pair_blocks, pair_sum,
+                                  padded_half_pairs)
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -561,16 +562,30 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         positions, radii, mass, t = particles.positions, particles.radii, particles.mass, state.time
         contacts, motion, overflow = follow_contacts(neighbor_fn, positions, radii, contacts, state.mechanics)
         state = dataclasses.replace(state, overflow=state.overflow | overflow, contacts=contacts)
-        geometry = mechanics.pair_geometry(positions, radii, contacts.pairs.pairs)
         modulus = mechanics.particle_modulus(physics, mp, particles.temperature, particles.material)
         nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, positions.dtype))[particles.material], radii.shape)
-        loads = mechanics.contact_loads(physics, mp, geometry, positions, radii, mass, modulus, nu, motion, t,
-                                        state.dt)
-        # heat through the contacts of this geometry (Eqs. 32-36; walls as neighbours of infinite radius)
         kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
         law_params = merged_law_params(physics, params)
-        conductance = pair_conductance(physics, radii, particles.material, geometry, kappa, law_params)
-        power = pair_heat_power(conductance, geometry.pairs, particles.temperature)
+        temperature = particles.temperature
+
+        def on_pairs(pairs, spring, rolling):
+            geometry = mechanics.pair_geometry(positions, radii, pairs)
+            f, t_i, t_j, spring, rolling = mechanics.pair_loads(physics, mp, geometry, radii, mass, modulus, nu,
+                                                                motion.velocity, motion.spin, spring, rolling,
+                                                                state.dt, positions.dtype)
+            # heat through the contacts of this geometry (Eqs. 32-36)
+            conductance = pair_conductance(physics, radii, particles.material, geometry, kappa, law_params)
+            q = (conductance * (temperature[geometry.j] - temperature[geometry.i]))[:, None]
+            # what each end receives, packed: one scatter per end instead of three (values and order unchanged)
+            return jnp.concatenate([f, t_i, q], axis=1), jnp.concatenate([-f, t_j, -q], axis=1), spring, rolling
+
+        pairs = contacts.pairs.pairs
+        to_i, to_j, spring, rolling = map_pair_blocks(on_pairs, pairs, motion.spring, motion.rolling)
+        sums = pair_sum(to_i, to_j, pairs, radii.shape[0])
+        motion = dataclasses.replace(motion, spring=spring, rolling=rolling)
+        loads = mechanics.body_loads(physics, mp, positions, radii, mass, modulus, nu, motion, t, state.dt,
+                                     sums[:, :3], sums[:, 3:6])
+        power = sums[:, 6]
         for w, wall in enumerate(physics.walls):
             if wall.mode == "conducting":
                 h = loads.wall_penetration[w]
@@ -753,7 +768,7 @@ def reallocate_neighbors(neighbor_fns):
         if bool(half_pairs_overflowed(end.contacts.pairs)):
             need = max(int(end.contacts.pairs.demand), half_pair_count(nbrs.idx, end.particles.positions,
                                                                        end.particles.radii, neighbor_fns.skin))
-            capacity = max(capacity + 1, int(math.ceil(neighbor_fns.capacity_multiplier * need)))
+            capacity = half_pair_capacity(max(capacity + 1, int(math.ceil(neighbor_fns.capacity_multiplier * need))))
         n = start.particles.radii.shape[0]
         contacts = dataclasses.replace(start.contacts, neighbor_list=nbrs, neighbors=nbrs.idx,
                                        pairs=padded_half_pairs(half, capacity, n))
