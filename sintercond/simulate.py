@@ -575,17 +575,16 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                                                                 state.dt, positions.dtype)
             # heat through the contacts of this geometry (Eqs. 32-36)
             conductance = pair_conductance(physics, radii, particles.material, geometry, kappa, law_params)
-            q = (conductance * (temperature[geometry.j] - temperature[geometry.i]))[:, None]
-            # what each end receives, packed: one scatter per end instead of three (values and order unchanged)
-            return jnp.concatenate([f, t_i, q], axis=1), jnp.concatenate([-f, t_j, -q], axis=1), spring, rolling
+            q = conductance * (temperature[geometry.j] - temperature[geometry.i])
+            return f, t_i, t_j, spring, rolling, q
 
         pairs = contacts.pairs.pairs
-        to_i, to_j, spring, rolling = map_pair_blocks(on_pairs, pairs, motion.spring, motion.rolling)
-        sums = pair_sum(to_i, to_j, pairs, radii.shape[0])
+        f, t_i, t_j, spring, rolling, q = map_pair_blocks(on_pairs, pairs, motion.spring, motion.rolling)
+        n = radii.shape[0]
         motion = dataclasses.replace(motion, spring=spring, rolling=rolling)
         loads = mechanics.body_loads(physics, mp, positions, radii, mass, modulus, nu, motion, t, state.dt,
-                                     sums[:, :3], sums[:, 3:6])
-        power = sums[:, 6]
+                                     pair_sum(f, -f, pairs, n), pair_sum(t_i, t_j, pairs, n))
+        power = pair_sum(q, -q, pairs, n)
         for w, wall in enumerate(physics.walls):
             if wall.mode == "conducting":
                 h = loads.wall_penetration[w]
