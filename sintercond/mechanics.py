@@ -13,12 +13,15 @@ The laws run on a half pair list (:class:`sintercond.neighbors.HalfPairs`,
 ``[capacity, 2]``, each pair ``i < j`` once, kept within
 ``r_i + r_j + skin``), built from the jax-md Dense list whenever that list
 is rebuilt (MECHANICS.md, "Contacts and history"). The force on ``i`` is
-added to ``i`` and subtracted from ``j`` (:func:`sintercond.neighbors.pair_sum`),
+added to ``i`` and subtracted from ``j`` (:func:`sintercond.neighbors.pair_exchange`),
 so momentum is conserved by construction; the springs belong to the pair
 (``[capacity, 3]``, the spring of ``i`` relative to ``j``) and follow it
 through rebuilds and reallocations (:func:`remap_history`). The list is
 sorted by ``(i, j)``, so the sums over it do not depend on when the list was
-last rebuilt or on its capacity.
+last rebuilt or on its capacity. The per-pair part (:func:`pair_loads`) is
+separate from the sums so that the coupled step can evaluate long lists
+block by block (:func:`sintercond.neighbors.map_pair_blocks`, on the CPU)
+and sum once.
 
 Walls (Remark 1)
 ----------------
@@ -50,7 +53,7 @@ import jax.numpy as jnp
 
 from sintercond import forces
 from sintercond.materials import softened_modulus
-from sintercond.neighbors import HalfPairs, pair_sum, remap_half_pairs
+from sintercond.neighbors import HalfPairs, pair_exchange, pair_sum, remap_half_pairs
 from sintercond.state import pytree_dataclass
 
 
@@ -293,7 +296,7 @@ def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, pos
                                               state.spin, state.spring, state.rolling, dt, positions.dtype)
     state = dataclasses.replace(state, spring=spring, rolling=rolling)
     return body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, dt,
-                      pair_sum(f, -f, geometry.pairs, n), pair_sum(t_i, t_j, geometry.pairs, n))
+                      pair_exchange(f, geometry.pairs, n), pair_sum(t_i, t_j, geometry.pairs, n))
 
 
 def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, dt, force, torque) -> Loads:

@@ -655,13 +655,16 @@ def remap_half_pairs(old_pairs, new_pairs, values, fill=0):
 
 
 PAIR_BLOCK = 16384
-"""Pairs per block of the pair pass on the CPU (:func:`map_pair_blocks`): lists of at least two blocks are
-evaluated block by block, so that the pair laws' many intermediates stay in the cache."""
+"""Pairs per block of the pair pass on the CPU (:func:`map_pair_blocks`): lists of at least
+:data:`PAIR_BLOCKS_FROM` blocks are evaluated block by block, so that the pair laws' many intermediates stay in
+the cache (shorter lists fit in it whole, and blocks made the 38,115-pair list of 1e4 spheres slower)."""
+
+PAIR_BLOCKS_FROM = 4
 
 
 def half_pair_capacity(need: int) -> int:
-    """The capacity allocated for ``need`` pairs: a whole number of :data:`PAIR_BLOCK` blocks from two blocks up."""
-    return need if need < 2 * PAIR_BLOCK else -(-need // PAIR_BLOCK) * PAIR_BLOCK
+    """The capacity allocated for ``need`` pairs: a whole number of :data:`PAIR_BLOCK` blocks when it is blocked."""
+    return need if need < PAIR_BLOCKS_FROM * PAIR_BLOCK else -(-need // PAIR_BLOCK) * PAIR_BLOCK
 
 
 def map_pair_blocks(fn, pairs, *per_pair):
@@ -669,16 +672,16 @@ def map_pair_blocks(fn, pairs, *per_pair):
 
     ``fn`` maps pairs to per-pair outputs (a pytree of ``[c', ...]`` arrays)
     and may gather per-particle arrays it closes over. On the CPU a list of
-    at least two :data:`PAIR_BLOCK` blocks is evaluated one block at a time
-    (``lax.map``): the values are the same, bit for bit, but each
-    intermediate of the laws stays in the cache instead of making its own
-    pass through memory (1.3x on the 1e5-sphere coupled step,
+    :data:`PAIR_BLOCKS_FROM` blocks of :data:`PAIR_BLOCK` pairs is evaluated
+    one block at a time (``lax.map``): the same arithmetic per pair, but
+    each intermediate of the laws stays in the cache instead of making its
+    own pass through memory (1.2-1.3x on the 1e5-sphere coupled step,
     benchmarks/RESULTS.md). A capacity that is not a whole number of blocks
     (:func:`half_pair_capacity` allocates one) is padded, at the cost of a
     copy. Elsewhere, and for shorter lists, one call.
     """
     c = pairs.shape[0]
-    if c < 2 * PAIR_BLOCK or jax.default_backend() != "cpu":
+    if c < PAIR_BLOCKS_FROM * PAIR_BLOCK or jax.default_backend() != "cpu":
         return fn(pairs, *per_pair)
     blocks = -(-c // PAIR_BLOCK)
     pad = blocks * PAIR_BLOCK - c
@@ -704,6 +707,16 @@ def pair_sum(on_i, on_j, pairs, n):
     """
     out = jnp.zeros((n,) + on_i.shape[1:], jnp.result_type(on_i, on_j))
     return out.at[pairs[:, 0]].add(on_i, mode="drop").at[pairs[:, 1]].add(on_j, mode="drop")
+
+
+def pair_exchange(on_i, pairs, n):
+    """``[n, ...]``: what each pair passes from ``j`` to ``i`` (a force, a heat flow), added to ``i``, taken from ``j``.
+
+    The same numbers as ``pair_sum(on_i, -on_i, pairs, n)``, without a
+    negated copy of ``on_i`` (``j``'s scatter subtracts).
+    """
+    out = jnp.zeros((n,) + on_i.shape[1:], on_i.dtype)
+    return out.at[pairs[:, 0]].add(on_i, mode="drop").at[pairs[:, 1]].subtract(on_i, mode="drop")
 
 
 # --------------------------------------------------------------------------

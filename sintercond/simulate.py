@@ -50,7 +50,7 @@ inside the step, and whenever it is rebuilt a half pair list (each pair
 :class:`sintercond.neighbors.HalfPairs`) is rebuilt from it. The law is
 evaluated once per pair of the half list from the current overlaps at every
 step, and heat (and force) is added to one end and taken from the other
-(:func:`sintercond.neighbors.pair_sum`): conserved by construction.
+(:func:`sintercond.neighbors.pair_exchange`): conserved by construction.
 Overflow of either list is a flag in the state, recovered by the host
 driver (:func:`sintercond.run.advance` with :func:`reallocate_neighbors`).
 """
@@ -71,9 +71,9 @@ from sintercond import mechanics, thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState
 from sintercond.neck import NECK_MODELS
-from sintercond.neighbors import (HalfPairs, allocate_half_pairs, did_buffer_overflow, did_rebuild, half_pair_count,
-                                  half_pair_capacity, half_pairs, half_pairs_overflowed, map_pair_blocks, pair_sum,
-                                  padded_half_pairs)
+from sintercond.neighbors import (HalfPairs, allocate_half_pairs, did_buffer_overflow, did_rebuild, half_pair_capacity,
+                                  half_pair_count, half_pairs, half_pairs_overflowed, map_pair_blocks, padded_half_pairs,
+                                  pair_exchange, pair_sum)
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -451,8 +451,12 @@ def pair_heat_power(conductance, pairs, temperature):
     """
     n = temperature.shape[0]
     i, j = jnp.minimum(pairs[:, 0], n - 1), jnp.minimum(pairs[:, 1], n - 1)
-    q = conductance * (temperature[j] - temperature[i])
-    return pair_sum(q, -q, pairs, n)
+    return pair_exchange(pair_heat_flow(conductance, i, j, temperature), pairs, n)
+
+
+def pair_heat_flow(conductance, i, j, temperature):
+    """Heat flow ``K (T_j - T_i)`` (W) from ``j`` to ``i`` of each pair (Rojek et al. 2022, Eq. 3)."""
+    return conductance * (temperature[j] - temperature[i])
 
 
 def follow_contacts(neighbor_fn, positions, radii, contacts: Contacts, history=None):
@@ -575,16 +579,15 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                                                                 state.dt, positions.dtype)
             # heat through the contacts of this geometry (Eqs. 32-36)
             conductance = pair_conductance(physics, radii, particles.material, geometry, kappa, law_params)
-            q = conductance * (temperature[geometry.j] - temperature[geometry.i])
-            return f, t_i, t_j, spring, rolling, q
+            return f, t_i, t_j, spring, rolling, pair_heat_flow(conductance, geometry.i, geometry.j, temperature)
 
         pairs = contacts.pairs.pairs
         f, t_i, t_j, spring, rolling, q = map_pair_blocks(on_pairs, pairs, motion.spring, motion.rolling)
         n = radii.shape[0]
         motion = dataclasses.replace(motion, spring=spring, rolling=rolling)
         loads = mechanics.body_loads(physics, mp, positions, radii, mass, modulus, nu, motion, t, state.dt,
-                                     pair_sum(f, -f, pairs, n), pair_sum(t_i, t_j, pairs, n))
-        power = pair_sum(q, -q, pairs, n)
+                                     pair_exchange(f, pairs, n), pair_sum(t_i, t_j, pairs, n))
+        power = pair_exchange(q, pairs, n)
         for w, wall in enumerate(physics.walls):
             if wall.mode == "conducting":
                 h = loads.wall_penetration[w]

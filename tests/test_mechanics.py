@@ -373,3 +373,35 @@ def test_momentum_of_a_colliding_cloud_is_conserved_to_round_off_float32_forces_
     np.testing.assert_allclose(np.asarray(f32.particles.positions), np.asarray(ref.particles.positions), atol=1e-6 * R)
     with pytest.raises(ValueError, match="Physics.force_dtype must be None, 'float32' or 'float64'"):
         simulate.Physics(mechanics=True, contacts="dynamic", conductance="lifted", force_dtype="float16")
+
+
+def test_pair_pass_by_blocks_equals_one_pass(monkeypatch):
+    from sintercond import neighbors
+
+    rng = np.random.default_rng(4)
+    grid = np.array(np.meshgrid(*[np.arange(3)] * 3, indexing="ij")).reshape(3, -1).T * 2.02 * R
+    positions = grid + rng.uniform(-0.03, 0.03, grid.shape) * R + [0.0, 0.0, R]
+    velocity = rng.normal(0.0, 0.05, grid.shape)
+    wall = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "conducting", 700.0)
+    scene = lambda: _scene(positions, velocity, 1e-6, _params(mu=0.3, mu_r=0.1, xi_rol=0.3),  # noqa: E731
+                           walls=(wall,), friction=True, rolling=True)
+    summary = lambda s: (s.particles.positions, s.mechanics.velocity, s.mechanics.spin, s.particles.temperature)  # noqa: E731
+    sim, state, params = scene()
+    one_pass = _run(sim, state, params, 150, 150, summary)[0]
+    monkeypatch.setattr(neighbors, "PAIR_BLOCK", 8)
+    monkeypatch.setattr(neighbors, "PAIR_BLOCKS_FROM", 2)
+    sim_b, rounded, _ = scene()  # capacity allocated in whole blocks
+    assert rounded.contacts.pairs.capacity % 8 == 0 and rounded.contacts.pairs.capacity >= 16
+    blocked = _run(sim_b, rounded, params, 150, 150, summary)[0]
+    assert int(jnp.sum(mechanics.pair_geometry(blocked.particles.positions, blocked.particles.radii,
+                                               blocked.contacts.pairs.pairs).touching)) >= 10
+    for a, b in zip(summary(blocked), summary(one_pass)):  # the same arithmetic per pair: round-off at most
+        np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13 * float(np.max(np.abs(b))))
+    pairs = lambda s: {tuple(p): k for k, p in enumerate(np.asarray(s.contacts.pairs.pairs).tolist())  # noqa: E731
+                       if p[0] < p[1]}
+    ours, theirs = pairs(blocked), pairs(one_pass)
+    assert ours.keys() == theirs.keys()
+    for p, k in ours.items():
+        np.testing.assert_allclose(blocked.mechanics.spring[k], one_pass.mechanics.spring[theirs[p]],
+                                   rtol=1e-13, atol=1e-13 * float(jnp.max(jnp.abs(one_pass.mechanics.spring))))
+    assert float(jnp.max(one_pass.particles.temperature)) > 300.0  # the wall heated the bottom layer

@@ -373,3 +373,29 @@ def test_pair_sum_conserves_to_round_off():
             expected[a] += v
             expected[b] -= v
     np.testing.assert_allclose(total, expected, rtol=1e-12, atol=1e-12 * np.max(np.abs(f)))
+    # adding -f and subtracting f are the same IEEE operation: bit for bit
+    exchanged = np.asarray(neighbors.pair_exchange(jnp.asarray(f), pairs, n))
+    np.testing.assert_array_equal(exchanged, total)
+
+
+def test_pair_blocks_equal_one_pass_padded_or_not(monkeypatch):
+    monkeypatch.setattr(neighbors, "PAIR_BLOCK", 16)
+    monkeypatch.setattr(neighbors, "PAIR_BLOCKS_FROM", 2)
+    assert neighbors.half_pair_capacity(31) == 31  # under two blocks: as asked
+    assert neighbors.half_pair_capacity(32) == 32 and neighbors.half_pair_capacity(33) == 48
+    rng = np.random.default_rng(8)
+    n = 40
+    x = jnp.asarray(rng.normal(size=(n, 3)))
+
+    def per_pair(pairs, spring, unused):  # gathers of a closed-over array, a per-pair input, None kept None
+        i, j = pairs[:, 0], jnp.minimum(pairs[:, 1], n - 1)
+        return jnp.sqrt(jnp.sum((x[j] - x[i]) ** 2, axis=-1)), spring * 2.0 + x[i], unused
+
+    for c in (37, 48):  # padded to 48, and whole blocks
+        pairs = np.sort(rng.integers(0, n, (c, 2)), axis=1).astype(np.int32)
+        spring = jnp.asarray(rng.normal(size=(c, 3)))
+        one = per_pair(jnp.asarray(pairs), spring, None)
+        blocked = jax.jit(lambda p, s: neighbors.map_pair_blocks(per_pair, p, s, None))(pairs, spring)
+        assert blocked[2] is None and blocked[0].shape == (c,) and blocked[1].shape == (c, 3)
+        for a, b in zip(blocked[:2], one[:2]):
+            np.testing.assert_allclose(a, b, rtol=1e-15)
