@@ -52,7 +52,7 @@ import numpy as np
 from _common import markdown_table, write_section
 from thermal_step import jittered_packing
 
-from sintercond import neighbors, simulate
+from sintercond import neighbors, pair_list, simulate
 from sintercond.state import ParticleState
 
 A = 1e-4  # the lattice spacing of thermal_step.jittered_packing (m)
@@ -122,11 +122,11 @@ def rebuild_costs(centres, radii, skin, repeats=5):
         runs[name] = (run, positions, stale)
     if not np.array_equal(*tables.values()):
         raise AssertionError("the sorted cell list and jax-md's list hold different pairs")
-    half = neighbors.allocate_half_pairs(tables["sorted cell list"], positions, r, skin, 1.5)
+    half = pair_list.allocate_half_pairs(tables["sorted cell list"], positions, r, skin, 1.5)
 
     def half_and_remap(idx, old):
-        new = neighbors.half_pairs(idx, positions, r, skin, old.capacity)
-        return new, neighbors.remap_half_pairs(old.pairs, new.pairs, jnp.ones((old.capacity, 3)))
+        new = pair_list.half_pairs(idx, positions, r, skin, old.capacity)
+        return new, pair_list.remap_half_pairs(old.pairs, new.pairs, jnp.ones((old.capacity, 3)))
 
     idx = jnp.asarray(tables["sorted cell list"], jnp.int32)
     runs["half list + remap"] = (jax.jit(half_and_remap).lower(idx, half).compile(), idx, half)

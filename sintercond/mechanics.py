@@ -9,18 +9,18 @@ motion. :mod:`sintercond.simulate` builds the coupled step from it
 
 Pairs
 -----
-The laws run on a half pair list (:class:`sintercond.neighbors.HalfPairs`,
+The laws run on a half pair list (:class:`sintercond.pair_list.HalfPairs`,
 ``[capacity, 2]``, each pair ``i < j`` once, kept within
 ``r_i + r_j + skin``), built from the jax-md Dense list whenever that list
 is rebuilt (MECHANICS.md, "Contacts and history"). The force on ``i`` is
-added to ``i`` and subtracted from ``j`` (:func:`sintercond.neighbors.pair_exchange`),
+added to ``i`` and subtracted from ``j`` (:func:`sintercond.pair_list.pair_exchange`),
 so momentum is conserved by construction; the springs belong to the pair
 (``[capacity, 3]``, the spring of ``i`` relative to ``j``) and follow it
 through rebuilds and reallocations (:func:`remap_history`). The list is
 sorted by ``(i, j)``, so the sums over it do not depend on when the list was
 last rebuilt or on its capacity. The per-pair part (:func:`pair_loads`) is
 separate from the sums so that the coupled step can evaluate long lists
-block by block (:func:`sintercond.neighbors.map_pair_blocks`, on the CPU)
+block by block (:func:`sintercond.pair_list.map_pair_blocks`, on the CPU)
 and sum once.
 
 Walls (Remark 1)
@@ -53,7 +53,7 @@ import jax.numpy as jnp
 
 from sintercond import forces
 from sintercond.materials import softened_modulus
-from sintercond.neighbors import HalfPairs, pair_exchange, pair_sum, remap_half_pairs
+from sintercond.pair_list import HalfPairs, pair_exchange, pair_sum, remap_half_pairs
 from sintercond.state import pytree_dataclass
 
 
@@ -123,7 +123,7 @@ def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> 
       positions: ``[n, 3]`` (m), for shapes and dtype.
       contacts: the :class:`sintercond.simulate.Contacts` of
         :func:`sintercond.simulate.dynamic_contacts` (or its
-        :class:`sintercond.neighbors.HalfPairs`): the springs are laid on
+        :class:`sintercond.pair_list.HalfPairs`): the springs are laid on
         its half pair list.
     """
     half = getattr(contacts, "pairs", None) if not isinstance(contacts, HalfPairs) else contacts
@@ -165,7 +165,7 @@ def compiler_options(physics):
 class PairGeometry(NamedTuple):
     """The pairs of a half pair list ``[c, 2]`` (``i < j``; padding ``(n, n)``).
 
-    ``pairs``: the list (for :func:`sintercond.neighbors.pair_sum`); ``i``,
+    ``pairs``: the list (for :func:`sintercond.pair_list.pair_sum`); ``i``,
     ``j``: its ends, padding replaced by particle 0 (safe to gather);
     ``valid`` (a real pair); ``touching`` (overlap > 0); ``normal``
     ``[c, 3]`` unit vector from ``i`` to ``j`` (``e_z`` for padding);
@@ -337,7 +337,7 @@ def force_dtype(physics, dtype):
 def remap_history(state: MechanicalState, old_pairs, new_pairs) -> MechanicalState:
     """Carry the pair springs from the half list ``old_pairs`` to ``new_pairs`` by ``(i, j)`` identity.
 
-    :func:`sintercond.neighbors.remap_half_pairs`: a pair new to the list
+    :func:`sintercond.pair_list.remap_half_pairs`: a pair new to the list
     starts at zero; the lists may differ in capacity (a reallocation). Call
     it when the list is rebuilt (under the rebuild's ``lax.cond``).
     """

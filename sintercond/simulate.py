@@ -47,10 +47,10 @@ thermo-mechanical step); a Dense neighbour list with a skin (built from a
 sorted cell list, jax-md's Dense format; :func:`sintercond.neighbors.neighbor_list`) is updated
 inside the step, and whenever it is rebuilt a half pair list (each pair
 ``i < j`` once, within ``r_i + r_j + skin``;
-:class:`sintercond.neighbors.HalfPairs`) is rebuilt from it. The law is
+:class:`sintercond.pair_list.HalfPairs`) is rebuilt from it. The law is
 evaluated once per pair of the half list from the current overlaps at every
 step, and heat (and force) is added to one end and taken from the other
-(:func:`sintercond.neighbors.pair_exchange`): conserved by construction.
+(:func:`sintercond.pair_list.pair_exchange`): conserved by construction.
 Overflow of either list is a flag in the state, recovered by the host
 driver (:func:`sintercond.run.advance` with :func:`reallocate_neighbors`).
 """
@@ -71,9 +71,9 @@ from sintercond import mechanics, thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState
 from sintercond.neck import NECK_MODELS
-from sintercond.neighbors import (HalfPairs, allocate_half_pairs, did_buffer_overflow, did_rebuild, half_pair_capacity,
-                                  half_pair_count, half_pairs, half_pairs_overflowed, map_pair_blocks, padded_half_pairs,
-                                  pair_exchange, pair_sum)
+from sintercond.neighbors import did_buffer_overflow, did_rebuild
+from sintercond.pair_list import (HalfPairs, allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs,
+                                  half_pairs_overflowed, map_pair_blocks, padded_half_pairs, pair_exchange, pair_sum)
 from sintercond.network import network_laplacian
 from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -314,7 +314,7 @@ class Contacts:
         of each particle on each conducting wall (lifted), else None.
       neighbor_list: the neighbour list of dynamic contacts
         (:class:`sintercond.neighbors.NeighborList`), else None.
-      pairs: the half pair list (:class:`sintercond.neighbors.HalfPairs`,
+      pairs: the half pair list (:class:`sintercond.pair_list.HalfPairs`,
         ``[capacity, 2]``) of dynamic contacts, rebuilt with the Dense
         list, else None.
     """

@@ -376,7 +376,7 @@ def test_momentum_of_a_colliding_cloud_is_conserved_to_round_off_float32_forces_
 
 
 def test_pair_pass_by_blocks_equals_one_pass(monkeypatch):
-    from sintercond import neighbors
+    from sintercond import pair_list
 
     rng = np.random.default_rng(4)
     grid = np.array(np.meshgrid(*[np.arange(3)] * 3, indexing="ij")).reshape(3, -1).T * 2.02 * R
@@ -388,8 +388,8 @@ def test_pair_pass_by_blocks_equals_one_pass(monkeypatch):
     summary = lambda s: (s.particles.positions, s.mechanics.velocity, s.mechanics.spin, s.particles.temperature)  # noqa: E731
     sim, state, params = scene()
     one_pass = _run(sim, state, params, 150, 150, summary)[0]
-    monkeypatch.setattr(neighbors, "PAIR_BLOCK", 8)
-    monkeypatch.setattr(neighbors, "PAIR_BLOCKS_FROM", 2)
+    monkeypatch.setattr(pair_list, "PAIR_BLOCK", 8)
+    monkeypatch.setattr(pair_list, "PAIR_BLOCKS_FROM", 2)
     sim_b, rounded, _ = scene()  # capacity allocated in whole blocks
     assert rounded.contacts.pairs.capacity % 8 == 0 and rounded.contacts.pairs.capacity >= 16
     blocked = _run(sim_b, rounded, params, 150, 150, summary)[0]

@@ -88,7 +88,7 @@ def test_affine_shrinkage_is_a_linear_strain_toward_the_centroid():
 def test_either_list_overflowing_alone_is_flagged():
     """Bug caught (mutation 'dynamic skin overflow'): dropping the Dense list's flag survived the runs above, whose
     half list overflowed at the same time. Here each list is the tight one in turn, at the step that squeezes."""
-    from sintercond import neighbors
+    from sintercond import neighbors, pair_list
 
     rng = np.random.default_rng(6)
     centres = rng.uniform(0.0, 8.0, (120, 3))
@@ -96,11 +96,11 @@ def test_either_list_overflowing_alone_is_flagged():
     squeezed = jnp.asarray(centres.mean(axis=0) + 0.7 * (centres - centres.mean(axis=0)))
     for tight in ("dense", "half"):
         contacts, fns = simulate.dynamic_contacts(centres, radii, 0.2, 1.0 if tight == "dense" else 4.0)
-        pairs = neighbors.allocate_half_pairs(contacts.neighbors, centres, radii, fns.skin,
+        pairs = pair_list.allocate_half_pairs(contacts.neighbors, centres, radii, fns.skin,
                                               4.0 if tight == "dense" else 1.0)
         contacts = dataclasses.replace(contacts, pairs=pairs)
         after, _, overflow = jax.jit(simulate.follow_contacts, static_argnums=0)(fns, squeezed, jnp.asarray(radii),
                                                                                  contacts)
         assert bool(overflow), tight
         assert bool(neighbors.did_buffer_overflow(after.neighbor_list)) == (tight == "dense")
-        assert bool(neighbors.half_pairs_overflowed(after.pairs)) == (tight == "half")
+        assert bool(pair_list.half_pairs_overflowed(after.pairs)) == (tight == "half")

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sintercond import geometry, network, neighbors
+from sintercond import geometry, network, neighbors, pair_list
 
 
 def random_packing(n, seed, spread=1.0, polydispersity=0.5):
@@ -320,18 +320,18 @@ def test_half_pairs_are_the_size_aware_brute_force_pairs_sorted():
     skin = 0.15
     fns = free_list(radii, centres, skin)
     nbrs = fns.allocate(centres)
-    half = neighbors.allocate_half_pairs(nbrs.idx, centres, radii, skin, 1.3)
+    half = pair_list.allocate_half_pairs(nbrs.idx, centres, radii, skin, 1.3)
     expected = size_aware_pairs(centres, radii, skin)  # sorted by (i, j)
     pairs = np.asarray(half.pairs)
     assert half.pairs.dtype == jnp.int32 and int(half.demand) == len(expected)
     assert half.capacity == int(np.ceil(1.3 * len(expected)))
     assert [tuple(p) for p in pairs[:len(expected)].tolist()] == expected  # the pairs, in (i, j) order
     assert np.all(pairs[len(expected):] == len(radii))  # then padding (n, n)
-    assert not bool(neighbors.half_pairs_overflowed(half))
+    assert not bool(pair_list.half_pairs_overflowed(half))
     assert len(expected) < 0.75 * len(listed_pairs(nbrs.idx)) / 2  # the size-aware prune keeps fewer
     # too small: flagged, with the demand the host needs; the kept ones are the first in order
-    tight = jax.jit(neighbors.half_pairs, static_argnums=(3, 4))(nbrs.idx, centres, radii, skin, 50)
-    assert bool(neighbors.half_pairs_overflowed(tight)) and int(tight.demand) == len(expected)
+    tight = jax.jit(pair_list.half_pairs, static_argnums=(3, 4))(nbrs.idx, centres, radii, skin, 50)
+    assert bool(pair_list.half_pairs_overflowed(tight)) and int(tight.demand) == len(expected)
     assert [tuple(p) for p in np.asarray(tight.pairs).tolist()] == expected[:50]
 
 
@@ -347,14 +347,14 @@ def test_remap_half_pairs_follows_pairs_by_identity():
     old, new = random_list(120, 130), random_list(150, 171)  # overlapping sets, different capacities
     values = rng.normal(size=(130, 3))
     reference = {tuple(p): values[k] for k, p in enumerate(old.tolist()) if p[0] < p[1]}
-    out = np.asarray(jax.jit(neighbors.remap_half_pairs)(old, new, values))
+    out = np.asarray(jax.jit(pair_list.remap_half_pairs)(old, new, values))
     assert out.shape == (171, 3)
     carried = 0
     for k, p in enumerate(new.tolist()):
         np.testing.assert_array_equal(out[k], reference.get(tuple(p), np.zeros(3)))
         carried += tuple(p) in reference
     assert 0 < carried < 150  # some pairs carried, some new
-    empty = neighbors.remap_half_pairs(np.full((1, 2), n, np.int32), new, np.ones((1, 3)))
+    empty = pair_list.remap_half_pairs(np.full((1, 2), n, np.int32), new, np.ones((1, 3)))
     assert not np.any(np.asarray(empty))
 
 
@@ -364,7 +364,7 @@ def test_pair_sum_conserves_to_round_off():
     pairs = np.array(sorted({tuple(sorted(rng.choice(n, 2, replace=False))) for _ in range(300)}), np.int32)
     pairs = np.concatenate([pairs, np.full((7, 2), n, np.int32)])  # padding is dropped
     f = rng.normal(size=(len(pairs), 3)) * 10.0 ** rng.uniform(-3, 3, (len(pairs), 1))
-    total = np.asarray(neighbors.pair_sum(jnp.asarray(f), -jnp.asarray(f), pairs, n))
+    total = np.asarray(pair_list.pair_sum(jnp.asarray(f), -jnp.asarray(f), pairs, n))
     assert total.shape == (n, 3)
     assert np.max(np.abs(total.sum(axis=0))) < 1e-13 * np.max(np.abs(f))
     expected = np.zeros((n, 3))
@@ -374,15 +374,15 @@ def test_pair_sum_conserves_to_round_off():
             expected[b] -= v
     np.testing.assert_allclose(total, expected, rtol=1e-12, atol=1e-12 * np.max(np.abs(f)))
     # adding -f and subtracting f are the same IEEE operation: bit for bit
-    exchanged = np.asarray(neighbors.pair_exchange(jnp.asarray(f), pairs, n))
+    exchanged = np.asarray(pair_list.pair_exchange(jnp.asarray(f), pairs, n))
     np.testing.assert_array_equal(exchanged, total)
 
 
 def test_pair_blocks_equal_one_pass_padded_or_not(monkeypatch):
-    monkeypatch.setattr(neighbors, "PAIR_BLOCK", 16)
-    monkeypatch.setattr(neighbors, "PAIR_BLOCKS_FROM", 2)
-    assert neighbors.half_pair_capacity(31) == 31  # under two blocks: as asked
-    assert neighbors.half_pair_capacity(32) == 32 and neighbors.half_pair_capacity(33) == 48
+    monkeypatch.setattr(pair_list, "PAIR_BLOCK", 16)
+    monkeypatch.setattr(pair_list, "PAIR_BLOCKS_FROM", 2)
+    assert pair_list.half_pair_capacity(31) == 31  # under two blocks: as asked
+    assert pair_list.half_pair_capacity(32) == 32 and pair_list.half_pair_capacity(33) == 48
     rng = np.random.default_rng(8)
     n = 40
     x = jnp.asarray(rng.normal(size=(n, 3)))
@@ -395,7 +395,7 @@ def test_pair_blocks_equal_one_pass_padded_or_not(monkeypatch):
         pairs = np.sort(rng.integers(0, n, (c, 2)), axis=1).astype(np.int32)
         spring = jnp.asarray(rng.normal(size=(c, 3)))
         one = per_pair(jnp.asarray(pairs), spring, None)
-        blocked = jax.jit(lambda p, s: neighbors.map_pair_blocks(per_pair, p, s, None))(pairs, spring)
+        blocked = jax.jit(lambda p, s: pair_list.map_pair_blocks(per_pair, p, s, None))(pairs, spring)
         assert blocked[2] is None and blocked[0].shape == (c,) and blocked[1].shape == (c, 3)
         for a, b in zip(blocked[:2], one[:2]):
             np.testing.assert_allclose(a, b, rtol=1e-15)
