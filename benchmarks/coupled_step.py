@@ -3,7 +3,7 @@
 Usage: python benchmarks/coupled_step.py [--sizes 10000 100000] [--steps 200] [--ranks 1 2] [--lammps PATH/TO/lmp]
                                          [--no-peers] [--dtypes float64 float32-forces float32]
                                          [--order lattice|morton] [--compare-orders REPEATS]
-                                         [--compare-options REPEATS]
+                                         [--compare-options REPEATS] [--compare-blocks REPEATS]
 
 The scene: a jittered simple-cubic block of side^3 spheres (side = round(n^(1/3))),
 radii 3 mm * U(0.99, 1.01), spacing 1.99 * 3 mm (about half the pairs of the
@@ -66,7 +66,7 @@ import numpy as np
 from _common import markdown_table, write_section
 from peers_thermal import lammps_executable, loop_time
 
-from sintercond import mechanics, network, simulate
+from sintercond import mechanics, network, pair_list, simulate
 from sintercond.run import _compiled_chunk, advance
 from sintercond.scene import restitution_damping_ratio
 from sintercond.state import particle_state
@@ -216,19 +216,41 @@ def compare_orders(centres, radii, temperature, steps, repeats, variant="float64
         sim, _, state, params, _ = sintercond_setup(centres, radii, temperature, variant, None, order)
         chunk = _compiled_chunk(sim, steps)
         runs[order] = (chunk, state, params, jax.block_until_ready(chunk(state, params)))
-    best = {(order, clock): np.inf for order in runs for clock in ("wall", "cpu")}
-    for _ in range(repeats):
-        for order, (chunk, state, params, _) in runs.items():
-            wall, cpu = time.perf_counter(), time.process_time()
-            jax.block_until_ready(chunk(state, params))
-            best[order, "wall"] = min(best[order, "wall"], time.perf_counter() - wall)
-            best[order, "cpu"] = min(best[order, "cpu"], time.process_time() - cpu)
+    best = _alternate(runs, repeats, steps)
     back = np.argsort(network.morton_order(centres))
     a, b = runs["lattice"][3], runs["morton"][3]
     differences = [float(np.max(np.abs(np.asarray(x) - np.asarray(y)[back]))) for x, y in (
         (a.particles.positions, b.particles.positions), (a.mechanics.velocity, b.mechanics.velocity),
         (a.particles.temperature, b.particles.temperature))]
-    return {key: 1e3 * value / steps for key, value in best.items()}, differences
+    return best, differences
+
+
+def _alternate(runs, repeats, steps):
+    """``{(name, "wall" | "cpu"): ms/step}``: the min over ``repeats`` of each run of ``runs`` (name -> (compiled,
+    state, params, ...)), the runs alternating so that the machine's drift hits them alike."""
+    best = {(name, clock): np.inf for name in runs for clock in ("wall", "cpu")}
+    for _ in range(repeats):
+        for name, (compiled, state, params, *_) in runs.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            jax.block_until_ready(compiled(state, params))
+            best[name, "wall"] = min(best[name, "wall"], time.perf_counter() - wall)
+            best[name, "cpu"] = min(best[name, "cpu"], time.process_time() - cpu)
+    return {key: 1e3 * value / steps for key, value in best.items()}
+
+
+def _final_differences(runs):
+    """Max differences of the final positions, velocities, temperatures, spins and springs (the springs by pair
+    order, up to the shorter list) of each run of ``runs`` from the first run."""
+    first = next(iter(runs.values()))[-1]
+
+    def differences(b):
+        m = min(first.mechanics.spring.shape[0], b.mechanics.spring.shape[0])
+        return [float(np.max(np.abs(np.asarray(x) - np.asarray(y)))) for x, y in (
+            (first.particles.positions, b.particles.positions), (first.mechanics.velocity, b.mechanics.velocity),
+            (first.particles.temperature, b.particles.temperature), (first.mechanics.spin, b.mechanics.spin),
+            (first.mechanics.spring[:m], b.mechanics.spring[:m]))]
+
+    return {name: differences(run[-1]) for name, run in runs.items()}
 
 
 OPTION_VARIANTS = {"kept": {}, "vector width 256": {"xla_cpu_prefer_vector_width": 256}}
@@ -250,20 +272,28 @@ def compare_options(centres, radii, temperature, steps, repeats, variant="float6
     for name, overrides in OPTION_VARIANTS.items():
         compiled = jax.jit(run_chunk, compiler_options={**mechanics.COMPILER_OPTIONS, **overrides}).lower(
             state, params).compile()
-        runs[name] = (compiled, jax.block_until_ready(compiled(state, params)))
-    best = {(name, clock): np.inf for name in runs for clock in ("wall", "cpu")}
-    for _ in range(repeats):
-        for name, (compiled, _) in runs.items():
-            wall, cpu = time.perf_counter(), time.process_time()
-            jax.block_until_ready(compiled(state, params))
-            best[name, "wall"] = min(best[name, "wall"], time.perf_counter() - wall)
-            best[name, "cpu"] = min(best[name, "cpu"], time.process_time() - cpu)
-    first = next(iter(runs.values()))[1]
-    differences = {name: [float(np.max(np.abs(np.asarray(x) - np.asarray(y)))) for x, y in (
-        (first.particles.positions, b.particles.positions), (first.mechanics.velocity, b.mechanics.velocity),
-        (first.particles.temperature, b.particles.temperature), (first.mechanics.spin, b.mechanics.spin),
-        (first.mechanics.spring, b.mechanics.spring))] for name, (_, b) in runs.items()}
-    return {key: 1e3 * value / steps for key, value in best.items()}, differences
+        runs[name] = (compiled, state, params, jax.block_until_ready(compiled(state, params)))
+    return _alternate(runs, repeats, steps), _final_differences(runs)
+
+
+BLOCK_VARIANTS = {"one pass": None, "blocks of 16384": 16384, "blocks of 8192": 8192, "blocks of 32768": 32768}
+"""``--compare-blocks`` variants: ``pair_list.PAIR_BLOCK`` (None: the whole list in one pass)."""
+
+
+def compare_blocks(centres, radii, temperature, steps, repeats, variant="float64"):
+    """Min ms/step (wall, process CPU) of the chunk with the pair pass by blocks of each of :data:`BLOCK_VARIANTS`
+    (the capacity allocated in whole blocks), run alternately; and the max differences from the first one."""
+    runs = {}
+    for name, block_size in BLOCK_VARIANTS.items():
+        saved = pair_list.PAIR_BLOCK, pair_list.PAIR_BLOCKS_FROM
+        pair_list.PAIR_BLOCK, pair_list.PAIR_BLOCKS_FROM = (1 << 62, 1) if block_size is None else (block_size, 4)
+        try:  # the capacity is allocated, and the chunk traced, under the variant's block size
+            sim, _, state, params, _ = sintercond_setup(centres, radii, temperature, variant, None)
+            chunk = _compiled_chunk(sim, steps)
+            runs[name] = (chunk, state, params, jax.block_until_ready(chunk(state, params)))
+        finally:
+            pair_list.PAIR_BLOCK, pair_list.PAIR_BLOCKS_FROM = saved
+    return _alternate(runs, repeats, steps), _final_differences(runs)
 
 
 def write_data(path, centres, radii):
@@ -343,17 +373,23 @@ def main():
     parser.add_argument("--compare-options", type=int, default=0, metavar="REPEATS",
                         help="only time the chunk compiled with mechanics.COMPILER_OPTIONS against OPTION_VARIANTS "
                              "(float64, alternating, min of REPEATS); prints, writes nothing")
+    parser.add_argument("--compare-blocks", type=int, default=0, metavar="REPEATS",
+                        help="only time the pair pass in one pass against blocks of BLOCK_VARIANTS pairs "
+                             "(float64, alternating, min of REPEATS); prints, writes nothing")
     args = parser.parse_args()
-    if args.compare_options:
+    for repeats, compare, variants in ((args.compare_options, compare_options, OPTION_VARIANTS),
+                                       (args.compare_blocks, compare_blocks, BLOCK_VARIANTS)):
+        if not repeats:
+            continue
         for n in args.sizes:
             centres, radii, temperature = block(n)
-            best, differences = compare_options(centres, radii, temperature, args.steps, args.compare_options)
-            kept = best[next(iter(OPTION_VARIANTS)), "wall"]
-            for name in OPTION_VARIANTS:
+            best, differences = compare(centres, radii, temperature, args.steps, repeats)
+            first = next(iter(variants))
+            for name in variants:
                 print(f"{len(radii):,} spheres, {args.steps} steps, {name}: ms/step wall {best[name, 'wall']:.2f}, "
-                      f"CPU {best[name, 'cpu']:.2f}; wall / kept's {best[name, 'wall'] / kept:.3f}; max differences "
-                      "from kept: positions %.2g m, velocities %.2g m/s, temperatures %.2g K, spins %.2g rad/s, "
-                      "springs %.2g m" % tuple(differences[name]), flush=True)
+                      f"CPU {best[name, 'cpu']:.2f}; wall / {first}'s {best[name, 'wall'] / best[first, 'wall']:.3f}; "
+                      f"max differences from {first}: positions %.2g m, velocities %.2g m/s, temperatures %.2g K, "
+                      "spins %.2g rad/s, springs %.2g m" % tuple(differences[name]), flush=True)
         return
     if args.compare_orders:
         for n in args.sizes:
