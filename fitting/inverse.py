@@ -23,7 +23,10 @@ with ``mu`` the adjoint masked on held particles and ``a = dt / (c m)``. States
 are checkpointed every ``~sqrt(n_steps)`` steps and each segment is recomputed
 once on the way back, so memory is ``O(sqrt(n_steps))`` particle-sized arrays
 and the gradient sweeps the network three times per step (forward, recompute,
-adjoint): about 4x the forward time on a CPU (benchmarks/RESULTS.md).
+adjoint). Each sweep is one gather over the table; the adjoint carries
+``a mu`` so that its gather reads one array, and the recompute writes ``H``
+in place into one buffer shared by all segments: about 3.3-3.5x the forward
+time on a CPU, where the three gathers alone are 3x (benchmarks/RESULTS.md).
 
 Precision: float64 by default. Built in float32 (``SINTERCOND_ENABLE_X64=0``)
 the readings of a 10 K flash at 300 K stay within 1e-3 K of float64 over
@@ -265,7 +268,9 @@ def _adjoint_bwd(experiment, residuals, readings_bar):
             weight = masked(weight - kappa * rate * laplacian(weight, experiment.table))
             return weight, acc_inflow, acc_power
 
-        weight, acc_inflow, acc_power = jax.lax.fori_loop(0, length, back, (weight, acc_inflow, acc_power))
+        # two steps per iteration: XLA sums both steps' accumulations in one pass, and the second gather writes
+        # into the loop's own buffer (no copy of the weight)
+        weight, acc_inflow, acc_power = jax.lax.fori_loop(0, length, back, (weight, acc_inflow, acc_power), unroll=2)
         return (weight, acc_inflow, acc_power, inflows), None
 
     zeros = jnp.zeros(n, readings_bar.dtype)
