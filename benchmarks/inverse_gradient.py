@@ -210,7 +210,8 @@ def main():
               "grad rel. diff to adjoint"]
     body = (f"{n:,} particles (sintered SC lattice, 6 contacts each), float64, 8 probes read every 10 steps, "
             f"loss = sum of squared readings, gradient d/d(kappa, c).\n\n" + markdown_table(header, rows) +
-            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\n" + load_line(load_start) + "\n\n" + plot(rows, args.section))
+            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\n" + load_line(load_start) + "\n\n" +
+            plot(rows, args.section))
     print(body)
     write_section(args.section, "python benchmarks/inverse_gradient.py " + " ".join(sys.argv[1:]), body)
 
