@@ -16,6 +16,8 @@ Variants, each in its own process so that its peak memory is its own:
   through the rates s / C and 1 / C formed once per rollout, whose cotangents it
   accumulates per particle).
 * autodiff plain: the same rollout without checkpoints (every step's residuals kept).
+* reference adjoint (with --reference-adjoint FILE): the `_adjoint_readings` of another version of
+  fitting/inverse.py (e.g. `git show REV:fitting/inverse.py > /tmp/old_inverse.py`), to compare adjoints.
 
 Times: the best of alternating runs of the variant and the forward program in the same process
 (the VM's speed drifts by up to 2x over minutes, so ratios between processes are unreliable).
@@ -39,7 +41,7 @@ import time
 
 import numpy as np
 
-VARIANTS = ("forward", "adjoint", "autodiff plain", "autodiff checkpointed")
+VARIANTS = ("forward", "adjoint", "autodiff plain", "autodiff checkpointed", "reference adjoint")
 
 
 def build(path, particles):
@@ -56,7 +58,18 @@ def build(path, particles):
     return len(radii)
 
 
-def run_one(path, variant, steps, max_gb):
+def _reference_readings(path):
+    """``_adjoint_readings`` of the fitting/inverse.py version stored at ``path``."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("reference_inverse", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module._adjoint_readings
+
+
+def run_one(path, variant, steps, max_gb, reference=None):
     import jax
     import jax.numpy as jnp
 
@@ -82,6 +95,9 @@ def run_one(path, variant, steps, max_gb):
         fn = loss
     elif variant == "adjoint":
         fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(ex.temperatures(k, c) ** 2), argnums=(0, 1)))
+    elif variant == "reference adjoint":
+        readings = _reference_readings(reference)
+        fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(readings(ex, k, c) ** 2), argnums=(0, 1)))
     elif variant == "autodiff plain":
         fn = jax.jit(jax.value_and_grad(lambda k, c: jnp.sum(unchecked(k, c) ** 2), argnums=(0, 1)))
     else:
@@ -120,7 +136,7 @@ def run_one(path, variant, steps, max_gb):
     return out
 
 
-def plot(rows):
+def plot(rows, name="inverse_gradient"):
     """Gradient cost against the number of steps: seconds of each variant, and its ratio to the forward run."""
     from _common import new_figure, number, save_figure
 
@@ -140,7 +156,7 @@ def plot(rows):
     for ax in (seconds_ax, ratio_ax):
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
-    return save_figure("inverse_gradient", fig, "Gradient cost against time steps: adjoint and JAX reverse mode")
+    return save_figure(name, fig, "Gradient cost against time steps: adjoint and JAX reverse mode")
 
 
 def main():
@@ -150,11 +166,14 @@ def main():
     parser.add_argument("--max-gb", type=float, default=40.0)
     parser.add_argument("--max-checkpointed-steps", type=int, default=100_000,
                         help="skip 'autodiff checkpointed' beyond this many steps")
-    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS[:4]), choices=VARIANTS)
+    parser.add_argument("--reference-adjoint", help="a version of fitting/inverse.py whose adjoint runs as "
+                        "'reference adjoint'")
+    parser.add_argument("--section", default="inverse_gradient", help="RESULTS.md section (and figure) to write")
     parser.add_argument("--one", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
-        print(json.dumps(run_one(args.one[0], args.one[1], int(args.one[2]), args.max_gb)))
+        print(json.dumps(run_one(args.one[0], args.one[1], int(args.one[2]), args.max_gb, args.reference_adjoint)))
         return
 
     from _common import markdown_table, write_section
@@ -170,8 +189,9 @@ def main():
                 if variant == "autodiff checkpointed" and steps > args.max_checkpointed_steps:
                     rows.append([f"{steps:,}", variant, "not run (time)", "-", "-", "-", "-"])
                     continue
+                reference = ["--reference-adjoint", args.reference_adjoint] if args.reference_adjoint else []
                 proc = subprocess.run([sys.executable, __file__, "--one", str(path), variant, str(steps),
-                                       "--max-gb", str(args.max_gb)], capture_output=True, text=True)
+                                       "--max-gb", str(args.max_gb)] + reference, capture_output=True, text=True)
                 if proc.returncode:
                     print(proc.stderr[-3000:], file=sys.stderr)
                     raise SystemExit(f"{variant} at {steps} steps failed")
@@ -180,7 +200,7 @@ def main():
                 ratio = f"{r['ratio']:.2f}x" if r["ratio"] else "-"
                 grad = results[(steps, "adjoint")].get("grad") if variant != "forward" else None
                 agree = "-"
-                if variant.startswith("autodiff") and r.get("grad") and grad:
+                if variant != "adjoint" and r.get("grad") and grad:
                     agree = f"{max(abs(a / b - 1) for a, b in zip(r['grad'], grad)):.1e}"
                 rows.append([f"{steps:,}", variant, f"{r['seconds']:.3f}" if r["seconds"] else "not run",
                              ratio, f"{r['xla_gb']:.3f}", f"{r['rss_gb']:.2f}" if r["rss_gb"] is not None else "-",
@@ -190,9 +210,10 @@ def main():
               "grad rel. diff to adjoint"]
     body = (f"{n:,} particles (sintered SC lattice, 6 contacts each), float64, 8 probes read every 10 steps, "
             f"loss = sum of squared readings, gradient d/d(kappa, c).\n\n" + markdown_table(header, rows) +
-            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\n" + load_line(load_start) + "\n\n" + plot(rows))
+            f"\n\nNot run: XLA's estimate above {args.max_gb:g} GB.\n\n" + load_line(load_start) + "\n\n" +
+            plot(rows, args.section))
     print(body)
-    write_section("inverse_gradient", "python benchmarks/inverse_gradient.py " + " ".join(sys.argv[1:]), body)
+    write_section(args.section, "python benchmarks/inverse_gradient.py " + " ".join(sys.argv[1:]), body)
 
 
 if __name__ == "__main__":

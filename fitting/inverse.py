@@ -23,7 +23,10 @@ with ``mu`` the adjoint masked on held particles and ``a = dt / (c m)``. States
 are checkpointed every ``~sqrt(n_steps)`` steps and each segment is recomputed
 once on the way back, so memory is ``O(sqrt(n_steps))`` particle-sized arrays
 and the gradient sweeps the network three times per step (forward, recompute,
-adjoint): about 4x the forward time on a CPU (benchmarks/RESULTS.md).
+adjoint). Each sweep is one gather over the table; the adjoint carries
+``a mu`` so that its gather reads one array, and the recompute writes ``H``
+in place into one buffer shared by all segments: about 3.3-3.5x the forward
+time on a CPU, where the three gathers alone are 3x (benchmarks/RESULTS.md).
 
 Precision: float64 by default. Built in float32 (``SINTERCOND_ENABLE_X64=0``)
 the readings of a 10 K flash at 300 K stay within 1e-3 K of float64 over
@@ -178,9 +181,13 @@ def _step(experiment, kappa, specific_heat, temperature, k):
     """The simulator's explicit update (:func:`sintercond.thermal.explicit_update`) keeping ``H``, the inflow at
     kappa = 1, which the adjoint needs."""
     inflow = heat_inflow(temperature, experiment.table)
-    new = thermal.explicit_update(temperature, kappa * inflow + _power(experiment, k), specific_heat * experiment.mass,
-                                  experiment.dt, experiment.fixed_mask, experiment.fixed_temperature)
-    return new, inflow
+    return _update(experiment, kappa, specific_heat, temperature, inflow, k), inflow
+
+
+def _update(experiment, kappa, specific_heat, temperature, inflow, k):
+    """Step ``k``'s new temperatures from the inflow ``H`` at kappa = 1 (W)."""
+    return thermal.explicit_update(temperature, kappa * inflow + _power(experiment, k), specific_heat * experiment.mass,
+                                   experiment.dt, experiment.fixed_mask, experiment.fixed_temperature)
 
 
 def _run(experiment, kappa, specific_heat, temperature, k0, length):
@@ -226,48 +233,69 @@ def _adjoint_bwd(experiment, residuals, readings_bar):
     per_step = jnp.zeros((experiment.n_steps, p), readings_bar.dtype).at[every - 1::every].set(
         readings_bar[: experiment.n_steps // every])
     rate = experiment.dt / (specific_heat * experiment.mass)
-    held = None if experiment.fixed_mask is None else experiment.fixed_mask
+    held = experiment.fixed_mask
+
+    def masked(x):
+        return x if held is None else jnp.where(held, 0.0, x)
+
+    probe_rate = masked(rate)[experiment.probes]
+    heated = _heated_particles(experiment)
 
     def backward_segment(carry, xs):
         start, k0, bar = xs
         length = bar.shape[0]
+        weight, acc_inflow, acc_power, inflows = carry
 
-        def record(c, _):  # recompute the segment, keeping H per step
-            t, k = c
-            t_new, inflow = _step(experiment, kappa, specific_heat, t, k)
-            return (t_new, k + 1), inflow
+        def record(j, c):  # recompute the segment, keeping H per step in the buffer (one buffer for all segments)
+            t, inflows = c
+            inflows = jax.lax.dynamic_update_index_in_dim(inflows, heat_inflow(t, experiment.table), j, 0)
+            # H read back from the buffer: the gather writes it there in place, and the update reads it
+            inflow = jax.lax.dynamic_index_in_dim(inflows, j, keepdims=False)
+            return _update(experiment, kappa, specific_heat, t, inflow, k0 + j), inflows
 
-        _, inflows = jax.lax.scan(record, (start, k0), None, length=length)
+        _, inflows = jax.lax.fori_loop(0, length, record, (start, inflows))
 
-        def back(c, xs):
-            # per-particle accumulators (reduced once at the end): one fused pass per step
-            adjoint, acc_inflow, acc_power = c
-            inflow, bar_j, k = xs
-            adjoint = adjoint.at[experiment.probes].add(bar_j)
-            mu = adjoint if held is None else jnp.where(held, 0.0, adjoint)
-            rate_mu = rate * mu
+        def back(i, c):
+            # weight = a mu, the adjoint scaled by a = dt / (c m) and masked on held particles: the one array the
+            # network's gather reads (a product would be gathered factor by factor)
+            weight, acc_inflow, acc_power = c
+            j = length - 1 - i
+            k = k0 + j
+            weight = weight.at[experiment.probes].add(probe_rate * bar[j])
             on = jnp.asarray(k, rate.dtype) * experiment.dt < experiment.pulse_duration
-            acc_inflow = acc_inflow + rate_mu * inflow
-            acc_power = acc_power + jnp.where(on, rate_mu, 0.0)
-            adjoint = mu - kappa * laplacian(rate_mu, experiment.table)
-            return (adjoint, acc_inflow, acc_power), None
+            acc_inflow = acc_inflow + weight * jax.lax.dynamic_index_in_dim(inflows, j, keepdims=False)
+            acc_power = acc_power + jnp.where(on, weight if heated is None else weight[heated], 0.0)
+            weight = masked(weight - kappa * rate * laplacian(weight, experiment.table))
+            return weight, acc_inflow, acc_power
 
-        ks = k0 + jnp.arange(length)
-        carry, _ = jax.lax.scan(back, carry, (inflows, bar, ks), reverse=True)
-        return carry, None
+        # two steps per iteration: XLA sums both steps' accumulations in one pass, and the second gather writes
+        # into the loop's own buffer (no copy of the weight)
+        weight, acc_inflow, acc_power = jax.lax.fori_loop(0, length, back, (weight, acc_inflow, acc_power), unroll=2)
+        return (weight, acc_inflow, acc_power, inflows), None
 
     zeros = jnp.zeros(n, readings_bar.dtype)
-    carry = (zeros, zeros, zeros)
+    carry = (zeros, zeros, zeros if heated is None else jnp.zeros(len(heated), readings_bar.dtype),
+             jnp.zeros((seg, n), readings_bar.dtype))
     if tail:
         carry, _ = backward_segment(carry, (tail_start, n_seg * seg, per_step[n_seg * seg:]))
     if n_seg:
         bars = per_step[: n_seg * seg].reshape(n_seg, seg, p)
         carry, _ = jax.lax.scan(backward_segment, carry, (starts, jnp.arange(n_seg) * seg, bars), reverse=True)
-    _, acc_inflow, acc_power = carry
+    _, acc_inflow, acc_power, _ = carry
+    power = experiment.power if heated is None else experiment.power[heated]
     # d/d kappa of T + a (kappa H + q) is a H; d/dc is -(a / c)(kappa H + q)
     g_kappa = jnp.sum(acc_inflow)
-    g_c = -(kappa * g_kappa + jnp.sum(acc_power * experiment.power)) / specific_heat
+    g_c = -(kappa * g_kappa + jnp.sum(acc_power * power)) / specific_heat
     return g_kappa, g_c
+
+
+def _heated_particles(experiment):
+    """Indices of the particles the pulse heats when they are few (a flash heats one face), else None.
+
+    The adjoint then accumulates the pulse's cotangent on those alone, not in a pass over every particle.
+    """
+    heated = np.flatnonzero(np.asarray(experiment.power))
+    return jnp.asarray(heated, jnp.int32) if len(heated) <= experiment.table.n_particles // 8 else None
 
 
 _adjoint_readings.defvjp(_adjoint_forward, _adjoint_bwd)

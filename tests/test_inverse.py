@@ -59,15 +59,21 @@ def test_adjoint_gradient_equals_reverse_mode_and_finite_differences(n_steps, sa
         assert float(adjoint[k]) == pytest.approx(fd, rel=1e-6, abs=1e-12)
 
 
-def test_adjoint_with_held_particles_and_walls():
+@pytest.mark.parametrize("heated", ["face", "edge"])
+def test_adjoint_with_held_particles_and_walls(heated):
+    """150 steps: 11 segments of 13 and a tail of 7; probe 5 is held. The pulse heats a face (16 of 64 particles)
+    or an edge (4: the adjoint then accumulates the pulse's cotangent on the heated particles alone)."""
     centres, radii = _lattice(4)
     table = network.contact_table(centres, radii, 1.0)
     walls = network.wall_conductance(centres, radii, 1.0, axis=2, position=-0.47 * D)
     table = table.with_walls(walls, jnp.full(len(radii), 350.0))
     mass = RHO * 4 / 3 * np.pi * radii**3
     held = jnp.asarray(centres[:, 0] == 0.0)
+    on_face = centres[:, 1] == 0.0
+    on_edge = on_face & (centres[:, 2] == 0.0)
     ex = inverse.ProbeExperiment(table=table, mass=jnp.asarray(mass), initial=jnp.full(len(radii), 300.0),
-                                 power=jnp.where(jnp.asarray(centres[:, 1] == 0.0), 1e-3, 0.0), pulse_duration=0.02,
+                                 power=jnp.where(jnp.asarray(on_edge if heated == "edge" else on_face), 1e-3, 0.0),
+                                 pulse_duration=0.02,
                                  dt=0.4 * float(thermal.stable_time_step(mass * C_TRUE, table)) / KAPPA_TRUE,
                                  n_steps=150, save_every=3, probes=jnp.asarray([5, 40, 63]), fixed_mask=held,
                                  fixed_temperature=jnp.full(len(radii), 320.0))
