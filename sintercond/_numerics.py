@@ -10,6 +10,22 @@ evaluate, and select again, so values *and* gradients stay finite
 import jax.numpy as jnp
 
 
+def materialized(x):
+    """``x`` unchanged (bitwise, but ``-0.0`` becomes ``0.0``), computed into its own buffer before its consumers run.
+
+    XLA's CPU fusion copies cheap elementwise producers into every consumer
+    that reads them. A gather of ``a * b`` then reads both ``a`` and ``b`` at
+    every gathered index (about twice the cost of gathering one array;
+    benchmarks/RESULTS.md, ``inverse_gradient``), and a per-contact scalar
+    chain (a force magnitude, a stiffness) is evaluated again in each
+    ``[c, 3]`` output that uses it, once per component (the contact laws,
+    :func:`sintercond.mechanics.pair_loads`). ``optimization_barrier`` is
+    removed before fusion on the CPU; a reduction is not fused into its
+    consumers, so ``x`` goes through a two-term sum with zero (``x + 0 = x``).
+    """
+    return jnp.sum(jnp.stack([x, jnp.zeros_like(x)], axis=-1), axis=-1)
+
+
 def safe_sqrt(x):
     """``sqrt(max(x, 0))`` whose gradient is 0, not NaN/inf, where ``x <= 0``."""
     positive = x > 0

@@ -23,22 +23,9 @@ def self_adjoint(fn, residuals, x, transpose_fn=None):
     """``fn(residuals, x)``, linear in ``x`` and symmetric: its transpose is ``fn(residuals, .)`` itself.
 
     ``transpose_fn(residuals, ct)``: the same map written for cotangents
-    (e.g. with its input materialised first, :func:`materialized`); default ``fn``.
+    (e.g. with its input materialised first, :func:`sintercond._numerics.materialized`); default ``fn``.
     """
     return linear_call(fn, fn if transpose_fn is None else transpose_fn, residuals, x)
-
-
-def materialized(x):
-    """``x`` unchanged (bitwise), computed into its own buffer before its consumers run.
-
-    XLA's CPU fusion copies cheap elementwise producers into a gather that
-    reads them: a gather of ``a * b`` then reads both ``a`` and ``b`` at every
-    gathered index, which costs about twice the gather of one array
-    (benchmarks/RESULTS.md, ``inverse_gradient``). ``optimization_barrier`` is
-    removed before fusion on the CPU; a reduction is not fused into its
-    consumers, so ``x`` goes through a two-term sum with zero (``x + 0 = x``).
-    """
-    return jax.numpy.sum(jax.numpy.stack([x, jax.numpy.zeros_like(x)], axis=-1), axis=-1)
 
 
 def _eval(jaxpr, consts, args):

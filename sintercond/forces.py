@@ -42,7 +42,7 @@ import math
 
 import jax.numpy as jnp
 
-from sintercond._numerics import as_float_arrays, safe_divide, safe_norm, safe_power, safe_sqrt
+from sintercond._numerics import as_float_arrays, materialized, safe_divide, safe_norm, safe_power, safe_sqrt
 
 SOLID_SPHERE_INERTIA = 0.4
 """``I = (2/5) m r^2`` of a solid sphere (Sect. 2): the factor ``I / (m r^2)``."""
@@ -342,9 +342,10 @@ def _stick_slip(trial_spring, rate, stiffness, damping, static_limit, dynamic_li
     reproduces the slip force, ``s = -(f + d rate)/k`` (Eq. 13 with
     erratum 1's sign). ``k = 0`` gives a zero spring.
     """
-    stiffness, damping = stiffness[..., None], damping[..., None]
+    # computed once each, not in every [..., 3] consumer per component (materialized)
+    stiffness, damping = materialized(stiffness)[..., None], materialized(damping)[..., None]
     trial = -stiffness * trial_spring - damping * rate
-    trial_size = safe_norm(trial)
+    trial_size = materialized(safe_norm(trial))
     slipping = trial_size > static_limit
     if slip_direction == "trial":
         direction = safe_divide(trial, trial_size[..., None])

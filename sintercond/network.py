@@ -23,7 +23,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond._symmetric import materialized, self_adjoint
+from sintercond._numerics import materialized
+from sintercond._symmetric import self_adjoint
 from sintercond._validation import require_finite, require_positive
 from sintercond.conductance import pair_conductance, validate_pair_conductance_inputs
 from sintercond.neighbors import cell_list_pairs, minimum_image

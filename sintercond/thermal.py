@@ -31,11 +31,12 @@ import numpy as np
 from jax.scipy.sparse.linalg import cg
 
 from sintercond import heat_sources
+from sintercond._numerics import materialized
+from sintercond._symmetric import linear_call
 from sintercond._validation import require_positive
 from sintercond.conductance import validate_pair_conductance_inputs
 from sintercond.network import (ContactTable, contact_table, heat_inflow, gather_laplacian, laplacian, network_laplacian,
                                 total_conductance, wall_inflow)
-from sintercond._symmetric import linear_call, materialized
 
 
 def stable_time_step(capacity, table: ContactTable):
