@@ -7,6 +7,7 @@ evaluate, and select again, so values *and* gradients stay finite
 (jax-md ``util.safe_mask``, optax ``safe_norm``).
 """
 
+import jax
 import jax.numpy as jnp
 
 
@@ -22,8 +23,14 @@ def materialized(x):
     :func:`sintercond.mechanics.pair_loads`). ``optimization_barrier`` is
     removed before fusion on the CPU; a reduction is not fused into its
     consumers, so ``x`` goes through a two-term sum with zero (``x + 0 = x``).
+    float32 is summed in float64 (exact both ways): XLA:CPU gives float32
+    reductions to its YNNPACK library fusions, which write the stacked pair
+    out and sum it in a second kernel (about 15 of the 26 ms of the float32
+    coupled step at 1e5 spheres, benchmarks/RESULTS.md).
     """
-    return jnp.sum(jnp.stack([x, jnp.zeros_like(x)], axis=-1), axis=-1)
+    wide = x.dtype == jnp.float32 and jax.config.read("jax_enable_x64")
+    y = x.astype(jnp.float64) if wide else x
+    return jnp.sum(jnp.stack([y, jnp.zeros_like(y)], axis=-1), axis=-1).astype(x.dtype)
 
 
 def safe_sqrt(x):
