@@ -173,8 +173,9 @@ MUTANTS = [
      "state = sim_module.init_state(particles, contacts, dt, 0)", [TEETH]),
     ("held ignored", "sintercond/thermal.py", "    return jnp.where(fixed_mask, fixed_temperature, new)",
      "    return new", THERMAL[:1]),
-    ("symmetric transpose", "sintercond/network.py", "tangent = self_adjoint(_gather_laplacian, (conductance, neighbors), dx)",
-     "tangent = self_adjoint(lambda t, v: 0.5 * _gather_laplacian(t, v), (conductance, neighbors), dx)",
+    ("symmetric transpose", "sintercond/network.py", "tangent = self_adjoint(_gather_laplacian, (conductance, neighbors), dx, _gather_laplacian_cotangent)",
+     "tangent = self_adjoint(lambda t, v: 0.5 * _gather_laplacian(t, v), (conductance, neighbors), dx,\n"
+     "                              lambda t, v: 0.5 * _gather_laplacian_cotangent(t, v))",
      [T + "test_simulate.py"]),
     ("checkpoint segments", "sintercond/simulate.py", "    q, r = divmod(n_saves, group)",
      "    q, r = divmod(n_saves, group)\n    r = 0", [T + "test_simulate.py"]),
