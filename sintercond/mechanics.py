@@ -269,14 +269,11 @@ class Loads(NamedTuple):
 def pair_loads(physics, params: MechanicalParams, geometry: PairGeometry, radii, mass, modulus, nu, velocity, spin,
                spring, rolling, dt, dtype):
     """Per pair: force on ``i``, torques on ``i`` and ``j`` (in ``dtype``), and the new springs."""
-    fd = force_dtype(physics, dtype)
-    cast = lambda x: x if x is None else jnp.asarray(x).astype(fd)  # noqa: E731
-    params, dt = jax.tree.map(cast, params), cast(dt)
-    radii_f, mass_f, modulus, nu = cast(radii), cast(mass), cast(modulus), cast(nu)
-    v, omega = cast(velocity), cast(spin)
+    params, dt, radii_f, mass_f, modulus, nu, v, omega, normal, overlap = in_force_dtype(
+        physics, dtype, params, dt, radii, mass, modulus, nu, velocity, spin, geometry.normal, geometry.overlap)
     i, j = geometry.i, geometry.j
     f, t_i, t_j, spring, rolling, _ = _contact_laws(
-        physics, params, dt, cast(geometry.normal), cast(geometry.overlap), radii_f[i], radii_f[j], mass_f[i],
+        physics, params, dt, normal, overlap, radii_f[i], radii_f[j], mass_f[i],
         mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], spring,
         rolling, params.mu, params.mu_r)
     # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
@@ -308,15 +305,14 @@ def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, d
     """:class:`Loads` from the pair sums ``force``, ``torque`` ``[n, 3]``: the walls' and gravity's loads added."""
     dtype = positions.dtype
     fd = force_dtype(physics, dtype)
-    cast = lambda x: x if x is None else jnp.asarray(x).astype(fd)  # noqa: E731
-    params, dt = jax.tree.map(cast, params), cast(dt)
-    radii_f, mass_f, modulus, nu = cast(radii), cast(mass), cast(modulus), cast(nu)
-    v, omega = cast(state.velocity), cast(state.spin)
+    params, dt, radii_f, mass_f, modulus, nu, v, omega = in_force_dtype(
+        physics, dtype, params, dt, radii, mass, modulus, nu, state.velocity, state.spin)
     n = radii.shape[0]
     new = state
     h = wall_n = None
     if physics.walls:
         h = wall_penetration(physics.walls, positions, radii, t)  # in the positions' precision
+        (h_f,) = in_force_dtype(physics, dtype, h)
         inward = jnp.stack([jnp.asarray(w.normal, fd) for w in physics.walls])[:, None, :]
         wall_v = jnp.stack([jnp.asarray(w.velocity, fd) for w in physics.walls])[:, None, :]
         inf = jnp.asarray(jnp.inf, fd)
@@ -324,7 +320,7 @@ def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, d
         mu_r_w = params.mu_r if params.mu_r_wall is None else params.mu_r_wall
         # the wall is j: the normal from the particle to the wall is -n_w
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
-            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), cast(h), radii_f, inf, mass_f,
+            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h_f, radii_f, inf, mass_f,
             inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
             jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
         force = force + jnp.sum(f_w.astype(dtype), axis=0)
@@ -337,6 +333,12 @@ def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, d
 def force_dtype(physics, dtype):
     """The dtype the contact laws run in: ``physics.force_dtype``, or the positions' ``dtype`` if None."""
     return jnp.dtype(dtype if physics.force_dtype is None else physics.force_dtype)
+
+
+def in_force_dtype(physics, dtype, *values):
+    """``values`` (arrays, pytrees such as :class:`MechanicalParams`, or None) cast to :func:`force_dtype`."""
+    fd = force_dtype(physics, dtype)
+    return [jax.tree.map(lambda x: jnp.asarray(x).astype(fd), v) for v in values]
 
 
 def remap_history(state: MechanicalState, old_pairs, new_pairs) -> MechanicalState:
