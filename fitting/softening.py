@@ -116,12 +116,25 @@ class SofteningExperiment:
                 and self.n_steps >= self.save_every and self.n_steps % self.save_every == 0):
             raise ValueError(f"n_steps ({self.n_steps!r}) must be a positive multiple of save_every "
                              f"({self.save_every!r})")
-        object.__setattr__(self, "_predict", jax.jit(self.predict, compiler_options=mechanics.compiler_options(
-            self.sim.physics)))
+        object.__setattr__(self, "_predict", jax.jit(self._readings_and_overflow,
+                                                     compiler_options=mechanics.compiler_options(self.sim.physics)))
+
+    def _readings_and_overflow(self, values: Mapping):
+        state, saved = self.rollout(values)
+        return saved, state.overflow
 
     def readings(self, values: Mapping) -> np.ndarray:
-        """:meth:`predict` compiled once per experiment, as a NumPy array."""
-        return np.asarray(self._predict({k: float(v) for k, v in values.items()}))
+        """:meth:`predict` compiled once per experiment, as a NumPy array.
+
+        Raises:
+          ValueError: a neighbour or pair list of the run ran out of room (pairs were dropped, so the
+            readings would be wrong); :func:`bed_experiment`'s ``capacity_multiplier`` gives more.
+        """
+        saved, overflow = self._predict({k: float(v) for k, v in values.items()})
+        if bool(overflow):
+            raise ValueError(f"the contact lists overflowed during the run at {dict(values)} (pairs were dropped); "
+                             "rebuild the experiment with more room (bed_experiment's capacity_multiplier)")
+        return np.asarray(saved)
 
     @property
     def times(self) -> np.ndarray:
@@ -372,6 +385,7 @@ def fit_softening(experiment: SofteningExperiment, data, sigma, fit=("E0", "thet
     result = least_squares(experiment.log_model, jnp.asarray(columns), data[:, columns].ravel(), logs0,
                            {k: Free() for k in logs0}, weights=weights, method=method, **options)
     values = {k: math.exp(result.params[f"log_{k}"]) for k in fit}
+    experiment.readings(values)  # the fitted run must have kept every pair: raises if its lists overflowed
     log_cov = np.asarray(result.covariance)
     stderr = {k: values[k] * float(np.sqrt(log_cov[i, i])) for i, k in enumerate(fit)}
     notes = []
@@ -431,7 +445,7 @@ def _bed_readings(state, probes):
 def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-3), seed=0, specific_heat=0.2,
                    floor_temperature=700.0, initial_temperature=300.0, t_end=0.06, save_every=100, n_probes=3,
                    friction=True, mu=0.3, settle_time=0.3, speed_tol=1e-4, dt=None, E0=1e6, theta_star=400.0,
-                   rate=1.0) -> SofteningExperiment:
+                   rate=1.0, capacity_multiplier=1.25) -> SofteningExperiment:
     """A bed settled under gravity by the coupled simulation, then heated from its floor: probes and settlement.
 
     The spheres (density 3000 kg/m^3, k = 60 W/(m K), nu = 0.3, Example 5.1's
@@ -440,7 +454,12 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     settled by the coupled simulation itself (Hertz contacts, friction ``mu``
     between particles, the floor at the bed's temperature: no heat flows)
     until every sphere moves slower than ``speed_tol`` (m/s), so the heating
-    starts from the simulation's own equilibrium. At ``t = 0`` the floor
+    starts from the simulation's own equilibrium. The settling lists have
+    room for twice the loose pile's pairs; the heating run's are then sized
+    on the settled bed with ``capacity_multiplier`` spare room (half as many
+    pair slots: the laws run on every slot, so the run, its gradient and the
+    fits are ~1.3-1.5x faster; :meth:`SofteningExperiment.readings` and
+    :func:`fit_softening` raise if they ran out). At ``t = 0`` the floor
     turns to ``floor_temperature``. Readings: ``n_probes`` particle
     temperatures from the bottom to the top of the bed's central column,
     and the mean height of the centres (its drop is the settlement).
@@ -457,6 +476,9 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     from sintercond.state import particle_state
     from sintercond.walls import PlaneWall
 
+    if not capacity_multiplier >= 1.0:
+        raise ValueError(f"capacity_multiplier (spare room of the heating run's contact lists) must be >= 1; got "
+                         f"{capacity_multiplier!r}")
     bed = packing.powder_bed(lateral_size, height, diameter_range, seed=seed)
     x, r = bed.centres, bed.radii
     particles = particle_state(x, r, initial_temperature, 3000.0)
@@ -495,6 +517,12 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
         raise ValueError(f"the bed did not settle within settle_time = {settle_time:g} s (fastest sphere "
                          f"{float(speed[-1]):.3g} m/s, allowed < {speed_tol:g} m/s)")
     state = dataclasses.replace(state, step=jnp.zeros_like(state.step))
+    contacts, fns = simulate.dynamic_contacts(state.particles.positions, particles.radii, 0.1 * float(np.mean(r)),
+                                              capacity_multiplier=capacity_multiplier)
+    state = dataclasses.replace(
+        state, contacts=dataclasses.replace(state.contacts, neighbors=contacts.neighbors,
+                                            neighbor_list=contacts.neighbor_list, pairs=contacts.pairs),
+        mechanics=mechanics.remap_history(state.mechanics, state.contacts.pairs.pairs, contacts.pairs.pairs))
     # probes: the spheres nearest the box's vertical axis, spread from the bottom to the top
     centre = np.asarray(state.particles.positions)
     axis = np.linalg.norm(centre[:, :2] - 0.5 * lateral_size, axis=1)

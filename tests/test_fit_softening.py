@@ -280,6 +280,31 @@ def test_gradient_through_the_bed_equals_central_differences(small_bed):
     assert pattern.sum(axis=1).min() > small_bed.state.particles.radii.shape[0]  # a contact network
 
 
+def test_bed_heating_lists_sized_on_the_settled_bed_and_overflow_is_an_error(small_bed):
+    """The heating run's pair list holds the settled bed's pairs with 1.25x room (not the loose pile's 2x), the
+    springs kept pair by pair; a list too short for them makes the readings raise instead of dropping pairs."""
+    from sintercond.pair_list import HalfPairs
+
+    state = small_bed.state
+    p, contacts = state.particles, state.contacts
+    need = int(jnp.sum(contacts.pairs.pairs[:, 0] < contacts.pairs.pairs[:, 1]))  # the pairs kept at allocation
+    assert 0 < need <= contacts.pairs.capacity <= 1.25 * need + 1
+    geometry = mechanics.pair_geometry(p.positions, p.radii, contacts.pairs.pairs)
+    assert bool(jnp.all(jnp.where(geometry.touching[:, None], True, state.mechanics.spring == 0)))
+    assert float(jnp.max(jnp.abs(state.mechanics.spring))) > 0  # the settled springs came along
+
+    short = HalfPairs(contacts.pairs.pairs[:need // 2], contacts.pairs.demand)
+    stale = dataclasses.replace(contacts.neighbor_list, reference_position=jnp.full_like(
+        contacts.neighbor_list.reference_position, jnp.inf))  # the first step rebuilds
+    starved = dataclasses.replace(small_bed, state=dataclasses.replace(state, contacts=dataclasses.replace(
+        contacts, pairs=short, neighbor_list=stale), mechanics=dataclasses.replace(
+        state.mechanics, spring=state.mechanics.spring[:need // 2])))
+    with pytest.raises(ValueError, match="overflowed"):
+        starved.readings(starved.nominal())
+    with pytest.raises(ValueError, match="capacity_multiplier"):
+        sf.bed_experiment(capacity_multiplier=0.5)
+
+
 def test_notebook_fits_cover_the_truth():
     """The committed calibrate_softening notebook (cheap: its JSON): every printed fit of Example 5.1 and of the
     bed lies within 3 printed standard errors of the truth it was made from."""
