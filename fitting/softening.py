@@ -488,7 +488,8 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     def physics(floor):
         walls = (PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "conducting", float(floor)),) + side
         return simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                                mechanics=True, walls=walls, softening=True, friction=friction)
+                                mechanics=True, walls=walls, softening=True, friction=friction,
+                                wall_friction=False)  # mu_wall = 0: the walls' tangential law is skipped
 
     contacts, fns = simulate.dynamic_contacts(x, particles.radii, 0.1 * float(np.mean(r)), capacity_multiplier=2.0)
     f64 = lambda v: jnp.asarray(float(v), jnp.float64)  # noqa: E731

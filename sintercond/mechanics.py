@@ -50,6 +50,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from sintercond import forces
 from sintercond._numerics import materialized
@@ -139,8 +140,28 @@ def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> 
     fd = force_dtype(physics, positions.dtype)
     pair = jnp.zeros((half.capacity, 3), fd)
     wall = jnp.zeros((w, n, 3), fd)
+    walls = wall_physics(physics)
     return MechanicalState(velocity, spin, pair if physics.friction else None, pair if physics.rolling else None,
-                           wall if physics.friction else None, wall if physics.rolling else None)
+                           wall if walls.friction else None, wall if walls.rolling else None)
+
+
+def wall_physics(physics):
+    """The laws the walls see: ``physics`` with friction (rolling) off where ``wall_friction`` (``wall_rolling``) is."""
+    return dataclasses.replace(physics, friction=physics.friction and physics.wall_friction,
+                               rolling=physics.rolling and physics.wall_rolling)
+
+
+def check_wall_coefficients(physics, params: MechanicalParams):
+    """Raise ``ValueError`` if frictionless walls (``wall_friction``/``wall_rolling`` False) get concrete nonzero
+    ``mu_wall``/``mu_r_wall`` (``mu``/``mu_r`` where those are None); traced values are not checked."""
+    for flag, on, name, value, fallback in (
+            ("wall_friction", physics.friction, "mu_wall", params.mu_wall, params.mu),
+            ("wall_rolling", physics.rolling, "mu_r_wall", params.mu_r_wall, params.mu_r)):
+        value = fallback if value is None else value
+        if on and not getattr(physics, flag) and not isinstance(value, jax.core.Tracer) and \
+                bool(np.any(np.asarray(value) != 0)):
+            raise ValueError(f"Physics.{flag}=False makes the walls frictionless, but MechanicalParams.{name} "
+                             f"(or its fallback) is {value!r}; it must be 0 there (or set {flag}=True)")
 
 
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_cpu_prefer_vector_width": 512}
@@ -319,7 +340,7 @@ def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, d
         mu_r_w = params.mu_r if params.mu_r_wall is None else params.mu_r_wall
         # the wall is j: the normal from the particle to the wall is -n_w
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
-            physics, params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h.astype(fd), radii_f, inf, mass_f,
+            wall_physics(physics), params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h.astype(fd), radii_f, inf, mass_f,
             inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
             jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
         force = force + jnp.sum(f_w.astype(dtype), axis=0)

@@ -161,7 +161,8 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
         slip_direction=p.get("slip_direction", "trial"), rolling_projection=p.get("rolling_projection", False),
         damping_clamp=p.get("damping_clamp", False), softening="softening" in scene,
         friction=mu > 0 or m.get("wall_friction", mu) > 0,
-        rolling=mu_r > 0 or m.get("wall_rolling_friction", mu_r) > 0)
+        rolling=mu_r > 0 or m.get("wall_rolling_friction", mu_r) > 0,
+        wall_friction=m.get("wall_friction", mu) > 0, wall_rolling=m.get("wall_rolling_friction", mu_r) > 0)
 
 
 def scene_params(scene) -> simulate.Params:

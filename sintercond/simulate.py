@@ -124,6 +124,14 @@ class Physics:
       gravity: ``[3]`` acceleration (m/s^2).
       friction: Mindlin stick-slip friction with a spring (Eqs. 7-14).
       rolling: rolling resistance (Eqs. 15-20).
+      wall_friction, wall_rolling: with ``friction`` (``rolling``), whether
+        the walls rub (resist rolling) too. False: frictionless walls
+        (``mu_wall = 0``; without rolling resistance, ``mu_r_wall = 0``):
+        their tangential (rolling) law, whose force would be exactly zero,
+        is not evaluated and its springs are not stored, which makes a bed
+        in frictionless walls' run and gradient ~1.3x faster
+        (benchmarks/RESULTS.md); :func:`rollout` rejects concrete nonzero
+        coefficients.
       softening: Young's modulus from the temperature, Eq. 42 (erratum 6).
       damping_clamp: no tensile normal force (LAMMPS ``limit_damping``).
       shear: ``"paper"`` (Eq. 9) or ``"mindlin"`` effective shear modulus.
@@ -155,6 +163,8 @@ class Physics:
     gravity: tuple = (0.0, 0.0, -9.81)
     friction: bool = False
     rolling: bool = False
+    wall_friction: bool = True
+    wall_rolling: bool = True
     softening: bool = False
     damping_clamp: bool = False
     shear: str = "paper"
@@ -202,6 +212,11 @@ class Physics:
             raise ValueError(f"Physics.shear must be one of {list(SHEAR_CONVENTIONS)}; got {self.shear!r}")
         if self.force_dtype not in (None, "float32", "float64"):
             raise ValueError(f"Physics.force_dtype must be None, 'float32' or 'float64'; got {self.force_dtype!r}")
+        for name, law in (("wall_friction", self.friction), ("wall_rolling", self.rolling)):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"Physics.{name} must be True or False; got {getattr(self, name)!r}")
+            # without the law the flag says nothing: the same spec compares (and compiles) as one
+            object.__setattr__(self, name, bool(getattr(self, name)) or not law)
         if self.slip_direction not in SLIP_DIRECTIONS:
             raise ValueError(f"Physics.slip_direction must be one of {list(SLIP_DIRECTIONS)}; got {self.slip_direction!r}")
         gravity = tuple(float(g) for g in self.gravity)
@@ -871,6 +886,8 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
         raise ValueError(f"n_steps ({n_steps}) must be a multiple of saveat.every ({every}); "
                          f"{n_steps // every * every} or {(n_steps // every + 1) * every} would do")
     observe = (lambda s: s.particles.temperature) if saveat.fn is None else saveat.fn
+    if sim.physics.mechanics and params.mechanics is not None:
+        mechanics.check_wall_coefficients(sim.physics, params.mechanics)
     prep = sim.prepare_fn(state, params)
     seg = segment_length(n_steps) if checkpoint else n_steps
 

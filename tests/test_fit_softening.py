@@ -180,6 +180,9 @@ def _event_pattern(sim, params, state):
     mu_wall = mp.mu if mp.mu_wall is None else mp.mu_wall
     for w, wall in enumerate(physics.walls):
         h = wall.penetration(p.positions, p.radii)
+        if not physics.wall_friction:  # frictionless walls: contact only
+            flags.append(h > 0)
+            continue
         n = jnp.broadcast_to(-jnp.asarray(wall.normal), p.positions.shape)
         dd, vt = forces.relative_contact_velocity(m.velocity, jnp.asarray(wall.velocity), m.spin, 0.0 * m.spin, n,
                                                   p.radii, 0.0)

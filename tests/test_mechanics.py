@@ -218,6 +218,45 @@ def test_without_rolling_resistance_it_rolls_at_five_sevenths():
     assert accel == pytest.approx(5.0 / 7.0 * G * math.sin(a), rel=1e-3)
 
 
+def test_frictionless_walls_skip_their_laws_exactly():
+    """``Physics(wall_friction=False, wall_rolling=False)``: the same run, bit for bit, as the walls' tangential and
+    rolling laws evaluated at mu_wall = mu_r_wall = 0 (zero force and torque there: a spring may load, capped at
+    zero force, and never act), no wall springs kept; a sphere on a
+    frictionless incline slides at g sin(a); nonzero wall coefficients with the flags off are refused."""
+    floor, side = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), PlaneWall((-R, 0.0, 0.0), (1.0, 0.0, 0.0))
+    x = [[0.0, 0.0, R - 2e-6], [2 * R - 3e-6, 1e-4, R + 1e-5], [R, 2e-4, 2.8 * R]]
+    v = [[0.01, 0.02, -0.01], [-0.01, 0.0, 0.0], [0.0, -0.01, -0.02]]
+    params = _params(mu=0.3, mu_r=0.1, xi_rol=0.3, mu_wall=0.0, mu_r_wall=0.0)
+    states = []
+    for flags in (True, False):
+        sim, state, _ = _scene(x, v, 1e-6, params, walls=(floor, side), friction=True, rolling=True,
+                               wall_friction=flags, wall_rolling=flags)
+        states.append(_run(sim, state, params, 400, 400, lambda s: s.particles.positions)[0])
+    dense, skipped = states
+    assert skipped.mechanics.wall_spring is None and skipped.mechanics.wall_rolling is None
+    for name in ("positions", "temperature"):
+        np.testing.assert_array_equal(getattr(dense.particles, name), getattr(skipped.particles, name))
+    for name in ("velocity", "spin", "spring", "rolling"):
+        np.testing.assert_array_equal(getattr(dense.mechanics, name), getattr(skipped.mechanics, name))
+    assert float(jnp.max(jnp.abs(skipped.mechanics.spring))) > 0  # the pairs still rub
+
+    a = math.radians(20.0)
+    normal = (-math.sin(a), 0.0, math.cos(a))
+    down = jnp.asarray([-math.cos(a), 0.0, -math.sin(a)])
+    slope = _params(mu=0.5, mu_wall=0.0)
+    sim, state, _ = _scene([np.asarray(normal) * R], None, 2e-5, slope, walls=(PlaneWall((0.0, 0.0, 0.0), normal),),
+                           friction=True, wall_friction=False)
+    end, speed = _run(sim, state, slope, 5000, 100, lambda s: jnp.sum(s.mechanics.velocity[0] * down))
+    speed = np.asarray(speed)
+    assert (speed[-1] - speed[-11]) / (10 * 100 * 2e-5) == pytest.approx(G * math.sin(a), rel=1e-3)
+    assert float(jnp.max(jnp.abs(end.mechanics.spin))) == 0.0  # no torque: it slides without turning
+
+    with pytest.raises(ValueError, match="mu_wall"):
+        simulate.rollout(sim, state, _params(mu=0.5), 1)  # mu_wall None falls back to mu = 0.5
+    with pytest.raises(ValueError, match="wall_rolling"):
+        simulate.Physics(mechanics=True, contacts="dynamic", conductance="lifted", rolling=True, wall_rolling="no")
+
+
 # --------------------------------------------------------------------------
 # jit, rollout, gradients
 
