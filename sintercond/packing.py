@@ -460,18 +460,21 @@ def box_walls(lateral_size):
             PlaneWall((0.0, L, 0.0), (0.0, -1.0, 0.0)))
 
 
-def dem_physics(walls, softening=False):
+def dem_physics(walls, softening=False, wall_friction=True, wall_rolling=True):
     """The :class:`sintercond.simulate.Physics` of a DEM settle: Hertz, Mindlin, rolling, gravity ``-9.81 e_z``, ``walls``.
 
     Conduction is the paper's (``law="conductivity"``, Hertz contact radius,
     Eqs. 32-35); while settling every particle is held at its temperature, so
-    no heat moves.
+    no heat moves. ``wall_friction``/``wall_rolling`` False: frictionless
+    walls (``Physics.wall_friction``; :func:`dem_settle` sets them from
+    ``DemMaterial.mu_wall``/``mu_r_wall``).
     """
     from sintercond import simulate
 
     return simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
                             mechanics=True, walls=tuple(walls), gravity=(0.0, 0.0, -GRAVITY), friction=True,
-                            rolling=True, softening=softening, held=True)
+                            rolling=True, wall_friction=wall_friction, wall_rolling=wall_rolling,
+                            softening=softening, held=True)
 
 
 GRAVITY = 9.81
@@ -553,7 +556,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
             particles = particle_state(centres, radii, temperature, material.density, fixed=True)
         except ValueError as err:
             raise PackingError(str(err)) from None
-        physics = dem_physics(walls, softening)
+        physics = dem_physics(walls, softening, material.mu_wall > 0, material.mu_r_wall > 0)
         mp = material.mechanical_params()
         r_max = float(radii.max())
         contacts, fns = simulate.dynamic_contacts(centres, radii, skin_fraction * float(radii.mean()),
