@@ -340,9 +340,9 @@ def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, d
         mu_r_w = params.mu_r if params.mu_r_wall is None else params.mu_r_wall
         # the wall is j: the normal from the particle to the wall is -n_w
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
-            wall_physics(physics), params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h.astype(fd), radii_f, inf, mass_f,
-            inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)), omega,
-            jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
+            wall_physics(physics), params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h.astype(fd),
+            radii_f, inf, mass_f, inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)),
+            omega, jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
         force = force + jnp.sum(f_w.astype(dtype), axis=0)
         torque = torque + jnp.sum(t_w.astype(dtype), axis=0)
         new = dataclasses.replace(new, wall_spring=wall_spring, wall_rolling=wall_rolling)

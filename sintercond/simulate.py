@@ -128,10 +128,10 @@ class Physics:
         the walls rub (resist rolling) too. False: frictionless walls
         (``mu_wall = 0``; without rolling resistance, ``mu_r_wall = 0``):
         their tangential (rolling) law, whose force would be exactly zero,
-        is not evaluated and its springs are not stored, which makes a bed
-        in frictionless walls' run and gradient ~1.3x faster
-        (benchmarks/RESULTS.md); :func:`rollout` rejects concrete nonzero
-        coefficients.
+        is not evaluated and its springs are not stored (a bed in such
+        walls runs and differentiates ~1.3x faster, benchmarks/RESULTS.md).
+        :func:`rollout` rejects concrete nonzero coefficients; under
+        ``jit`` they are not checked and would be ignored.
       softening: Young's modulus from the temperature, Eq. 42 (erratum 6).
       damping_clamp: no tensile normal force (LAMMPS ``limit_damping``).
       shear: ``"paper"`` (Eq. 9) or ``"mindlin"`` effective shear modulus.
