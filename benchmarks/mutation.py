@@ -51,9 +51,14 @@ FIT = [T + "test_fitting.py"]
 TEETH = T + "test_teeth_thermal.py"
 THERMAL = [T + "test_thermal.py", TEETH]
 SCENE = [T + "test_scene.py", T + "test_scene_run.py"]
+MECH = [T + "test_mechanics.py"]
 
 # (name, module, original, mutated, tests)
 MUTANTS = [
+    ("walls rub regardless", "sintercond/mechanics.py", "friction=physics.friction and physics.wall_friction",
+     "friction=physics.friction", MECH),
+    ("walls never rub", "sintercond/mechanics.py", "friction=physics.friction and physics.wall_friction",
+     "friction=False", MECH),
     # --- sintercond/neck.py
     ("coble r*", "sintercond/neck.py", "r_star = 2.0 * r_i * r_j / (r_i + r_j)\n    a = safe_sqrt(2.0 * r_star * h)",
      "r_star = r_i * r_j / (r_i + r_j)\n    a = safe_sqrt(2.0 * r_star * h)", NECK),
