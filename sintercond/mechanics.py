@@ -151,13 +151,18 @@ def wall_physics(physics):
                                rolling=physics.rolling and physics.wall_rolling)
 
 
+def wall_coefficients(params: MechanicalParams):
+    """``(mu, mu_r)`` against the walls: ``mu_wall``/``mu_r_wall``, or the pairs' ``mu``/``mu_r`` where those are None."""
+    return (params.mu if params.mu_wall is None else params.mu_wall,
+            params.mu_r if params.mu_r_wall is None else params.mu_r_wall)
+
+
 def check_wall_coefficients(physics, params: MechanicalParams):
     """Raise ``ValueError`` if frictionless walls (``wall_friction``/``wall_rolling`` False) get concrete nonzero
-    ``mu_wall``/``mu_r_wall`` (``mu``/``mu_r`` where those are None); traced values are not checked."""
-    for flag, on, name, value, fallback in (
-            ("wall_friction", physics.friction, "mu_wall", params.mu_wall, params.mu),
-            ("wall_rolling", physics.rolling, "mu_r_wall", params.mu_r_wall, params.mu_r)):
-        value = fallback if value is None else value
+    :func:`wall_coefficients`; traced values are not checked."""
+    mu_w, mu_r_w = wall_coefficients(params)
+    for flag, on, name, value in (("wall_friction", physics.friction, "mu_wall", mu_w),
+                                  ("wall_rolling", physics.rolling, "mu_r_wall", mu_r_w)):
         if on and not getattr(physics, flag) and not isinstance(value, jax.core.Tracer) and \
                 bool(np.any(np.asarray(value) != 0)):
             raise ValueError(f"Physics.{flag}=False makes the walls frictionless, but MechanicalParams.{name} "
@@ -336,8 +341,7 @@ def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, d
         inward = jnp.stack([jnp.asarray(w.normal, fd) for w in physics.walls])[:, None, :]
         wall_v = jnp.stack([jnp.asarray(w.velocity, fd) for w in physics.walls])[:, None, :]
         inf = jnp.asarray(jnp.inf, fd)
-        mu_w = params.mu if params.mu_wall is None else params.mu_wall
-        mu_r_w = params.mu_r if params.mu_r_wall is None else params.mu_r_wall
+        mu_w, mu_r_w = wall_coefficients(params)
         # the wall is j: the normal from the particle to the wall is -n_w
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
             wall_physics(physics), params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h.astype(fd),

@@ -151,8 +151,7 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     ``Physics.walls``; a held wall pushes as an insulated one (its
     particles are held by ``Physics.held``, :func:`_apply_walls`).
     """
-    p, m = scene["physics"], scene["mechanics"]
-    mu, mu_r = m.get("friction", 0.0), m.get("rolling_friction", 0.0)
+    p, c = scene["physics"], contact_material(scene)
     walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
                    for w in planes)
     return dataclasses.replace(
@@ -160,9 +159,8 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
         gravity=tuple(p.get("gravity", (0.0, 0.0, -9.81))), shear=p.get("shear", "paper"),
         slip_direction=p.get("slip_direction", "trial"), rolling_projection=p.get("rolling_projection", False),
         damping_clamp=p.get("damping_clamp", False), softening="softening" in scene,
-        friction=mu > 0 or m.get("wall_friction", mu) > 0,
-        rolling=mu_r > 0 or m.get("wall_rolling_friction", mu_r) > 0,
-        wall_friction=m.get("wall_friction", mu) > 0, wall_rolling=m.get("wall_rolling_friction", mu_r) > 0)
+        friction=c["mu"] > 0 or c["mu_wall"] > 0, rolling=c["mu_r"] > 0 or c["mu_r_wall"] > 0,
+        wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
 
 
 def scene_params(scene) -> simulate.Params:
