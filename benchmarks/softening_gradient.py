@@ -1,6 +1,6 @@
 """Gradient of the softening fit's loss through the coupled thermo-mechanical scan: time and memory, and fit times.
 
-Usage: python benchmarks/softening_gradient.py [--lateral-size 0.012] [--height 0.008] [--settle-time 0.3]
+Usage: python benchmarks/softening_gradient.py [--lateral-size 0.008] [--height 0.006] [--settle-time 0.3]
                                               [--steps 1000 10000 100000] [--no-fits] [--section NAME]
                                               [--variants forward "gradient checkpointed" ...]
 
