@@ -1,11 +1,12 @@
 """Gradient of the softening fit's loss through the coupled thermo-mechanical scan: time and memory, and fit times.
 
 Usage: python benchmarks/softening_gradient.py [--lateral-size 0.008] [--height 0.006] [--settle-time 0.3]
-                                              [--steps 1000 10000 100000] [--no-fits] [--section NAME]
+                                              [--steps 1000 10000 100000] [--no-fits] [--section NAME] [--no-friction]
                                               [--variants forward "gradient checkpointed" ...]
 
 A bed (fitting.softening.bed_experiment: powder_bed piled, settled by the coupled
-simulation with friction, then heated by its floor at 700 K; float64), read
+simulation with friction (without it under --no-friction: Mindlin's law off throughout, to see
+what that law costs each variant), then heated by its floor at 700 K; float64), read
 every steps/100 steps (3 probe temperatures and the mean height); loss = weighted
 sum of squared residuals against the nominal readings shifted by one sigma.
 Variants, each in its own process so that its peak memory is its own:
@@ -53,15 +54,16 @@ VARIANTS = ("forward", "gradient checkpointed", "gradient plain", "gradient forw
 SIGMA = (0.5, 0.5, 0.5, 2e-8)
 
 
-def build(path, lateral_size, height, settle_time=0.3):
+def build(path, lateral_size, height, settle_time=0.3, friction=True):
     from fitting import softening as sf
 
     t0 = time.perf_counter()
     ex = sf.bed_experiment(lateral_size=lateral_size, height=height, t_end=0.01, save_every=10,
-                           settle_time=settle_time)
+                           settle_time=settle_time, friction=friction)
     state = ex.state
     with open(path, "wb") as f:
         pickle.dump({"lateral_size": lateral_size, "height": height, "settle_time": settle_time,
+                     "friction": friction,
                      "seconds": time.perf_counter() - t0,
                      "n": int(state.particles.radii.shape[0]), "dt": float(state.dt)}, f)
     return ex
@@ -73,7 +75,8 @@ def experiment(meta, steps):
 
     dt = meta["dt"]
     return sf.bed_experiment(lateral_size=meta["lateral_size"], height=meta["height"], t_end=steps * dt,
-                             save_every=max(1, steps // 100), settle_time=meta["settle_time"])
+                             save_every=max(1, steps // 100), settle_time=meta["settle_time"],
+                             friction=meta.get("friction", True))
 
 
 def run_one(path, variant, steps, max_gb):
@@ -191,6 +194,9 @@ def main():
     parser.add_argument("--fit-steps", type=int, default=3800)
     parser.add_argument("--max-gb", type=float, default=8.0)
     parser.add_argument("--no-fits", action="store_true", help="time the gradient only (a large bed's fits take long)")
+    parser.add_argument("--no-friction", action="store_true",
+                        help="frictionless bed (settled and heated without Mindlin's law): what the friction law "
+                             "costs in each variant")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS,
                         help="variants to time (default: all)")
     parser.add_argument("--section", default="softening_gradient",
@@ -212,7 +218,7 @@ def main():
     fit_rows = []
     with tempfile.TemporaryDirectory() as tmp:
         path = pathlib.Path(tmp) / "bed.pkl"
-        build(path, args.lateral_size, args.height, args.settle_time)
+        build(path, args.lateral_size, args.height, args.settle_time, friction=not args.no_friction)
         with open(path, "rb") as f:
             meta = pickle.load(f)
         rows, notes = [], []
@@ -246,7 +252,8 @@ def main():
                   "max |error| / stderr"]
     body = (f"Bed of {meta['n']:,} particles (powder_bed in a {1e3 * args.lateral_size:g} mm box, "
             f"{1e3 * args.height:g} mm high, settled by the coupled simulation; built and settled in "
-            f"{meta['seconds']:.0f} s), friction and softening on, dt = {meta['dt']:.3g} s, float64; loss on "
+            f"{meta['seconds']:.0f} s), {'friction' if meta.get('friction', True) else 'no friction'} and softening "
+            f"on, dt = {meta['dt']:.3g} s, float64; loss on "
             f"3 probe temperatures and the mean height read every steps/100 steps; gradient in the logs of "
             f"E0, theta*, rate.\n\n" + markdown_table(header, rows))
     if any(row[2] == "not run" for row in rows):
