@@ -252,8 +252,9 @@ def main():
                   "max |error| / stderr"]
     body = (f"Bed of {meta['n']:,} particles (powder_bed in a {1e3 * args.lateral_size:g} mm box, "
             f"{1e3 * args.height:g} mm high, settled by the coupled simulation; built and settled in "
-            f"{meta['seconds']:.0f} s), {'friction and softening on' if meta['friction'] else 'softening on, no friction'}"
-            f", dt = {meta['dt']:.3g} s, float64; loss on "
+            f"{meta['seconds']:.0f} s), "
+            f"{'friction and softening on' if meta['friction'] else 'softening on, no friction'}, "
+            f"dt = {meta['dt']:.3g} s, float64; loss on "
             f"3 probe temperatures and the mean height read every steps/100 steps; gradient in the logs of "
             f"E0, theta*, rate.\n\n" + markdown_table(header, rows))
     if any(row[2] == "not run" for row in rows):
