@@ -252,7 +252,8 @@ def conductance_from_neck(law, a, r_i, r_j, h, kappa_i, kappa_j, params=None):
     h_safe = jnp.where(contact, h, 0.0)
     k = law.from_neck(a_safe, r_i, r_j, h_safe, kappa_i, kappa_j, params)
     # under jit, invalid materials or parameters give NaN, never a negative conductance
-    undefined = undefined | ~((kappa_i > 0) & (kappa_j > 0)) | ~_params_valid(law, params)
+    # (jnp.asarray: for Python floats, ~True is the int -2, which would flag every pair)
+    undefined = undefined | ~((jnp.asarray(kappa_i) > 0) & (jnp.asarray(kappa_j) > 0)) | ~_params_valid(law, params)
     return jnp.where(undefined, jnp.nan, jnp.where(contact, k, 0.0))
 
 

@@ -256,3 +256,13 @@ def test_fitted_pair_unequal_halves_against_fe_anchors():
     assert k == pytest.approx(0.278033, rel=1e-2)
     # and it is symmetric in the numbering
     assert float(fitted_pair_conductance(r_j, r_i, h, KAPPA_CU)) == pytest.approx(k, rel=1e-14)
+
+
+def test_conductance_from_neck_takes_python_floats():
+    """Python-float conductivities are as good as arrays (``~True`` on a Python bool is -2, not False)."""
+    from sintercond.conductance import conductance_from_neck
+
+    a, r, kappa = 8e-6, 40e-6, 15.0
+    expected = 1.064 * kappa * np.pi * a / 2  # Rojek Eq. 43, two equal halves in series
+    for args in ((a, r, r, 1e-7, kappa, kappa), (jnp.asarray(a), jnp.asarray(r), jnp.asarray(r), 1e-7, kappa, kappa)):
+        assert float(conductance_from_neck("rojek", *args)) == pytest.approx(expected, rel=1e-14)
