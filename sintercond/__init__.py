@@ -16,7 +16,7 @@ import jax as _jax
 if _os.environ.get("SINTERCOND_ENABLE_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
     _jax.config.update("jax_enable_x64", True)
 
-from sintercond import conductance, dryden_zok, effective, neck  # noqa: E402
+from sintercond import conductance, dryden_zok, effective, neck, sintering  # noqa: E402
 from sintercond.conductance import (  # noqa: E402
     CONDUCTANCE_LAWS,
     ConductanceLaw,
@@ -79,6 +79,7 @@ __all__ = [
     "pair_conductance",
     "rojek_pair_conductance",
     "series_conductance",
+    "sintering",
     "validate_neck_inputs",
     "validate_pair_conductance_inputs",
 ]

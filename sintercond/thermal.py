@@ -35,7 +35,7 @@ from sintercond._numerics import materialized
 from sintercond._symmetric import linear_call
 from sintercond._validation import require_positive
 from sintercond.conductance import validate_pair_conductance_inputs
-from sintercond.network import (ContactTable, contact_table, heat_inflow, gather_laplacian, laplacian, network_laplacian,
+from sintercond.network import (ContactTable, contact_table, ell_table, heat_inflow, gather_laplacian, laplacian, network_laplacian,
                                 total_conductance, wall_inflow)
 
 
@@ -516,6 +516,13 @@ def _conductivity_setup(centres, radii, axis, law, neck_model, box):
     radii = np.asarray(radii, dtype=np.float64)
     physics = sim_module.Physics(law=law, neck_model=neck_model, conductance="lifted")
     pairs = contact_pairs(centres, radii)
+    hot, cold, length, area = _hot_and_cold_faces(centres, radii, pairs, axis, box)
+    contacts = sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)
+    return _ConductivitySetup(physics, radii, pairs, contacts, hot, cold, length, area)
+
+
+def _hot_and_cold_faces(centres, radii, pairs, axis, box):
+    """``(hot, cold, L, A)`` of :func:`steady_state_conductivity`'s definition."""
     if box is None:
         if len(pairs.i) == 0:
             raise ValueError("the packing has no contacts")
@@ -528,7 +535,36 @@ def _conductivity_setup(centres, radii, axis, law, neck_model, box):
         raise ValueError(f"no particle reaches the box faces along axis {axis}; check box")
     if np.any(hot & cold):
         raise ValueError("a particle reaches both faces: the packing is too thin along the axis")
-    contacts = sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)
     length = float(np.mean(centres[cold, axis]) - np.mean(centres[hot, axis]))
     area = float(np.prod(np.delete(hi - lo, axis)))
-    return _ConductivitySetup(physics, radii, pairs, contacts, hot, cold, length, area)
+    return hot, cold, length, area
+
+
+def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, axis=0, box=None, tol=1e-13):
+    """``k*`` (W/(m K)) of a packing whose contacts' conductances are given, from one steady solve.
+
+    As :func:`steady_state_conductivity` (same hot and cold sets, ``L`` and
+    ``A``), with ``K_ij`` supplied per pair instead of computed from the
+    overlaps: necks grown by :mod:`sintercond.sintering`, or any other law.
+
+    Args:
+      centres: ``[n, 3]`` (m). radii: ``[n]`` (m).
+      pairs: :class:`sintercond.network.ContactPairs` of the packing.
+      pair_conductance: ``[n_pairs]`` ``K_ij`` (W/K) in the order of ``pairs`` (differentiable).
+      axis, box, tol: as :func:`steady_state_conductivity`.
+    """
+    centres = np.asarray(centres, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    pair_conductance = jnp.asarray(pair_conductance)
+    if pair_conductance.shape != (len(pairs.i),):
+        raise ValueError(f"pair_conductance must have one value per pair ({len(pairs.i)}); got shape "
+                         f"{pair_conductance.shape}")
+    hot, cold, length, area = _hot_and_cold_faces(centres, radii, pairs, axis, box)
+    # the pair's index (+1; 0 on padding) in both rows of the padded table
+    neighbors, slot = ell_table(len(radii), pairs.i, pairs.j, np.arange(1, len(pairs.i) + 1))
+    conductance = jnp.concatenate([jnp.zeros((1,), pair_conductance.dtype), pair_conductance])[slot]
+    table = ContactTable(jnp.asarray(neighbors, dtype=jnp.int32), conductance)
+    hot_mask = jnp.asarray(hot)
+    temperature = steady_state(table, jnp.asarray(hot | cold), jnp.where(hot_mask, 1.0, 0.0), tol=tol)
+    q = -jnp.sum(jnp.where(hot_mask, heat_inflow(temperature, table), 0.0))
+    return q * length / area
