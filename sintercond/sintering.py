@@ -89,7 +89,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond._numerics import as_float_arrays, safe_power, sqrt_difference_of_squares
-from sintercond._validation import concrete_arrays, fail_where, require_finite, require_positive
+from sintercond._validation import (concrete_arrays, fail_where, law_params_valid, require_finite,
+                                    require_positive)
 from sintercond.neck import NeckStatus
 
 GAS_CONSTANT = 8.314462618
@@ -495,12 +496,17 @@ def _grow_neck(law, a0, r_i, r_j, temperatures, durations, params, quadrature_no
     a0_s = jnp.where(valid, jnp.minimum(a0, jnp.minimum(r_i_s, r_j_s)), 0.0)
     temperatures_s = jnp.where(valid, temperatures, 1.0)
     n = law.exponent(params)
+    if isinstance(n, float) and n.is_integer():
+        n = int(n)  # s ** (n - 1) by multiplications, not exp(log)
     a_cap = jnp.minimum(law.cap(r_i_s, r_j_s, params), jnp.minimum(r_i_s, r_j_s))
     u_cap = safe_power(a_cap, n)
 
     nodes, weights = (jnp.asarray(v, dtype) for v in np.polynomial.legendre.leggauss(quadrature_nodes))
 
     def neck(u):
+        if isinstance(n, int) and n == 6:  # sqrt and cbrt, several times faster than a general power (double where: NaN-free at 0)
+            positive = u > 0
+            return jnp.where(positive, jnp.cbrt(jnp.sqrt(jnp.where(positive, u, 1.0))), 0.0)
         return safe_power(u, 1.0 / n)
 
     def shape(a):
@@ -562,15 +568,7 @@ def _valid_growth(law, a0, r_i, r_j, temperatures, durations, params):
 
 
 def _params_valid(law, params):
-    ok = jnp.asarray(True)
-    for name, value in params.items():
-        value = jnp.asarray(value)
-        if name in law.params_any_sign:
-            ok = ok & jnp.all(jnp.isfinite(value))
-        elif name in law.params_allowing_zero:
-            ok = ok & jnp.all(jnp.isfinite(value) & (value >= 0))
-        else:
-            ok = ok & jnp.all(jnp.isfinite(value) & (value > 0))
+    ok = law_params_valid(law, params)
     if "dihedral_angle" in params:
         ok = ok & jnp.all(jnp.asarray(params["dihedral_angle"]) <= 180.0)
     return ok
