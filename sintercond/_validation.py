@@ -8,6 +8,7 @@ states are flagged instead (e.g. :func:`sintercond.neck.neck_status`).
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 
@@ -42,3 +43,22 @@ def require_positive(name: str, values, *, allow_zero: bool = False) -> None:
     else:
         bad, rule = ~(np.isfinite(values) & (values >= np.finfo(np.float64).tiny)), "> 0"
     fail_where(bad, lambda i: f"{name} must be finite and {rule}; got {float(values[i])!r} at index {i}")
+
+
+def law_params_valid(law, params):
+    """Under ``jit``: True where every parameter of a law is in its domain.
+
+    Finite and > 0, except those in ``law.params_allowing_zero`` (>= 0) and
+    ``law.params_any_sign`` (any finite value); the traced counterpart of the
+    laws' concrete checks.
+    """
+    ok = jnp.asarray(True)
+    for name, value in params.items():
+        value = jnp.asarray(value)
+        if name in law.params_any_sign:
+            ok = ok & jnp.all(jnp.isfinite(value))
+        elif name in law.params_allowing_zero:
+            ok = ok & jnp.all(jnp.isfinite(value) & (value >= 0))
+        else:
+            ok = ok & jnp.all(jnp.isfinite(value) & (value > 0))
+    return ok

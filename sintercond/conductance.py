@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, safe_divide
-from sintercond._validation import concrete_arrays, require_finite, require_positive
+from sintercond._validation import concrete_arrays, law_params_valid, require_finite, require_positive
 from sintercond.neck import NECK_MODELS, validate_neck_inputs
 
 ROJEK_SLOPE = 1.064
@@ -253,25 +253,12 @@ def conductance_from_neck(law, a, r_i, r_j, h, kappa_i, kappa_j, params=None):
     k = law.from_neck(a_safe, r_i, r_j, h_safe, kappa_i, kappa_j, params)
     # under jit, invalid materials or parameters give NaN, never a negative conductance
     # (jnp.asarray: for Python floats, ~True is the int -2, which would flag every pair)
-    undefined = undefined | ~((jnp.asarray(kappa_i) > 0) & (jnp.asarray(kappa_j) > 0)) | ~_params_valid(law, params)
+    undefined = undefined | ~((jnp.asarray(kappa_i) > 0) & (jnp.asarray(kappa_j) > 0)) | ~law_params_valid(law, params)
     return jnp.where(undefined, jnp.nan, jnp.where(contact, k, 0.0))
 
 
 def _all_concrete(*values) -> bool:
     return not any(isinstance(v, jax.core.Tracer) for v in values)
-
-
-def _params_valid(law: ConductanceLaw, params):
-    ok = jnp.asarray(True)
-    for name, value in params.items():
-        value = jnp.asarray(value)
-        if name in law.params_any_sign:
-            ok = ok & jnp.all(jnp.isfinite(value))
-        elif name in law.params_allowing_zero:
-            ok = ok & jnp.all(jnp.isfinite(value) & (value >= 0))
-        else:
-            ok = ok & jnp.all(jnp.isfinite(value) & (value > 0))
-    return ok
 
 
 def validate_law_inputs(law, params, kappa_i, kappa_j=None, names=None):
