@@ -52,6 +52,9 @@ TEETH = T + "test_teeth_thermal.py"
 THERMAL = [T + "test_thermal.py", TEETH]
 SCENE = [T + "test_scene.py", T + "test_scene_run.py"]
 MECH = [T + "test_mechanics.py"]
+SINTER = "sintercond/sintering.py"
+SINT = [T + "test_sintering.py"]
+FSINT = [T + "test_fit_sintering.py"]
 
 # (name, module, original, mutated, tests)
 MUTANTS = [
@@ -224,6 +227,34 @@ MUTANTS = [
      [T + "test_inverse.py::test_adjoint_and_simulate_give_the_same_readings"]),
     ("fitting x64", "fitting/__init__.py", "import sintercond  # noqa: F401,E402", "import jax  # noqa: F401,E402",
      [T + "test_fitting.py::test_importing_fitting_alone_turns_on_float64"]),
+    # sintering kinetics (session 11: each written before its test ran)
+    ("overlap cap term", SINTER, "(r_i + 2.0 * s_i) / (3.0 * b_i * b_i)", "(r_i + s_i) / (3.0 * b_i * b_i)", SINT),
+    ("overlap jvp radius sign", SINTER, "dh_da * da - u / (b_i * b_i) * dr_i", "dh_da * da + u / (b_i * b_i) * dr_i",
+     SINT),
+    ("overlap beyond min(r)", SINTER, "& (a <= _max_neck(r_i, r_j))", "& (a <= 2.0 * _max_neck(r_i, r_j))", SINT),
+    ("sintering force term", SINTER, "+ a * jnp.sin(psi_half)", "+ a * jnp.cos(psi_half)", SINT),
+    ("arrhenius in J/mol", SINTER, "jnp.exp(-1e3 * activation_energy_kj", "jnp.exp(-activation_energy_kj", SINT),
+    ("mobility 1/T dropped", SINTER, 'return params["A"] / temperature * _arrhenius', 'return params["A"] * _arrhenius', SINT),
+    ("equilibrium neck of the larger sphere", SINTER,
+     'return jnp.minimum(r_i, r_j) * jnp.sin(0.5 * jnp.deg2rad(params["dihedral_angle"]))',
+     'return jnp.maximum(r_i, r_j) * jnp.sin(0.5 * jnp.deg2rad(params["dihedral_angle"]))', SINT),
+    ("damped newton", SINTER, "u_end - residual * shape(a_end)", "u_end - 0.5 * residual * shape(a_end)", SINT),
+    ("viscous without 3/2", SINTER, "return 1.5 * _equivalent_radius(r_i, r_j)", "return _equivalent_radius(r_i, r_j)",
+     SINT),
+    ("ramp floor reading", SINTER, "step_temperatures = temperature_start + k * (",
+     "step_temperatures = temperature_start + (k - 1) * (", SINT),
+    ("pair temperature geometric", SINTER, "return 0.5 * (temperature_i + temperature_j)",
+     "return jnp.sqrt(temperature_i * temperature_j)", SINT),
+    ("durations may be negative", SINTER, 'require_positive("durations (s)", durations, allow_zero=True)',
+     'require_finite("durations (s)", durations)', SINT),
+    ("bed duplicate kept", "fitting/sintering.py", 'keep = ~((t8["particle_1"] == 2) & (t8["particle_2"] == 3))',
+     'keep = t8["particle_1"] > 0', FSINT),
+    ("A without T_ref", "fitting/sintering.py", 'out["A"] = rate_ref * reference_temperature * arrhenius_ref',
+     'out["A"] = rate_ref * arrhenius_ref', FSINT),
+    ("lattice not turned to the axis", "fitting/sintering.py", "    shifts[:, [axis, 0]] = shifts[:, [0, axis]]",
+     "    pass", FSINT),
+    ("python-float kappa flags every pair", "sintercond/conductance.py",
+     "~((jnp.asarray(kappa_i) > 0) & (jnp.asarray(kappa_j) > 0))", "~((kappa_i > 0) & (kappa_j > 0))", COND),
 ]
 
 
