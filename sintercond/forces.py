@@ -40,9 +40,11 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, materialized, safe_divide, safe_norm, safe_power, safe_sqrt
+from sintercond._validation import concrete_arrays, require_positive
 
 SOLID_SPHERE_INERTIA = 0.4
 """``I = (2/5) m r^2`` of a solid sphere (Sect. 2): the factor ``I / (m r^2)``."""
@@ -621,13 +623,28 @@ def stable_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_co
       safety: factor on the stability limits.
 
     Returns:
-      The time step (s); ``inf`` when nothing moves or overlaps.
+      The time step (s). NaN under ``jit`` for an approach speed that sizes
+      nothing (``v_rel <= 0`` or not finite, unless a static ``delta > 0`` is
+      given, when ``v_rel = 0`` is allowed).
+
+    Raises:
+      ValueError: for a concrete ``v_rel`` or ``delta`` outside that domain, naming it.
     """
+    sized_by_load = delta is not None
+    if not any(isinstance(v, jax.core.Tracer) for v in (v_rel, delta)):
+        # a step sized for no collision is inf, for a negative speed a plausible-looking number: refuse both
+        (speed,) = concrete_arrays("stable_time_step", v_rel)
+        require_positive("v_rel (m/s, the largest normal approach speed)", speed, allow_zero=sized_by_load)
+        if sized_by_load:
+            (load_overlap,) = concrete_arrays("stable_time_step", delta)
+            require_positive("delta (m, the largest overlap)", load_overlap)
     r_star, m_star, e_star, g_star, v_rel, xi_con, xi_fric, xi_rol = as_float_arrays(
         r_star, m_star, e_star, g_star, v_rel, xi_con, xi_fric, xi_rol)
     if delta is None:
         delta = hertz_collision_overlap(r_star, m_star, e_star, v_rel)
     (delta,) = as_float_arrays(delta)
+    sized = jnp.isfinite(v_rel) & jnp.isfinite(delta) & (
+        (v_rel >= 0) & (delta > 0) if sized_by_load else (v_rel > 0))
     sqrt_mobility = math.sqrt(CONTACT_POINT_MOBILITY)
     omega_n_squared = 2.0 * e_star * safe_sqrt(r_star * delta) / m_star
     omega_t_squared = CONTACT_POINT_MOBILITY * tangential_stiffness(delta, r_star, g_star) / m_star
@@ -636,4 +653,5 @@ def stable_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_co
         _mode_time_step(omega_n_squared, xi_con),
         jnp.minimum(_mode_time_step(omega_t_squared, xi_fric * sqrt_mobility),
                     _mode_time_step(omega_r_squared, xi_rol * sqrt_mobility)))
-    return jnp.minimum(hertz_collision_time_step(r_star, m_star, e_star, v_rel, fraction), safety * stability)
+    dt = jnp.minimum(hertz_collision_time_step(r_star, m_star, e_star, v_rel, fraction), safety * stability)
+    return jnp.where(sized, dt, jnp.nan)

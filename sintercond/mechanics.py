@@ -434,6 +434,9 @@ def stable_time_step(physics, particles, neighbors, params: MechanicalParams, v_
 def check_time_step(dt, physics, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs) -> float:
     """Raise ``ValueError`` naming the limit if ``dt`` exceeds :func:`stable_time_step`; returns the limit (s)."""
     limit = float(stable_time_step(physics, particles, neighbors, params, v_rel, delta, **kwargs))
+    if math.isnan(limit):
+        raise ValueError(f"the mechanical time step is undefined for v_rel = {float(v_rel)!r} m/s (the largest "
+                         f"normal approach speed must be finite and > 0) and delta = {delta!r}")
     if not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be finite and > 0 s; got {dt!r}")
     if dt > limit:

@@ -560,3 +560,22 @@ def test_float32_within_tolerance():
                                    np.float32(0.3))
     assert dt32.dtype == jnp.float32
     assert float(dt32) == pytest.approx(float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.3)), rel=1e-5)
+
+
+def test_stable_time_step_refuses_an_approach_speed_that_sizes_nothing():
+    """Issue 28: v_rel = 0 gave inf (or NaN), v_rel = -1 a plausible-looking step. Concrete input raises naming
+    v_rel; traced input gives NaN; v_rel = 0 is allowed only with a static overlap delta > 0."""
+    import jax
+
+    for bad in (0.0, -1.0, np.nan, np.inf):
+        with pytest.raises(ValueError, match=r"v_rel \(m/s"):
+            forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, bad)
+    with pytest.raises(ValueError, match=r"delta \(m"):
+        forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.0, delta=0.0)
+    traced = jax.jit(lambda v: forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v))
+    assert np.isnan(float(traced(-1.0))) and np.isnan(float(traced(0.0)))
+    assert float(traced(0.3)) == pytest.approx(float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.3)),
+                                               rel=1e-14)
+    # a static load: v_rel = 0 sizes the step from delta alone, the same as a slow approach to that overlap
+    static = float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.0, delta=DELTA))
+    assert np.isfinite(static) and static > 0
