@@ -253,6 +253,10 @@ MUTANTS = [
      'out["A"] = rate_ref * arrhenius_ref', FSINT),
     ("lattice not turned to the axis", "fitting/sintering.py", "    shifts[:, [axis, 0]] = shifts[:, [0, axis]]",
      "    pass", FSINT),
+    ("time step for a negative approach speed", "sintercond/forces.py",
+     '"v_rel (m/s, the largest normal approach speed)", speed, allow_zero=sized_by_load)',
+     '"v_rel (m/s, the largest normal approach speed)", abs(speed), allow_zero=sized_by_load)',
+     [T + "test_forces.py::test_stable_time_step_refuses_an_approach_speed_that_sizes_nothing"]),
     ("python-float kappa flags every pair", "sintercond/conductance.py",
      "~((jnp.asarray(kappa_i) > 0) & (jnp.asarray(kappa_j) > 0))", "~((kappa_i > 0) & (kappa_j > 0))", COND),
 ]

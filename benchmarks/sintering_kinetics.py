@@ -109,7 +109,7 @@ def throughput(n):
     intervals = len(durations)
     rows += [[f"growth on the ramp ({intervals} intervals), JAX float64 (exact per interval)",
               f"{n * intervals / t_grow:.3g}", f"{1e3 * t_grow:.0f}", "reference"],
-             [f"growth, JAX float32", f"{n * intervals / t_grow32:.3g}", f"{1e3 * t_grow32:.0f}", f"{err_32:.1e}"],
+             ["growth, JAX float32", f"{n * intervals / t_grow32:.3g}", f"{1e3 * t_grow32:.0f}", f"{err_32:.1e}"],
              [f"growth, NumPy RK4 in u, {m} substeps", f"{n * intervals / t_rk:.3g}", f"{1e3 * t_rk:.0f}",
               f"{err_rk:.1e}"]]
     return rows

@@ -163,13 +163,13 @@ def test_grain_boundary_growth_is_exact_per_interval_and_stops_at_the_equilibriu
         newton = [abs(float(st.grow_neck("grain_boundary", a0, r_i, r_j, [temperature], [16.0], GB,
                                          newton_iterations=k)[-1]) / one - 1) for k in (1, 2)]
         assert newton[0] < 1e-5 and newton[1] < 1e-13  # quadratic
-    r = 40e-6
-    # long enough: the neck stops at r sin(psi/2) and stays there
-    long = np.asarray(st.grow_neck("grain_boundary", 0.0, r, r, np.full(20, 1273.0), np.full(20, 1e4), GB))
-    a_eq = r * np.sin(np.deg2rad(75.0))
+    # long enough: the neck stops at the smaller sphere's r sin(psi/2) and stays there
+    long = np.asarray(st.grow_neck("grain_boundary", 0.0, r_i, r_j, np.full(20, 1273.0), np.full(20, 1e4), GB))
+    a_eq = r_j * np.sin(np.deg2rad(75.0))
     assert long[-1] == pytest.approx(a_eq, rel=1e-14)
     assert np.all(np.diff(long) >= 0) and np.all(long <= a_eq * (1 + 1e-14))
-    assert int(st.growth_status("grain_boundary", long[-1], r, r, np.full(20, 1273.0), np.full(20, 1e4), GB)) == \
+    assert int(st.growth_status("grain_boundary", long[-1], r_i, r_j, np.full(20, 1273.0), np.full(20, 1e4),
+                                GB)) == \
         st.GrowthStatus.AT_CAP
 
 
