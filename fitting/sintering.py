@@ -40,6 +40,7 @@ FE-fitted neck laws, the bulk conductivity from their Table 1.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import warnings
 
@@ -253,7 +254,10 @@ def fit_kinetics(series: NeckSeries, law="grain_boundary", *, exponent=6.0, size
         last = series.times == series.times.max()
         n = 6.0 if law == "grain_boundary" else float(exponent)
         u = (np.mean(series.necks_um[last]) * UM) ** n
-        scale = 48.0 * 40 * UM * 4 * 40 * UM * 0.26 if law == "grain_boundary" else 1.0
+        r_star = float(np.mean(2 * series.r_i * series.r_j / (series.r_i + series.r_j)))
+        # the point-contact shape 48 r* 4 r* (1 - cos(psi/2)) of the grain-boundary law
+        scale = 192.0 * r_star**2 * (1 - math.cos(math.radians(dihedral_angle) / 2)) if law == "grain_boundary" \
+            else 1.0
         params0["log_rate_ref"] = float(np.log(u / series.times.max() / scale))
     else:
         params0.update(start)
@@ -337,6 +341,20 @@ def lattice_conductivity(centres, radii, box, necks, kappa, law="rojek", axis=0,
     """
     centres, radii = np.asarray(centres, float), np.asarray(radii, float)
     lo, hi = (np.asarray(b, float) for b in box)
+    key = (centres.tobytes(), radii.tobytes(), lo.tobytes(), hi.tobytes(), int(axis), int(cells))
+    pairs, solve = _lattice(key, centres.shape[0])
+    a = jnp.stack([jnp.asarray(necks(ri, rj)) for ri, rj in zip(pairs.r_i, pairs.r_j)])
+    h = st.neck_overlap(a, pairs.r_i, pairs.r_j)
+    k_pairs = cd.conductance_from_neck(law, a, jnp.asarray(pairs.r_i), jnp.asarray(pairs.r_j), h, kappa, kappa)
+    return solve(k_pairs)
+
+
+@functools.lru_cache(maxsize=16)
+def _lattice(key, n):
+    """The periodic block of a cell and its compiled steady solve ``K_ij -> k*`` (the geometry never changes)."""
+    centres = np.frombuffer(key[0]).reshape(n, 3)
+    radii, lo, hi = (np.frombuffer(b) for b in key[1:4])
+    axis, cells = key[4], key[5]
     size = hi - lo
     lateral = np.arange(3) != axis
     shifts = np.array([[i, j, k] for i in range(cells) for j in range(3) for k in range(3)], float)
@@ -349,12 +367,11 @@ def lattice_conductivity(centres, radii, box, necks, kappa, law="rojek", axis=0,
     block, block_radii = block[unique], block_radii[unique]
     periodic_box = np.where(lateral, 3 * size, 100.0 * cells * size)  # no wrap along the axis
     pairs = contact_pairs(block, block_radii, periodic_box=periodic_box)
-    a = jnp.stack([jnp.asarray(necks(ri, rj)) for ri, rj in zip(pairs.r_i, pairs.r_j)])
-    h = st.neck_overlap(a, pairs.r_i, pairs.r_j)
-    k_pairs = cd.conductance_from_neck(law, a, jnp.asarray(pairs.r_i), jnp.asarray(pairs.r_j), h, kappa, kappa)
     faces_lo = np.where(lateral, 0.0, np.min(block[:, axis] - block_radii))
     faces_hi = np.where(lateral, 3 * size, np.max(block[:, axis] + block_radii))
-    return steady_state_network_conductivity(block, block_radii, pairs, k_pairs, axis=axis, box=(faces_lo, faces_hi))
+    solve = jax.jit(functools.partial(steady_state_network_conductivity, block, block_radii, pairs, axis=axis,
+                                      box=(faces_lo, faces_hi)))
+    return pairs, solve
 
 
 def conductivity_along_ramp(fits: dict, times=None) -> dict:

@@ -45,20 +45,22 @@ def require_positive(name: str, values, *, allow_zero: bool = False) -> None:
     fail_where(bad, lambda i: f"{name} must be finite and {rule}; got {float(values[i])!r} at index {i}")
 
 
-def law_params_valid(law, params):
+def law_params_valid(law, params, per_entry=False):
     """Under ``jit``: True where every parameter of a law is in its domain.
 
     Finite and > 0, except those in ``law.params_allowing_zero`` (>= 0) and
     ``law.params_any_sign`` (any finite value); the traced counterpart of the
-    laws' concrete checks.
+    laws' concrete checks. One flag for all (``per_entry=False``), or per
+    entry of parameters given per pair (broadcast).
     """
+    combine = (lambda ok: ok) if per_entry else jnp.all
     ok = jnp.asarray(True)
     for name, value in params.items():
         value = jnp.asarray(value)
         if name in law.params_any_sign:
-            ok = ok & jnp.all(jnp.isfinite(value))
+            ok = ok & combine(jnp.isfinite(value))
         elif name in law.params_allowing_zero:
-            ok = ok & jnp.all(jnp.isfinite(value) & (value >= 0))
+            ok = ok & combine(jnp.isfinite(value) & (value >= 0))
         else:
-            ok = ok & jnp.all(jnp.isfinite(value) & (value > 0))
+            ok = ok & combine(jnp.isfinite(value) & (value > 0))
     return ok

@@ -63,8 +63,12 @@ not: the force's ``a sin(psi/2)`` term is ``u^(1/6)``, which costs explicit
 schemes in ``u`` their order at the point contact); it is evaluated by
 Gauss-Legendre quadrature and set equal to ``speed(T) dt`` by Newton steps in
 ``u_1``, whose derivative is ``1 / shape``. The error against the node and
-iteration counts is measured in ``benchmarks/sintering_kinetics.py``;
-the defaults reach round-off. ``u`` is clipped at the cap, so a capped neck has
+iteration counts is measured in ``benchmarks/sintering_kinetics.py``:
+along the Eq. 6 ramp the defaults (8 nodes, 4 Newton steps) reach round-off;
+one long interval that grows a neck from 0 to near the equilibrium neck is
+within about 1e-5 (the shape has a square-root branch point at ``a = min(r)``),
+so split long holds. Lengths are scaled by ``min(r_i, r_j)`` inside, so that
+``u`` does not underflow float32. ``u`` is clipped at the cap, so a capped neck has
 zero rate and zero gradient. The pair temperature of two particles is their
 arithmetic mean (MUSEN's choice; :func:`pair_temperature`).
 
@@ -400,11 +404,18 @@ def law_params(law, params=None) -> dict:
 
 
 def growth_rate(law, a, r_i, r_j, temperature, params=None):
-    """``du/dt`` (m^n/s) of ``u = a^n`` at neck ``a`` and pair temperature ``temperature``; 0 at the cap."""
+    """``du/dt`` (m^n/s) of ``u = a^n`` at neck ``a`` and pair temperature ``temperature``.
+
+    0 at and beyond the law's cap (up to ``min(r_i, r_j)``); NaN for ``a`` outside ``[0, min(r_i, r_j)]``,
+    a temperature <= 0 or parameters out of their domain.
+    """
     law = kinetic_law(law)
     params = law_params(law, params)
     a, r_i, r_j, temperature = as_float_arrays(a, r_i, r_j, temperature)
-    return _rate(law, a, r_i, r_j, temperature, params)
+    valid = (_valid_neck(a, r_i, r_j) & jnp.isfinite(temperature) & (temperature > 0)
+             & _params_valid(law, params))
+    safe = jnp.where(valid, a, 0.0)
+    return jnp.where(valid, _rate(law, safe, r_i, r_j, jnp.where(valid, temperature, 1.0), params), jnp.nan)
 
 
 def _rate(law, a, r_i, r_j, temperature, params):
@@ -486,59 +497,69 @@ def _grow_neck(law, a0, r_i, r_j, temperatures, durations, params, quadrature_no
     dtype = jnp.result_type(a0, r_i, r_j, temperatures, durations, float)
     a0, r_i, r_j = (jnp.asarray(v, dtype) for v in (a0, r_i, r_j))
     temperatures, durations = temperatures.astype(dtype), durations.astype(dtype)
-    pair_shape = jnp.broadcast_shapes(a0.shape, r_i.shape, r_j.shape, temperatures.shape[1:])
-    a0, r_i, r_j = (jnp.broadcast_to(v, pair_shape) for v in (a0, r_i, r_j))
     params = {k: jnp.asarray(v, dtype) for k, v in params.items()}
+    pair_shape = jnp.broadcast_shapes(a0.shape, r_i.shape, r_j.shape, temperatures.shape[1:],
+                                      *(v.shape for v in params.values()))
+    a0, r_i, r_j = (jnp.broadcast_to(v, pair_shape) for v in (a0, r_i, r_j))
+    # one temperature row per interval, one column per pair, before any masking by pair
+    temperatures = jnp.broadcast_to(temperatures.reshape(temperatures.shape + (1,) * (len(pair_shape)
+                                                                                    - temperatures.ndim + 1)),
+                                    (durations.shape[0], *pair_shape))
+    params = {k: jnp.broadcast_to(v, pair_shape) for k, v in params.items()}
     valid = _valid_growth(law, a0, r_i, r_j, temperatures, durations, params)
     # invalid pairs run a harmless problem and are NaN afterwards (zero gradient there)
     r_i_s = jnp.where(valid, r_i, 1.0)
     r_j_s = jnp.where(valid, r_j, 1.0)
     a0_s = jnp.where(valid, jnp.minimum(a0, jnp.minimum(r_i_s, r_j_s)), 0.0)
     temperatures_s = jnp.where(valid, temperatures, 1.0)
-    n = law.exponent(params)
+    params_s = {k: jnp.where(valid, v, law.default_params[k]) for k, v in params.items()}
+    n = law.exponent(params_s)
     if isinstance(n, float) and n.is_integer():
         n = int(n)  # s ** (n - 1) by multiplications, not exp(log)
-    a_cap = jnp.minimum(law.cap(r_i_s, r_j_s, params), jnp.minimum(r_i_s, r_j_s))
-    u_cap = safe_power(a_cap, n)
-
+    # lengths in units of the smaller radius: u = (a / L)^n stays in [0, 1], where a^n in m^n would underflow
+    # float32 (a^6 < 1e-38 for necks below 0.5 um)
+    length = jnp.minimum(r_i_s, r_j_s)
+    inverse_power = safe_power(1.0 / length, 0.5 * n)  # (1/L)^n as a square: no overflow for small L
+    a_cap = jnp.minimum(law.cap(r_i_s, r_j_s, params_s), length)
+    u_cap = safe_power(a_cap / length, n)
     nodes, weights = (jnp.asarray(v, dtype) for v in np.polynomial.legendre.leggauss(quadrature_nodes))
+    node_params = {k: v[..., None] for k, v in params_s.items()}  # per-pair parameters against the node axis
 
-    def neck(u):
-        if isinstance(n, int) and n == 6:  # sqrt and cbrt, several times faster than a general power (double where: NaN-free at 0)
-            positive = u > 0
+    def neck(u):  # the scaled neck a / L
+        if isinstance(n, int) and n == 6:  # sqrt and cbrt, several times faster than a general power
+            positive = u > 0  # (double where: NaN-free at 0)
             return jnp.where(positive, jnp.cbrt(jnp.sqrt(jnp.where(positive, u, 1.0))), 0.0)
         return safe_power(u, 1.0 / n)
 
-    def shape(a):
-        return law.shape(a, r_i_s, r_j_s, params)
+    def shape(x):  # du/dtau in scaled units, tau the reduced time speed(T) t / L^n
+        return law.shape(x * length, r_i_s, r_j_s, params_s)
 
-    def elapsed(a_start, a_end):
-        # the reduced time to grow from a_start to a_end: int n s^(n-1) / shape(s) ds (smooth in s)
-        half, mid = 0.5 * (a_end - a_start), 0.5 * (a_end + a_start)
-        s = mid[..., None] + half[..., None] * nodes
-        integrand = n * s ** (n - 1) / law.shape(s, r_i_s[..., None], r_j_s[..., None], params)
+    def elapsed(x_start, x_end):
+        # the scaled reduced time to grow from x_start to x_end: int n y^(n-1) / shape(L y) dy (smooth in y)
+        half, mid = 0.5 * (x_end - x_start), 0.5 * (x_end + x_start)
+        y = mid[..., None] + half[..., None] * nodes
+        integrand = n * y ** (n - 1) / law.shape(y * length[..., None], r_i_s[..., None], r_j_s[..., None],
+                                                 node_params)
         return half * jnp.sum(weights * integrand, axis=-1)
 
     def interval(u, step):
         temperature, dt = step
-        reduced_time = law.speed(temperature, params) * dt
-        a_start = neck(u)
-        if not law.shape_depends_on_neck:
-            u_end = jnp.minimum(u + shape(a_start) * reduced_time, u_cap)
-        else:
-            # exact for a constant temperature: solve elapsed(a_start, a_end) = speed dt for u_end = a_end^n
-            # by Newton in u_end (d elapsed / d u_end = 1 / shape), from explicit Euler, which is below the
-            # root (shape grows with a) so the iterates rise monotonically onto it
-            u_end = jnp.minimum(u + shape(a_start) * reduced_time, u_cap)
+        reduced_time = law.speed(temperature, params_s) * dt * inverse_power * inverse_power
+        x_start = neck(u)
+        u_end = jnp.minimum(u + shape(x_start) * reduced_time, u_cap)
+        if law.shape_depends_on_neck:
+            # exact for a constant temperature, up to the quadrature: solve elapsed(x_start, x_end) = reduced
+            # time for u_end = x_end^n by Newton in u_end (d elapsed / d u_end = 1 / shape), from explicit
+            # Euler; elapsed is convex in u_end while the shape falls, concave while it rises, and the clip
+            # keeps the iterates in [u, u_cap]
             for _ in range(newton_iterations):
-                a_end = neck(u_end)
-                residual = elapsed(a_start, a_end) - reduced_time
-                u_end = jnp.clip(u_end - residual * shape(a_end), u, u_cap)
-        return u_end, neck(u_end)
+                x_end = neck(u_end)
+                residual = elapsed(x_start, x_end) - reduced_time
+                u_end = jnp.clip(u_end - residual * shape(x_end), u, u_cap)
+        return u_end, neck(u_end) * length
 
-    u0 = jnp.maximum(safe_power(a0_s, n), 0.0)
-    _, history = jax.lax.scan(interval, u0, (jnp.broadcast_to(temperatures_s, (durations.shape[0], *pair_shape)),
-                                             durations))
+    u0 = safe_power(a0_s / length, n)
+    _, history = jax.lax.scan(interval, u0, (temperatures_s, durations))
     # a neck that starts above its cap stays where it is
     history = jnp.where(a0_s >= a_cap, a0_s, history)
     return jnp.where(valid, history, jnp.nan)
@@ -568,9 +589,9 @@ def _valid_growth(law, a0, r_i, r_j, temperatures, durations, params):
 
 
 def _params_valid(law, params):
-    ok = law_params_valid(law, params)
+    ok = law_params_valid(law, params, per_entry=True)
     if "dihedral_angle" in params:
-        ok = ok & jnp.all(jnp.asarray(params["dihedral_angle"]) <= 180.0)
+        ok = ok & (jnp.asarray(params["dihedral_angle"]) <= 180.0)
     return ok
 
 
@@ -607,8 +628,8 @@ def validate_growth_inputs(law, a0, r_i, r_j, temperatures, durations, params=No
             require_positive(label, value, allow_zero=name in law.params_allowing_zero)
     if "dihedral_angle" in params:
         angle = np.asarray(params["dihedral_angle"], dtype=np.float64)
-        fail_where(angle > 180.0, lambda i: f"params['dihedral_angle'] must be in (0, 180] degrees; got "
-                                            f"{float(np.ravel(angle)[0])!r}")
+        fail_where(np.atleast_1d(angle) > 180.0, lambda i: f"params['dihedral_angle'] must be in (0, 180] degrees; "
+                                                          f"got {float(np.atleast_1d(angle)[i])!r} at index {i}")
 
 
 # --------------------------------------------------------------------------

@@ -271,6 +271,71 @@ def test_growth_float32_agrees_with_float64():
     np.testing.assert_allclose(a32, a64, rtol=2e-6)
 
 
+def test_growth_to_a_large_neck_matches_an_independent_ode_solution():
+    """From a/r = 0.05 to about 0.9 at 1200 K against SciPy's solve_ivp on da/dt = rate(a) / (6 a^5), the rate
+    written out from the module docstring with H'(a) = 1 / (da/dh) from neck.neck_radius's implicit derivative."""
+    from scipy.integrate import solve_ivp
+
+    r_i, r_j, temperature = 40e-6, 29.3e-6, 1273.0
+    r_star = 2 * r_i * r_j / (r_i + r_j)
+    psi = np.deg2rad(GB["dihedral_angle"]) / 2
+    mobility = GB["A"] / temperature * np.exp(-GB["activation_energy"] * 1e3 / (8.314462618 * temperature))
+    slope_of = jax.jit(lambda a: 1.0 / jax.grad(sc.neck_radius, argnums=2)(r_i, r_j, st.neck_overlap(a, r_i, r_j)))
+
+    def rhs(_, y):
+        a = y[0]
+        slope = float(slope_of(a))
+        rate = 48 * (a / slope) * mobility * (4 * r_star * (1 - np.cos(psi)) + a * np.sin(psi))
+        return [rate / (6 * a**5)]
+
+    a0, t_end = 0.05 * r_j, 2500.0
+    reference = solve_ivp(rhs, (0.0, t_end), [a0], method="DOP853", rtol=1e-12, atol=0).y[0, -1]
+    assert 0.85 < reference / r_j < 0.95
+    ours = st.grow_neck("grain_boundary", a0, r_i, r_j, np.full(25, temperature), np.full(25, t_end / 25), GB)[-1]
+    assert float(ours) == pytest.approx(reference, rel=1e-9)
+
+
+def test_temperatures_per_interval_broadcast_over_pairs_and_parameters_per_pair():
+    """A 1-D history applies to every pair (it was broadcast along the pair axis when there were as many pairs as
+    intervals); parameters may be given per pair, and one bad pair's parameter spoils only that pair."""
+    temps, durations = np.array([900.0, 1200.0]), np.array([1.0, 1.0])
+    power = {"K0": 1e-12, "activation_energy": 30.0, "exponent": 2.0}
+    single = np.asarray(st.grow_neck("power_law", 0.0, 40e-6, 40e-6, temps, durations, power))
+    both = np.asarray(st.grow_neck("power_law", 0.0, np.full(2, 40e-6), 40e-6, temps, durations, power))
+    np.testing.assert_allclose(both, np.stack([single, single], axis=1), rtol=1e-15)
+    angles = np.array([100.0, 170.0, 150.0])
+    per_pair = np.asarray(st.grow_neck("grain_boundary", 0.0, np.full(3, 40e-6), 29.3e-6, np.full(5, 1200.0),
+                                       np.full(5, 2.0), {**GB, "dihedral_angle": angles}))
+    for k, angle in enumerate(angles):
+        alone = np.asarray(st.grow_neck("grain_boundary", 0.0, 40e-6, 29.3e-6, np.full(5, 1200.0), np.full(5, 2.0),
+                                        {**GB, "dihedral_angle": angle}))
+        np.testing.assert_allclose(per_pair[:, k], alone, rtol=1e-13)
+    run = jax.jit(lambda q: st.grow_neck("grain_boundary", 0.0, np.full(3, 40e-6), 29.3e-6, np.full(5, 1200.0),
+                                         np.full(5, 2.0), {**GB, "activation_energy": q}))
+    mixed = np.asarray(run(jnp.array([120.0, -1.0, 120.0])))
+    assert np.all(np.isfinite(mixed[:, [0, 2]])) and np.all(np.isnan(mixed[:, 1]))
+
+
+def test_float32_growth_of_submicron_necks_at_the_default_parameters():
+    """a^6 in m^6 underflows float32 below a ~ 0.5 um (1e-38): the integration works in units of min(r)."""
+    temps, durations = np.full(4, 1000.0), np.full(4, 1.0)
+    a64 = np.asarray(st.grow_neck("grain_boundary", 0.0, 40e-6, 40e-6, temps, durations))
+    a32 = np.asarray(st.grow_neck("grain_boundary", np.float32(0.0), np.float32(40e-6), np.float32(40e-6),
+                                  temps.astype(np.float32), durations.astype(np.float32),
+                                  {k: np.float32(v) for k, v in st.KINETIC_LAWS["grain_boundary"].default_params.items()}))
+    assert 0.3e-6 < a64[0] < a64[-1] < 1e-6
+    np.testing.assert_allclose(a32, a64, rtol=2e-6)
+
+
+def test_growth_rate_is_nan_outside_the_domain():
+    rates = np.asarray(st.growth_rate("grain_boundary", np.array([-1e-6, 1e-6, 39e-6, 41e-6]), 40e-6, 40e-6, 1000.0))
+    assert np.isnan(rates[0]) and rates[1] > 0 and rates[2] == 0.0 and np.isnan(rates[3])  # 39 um: past the cap
+    assert np.isnan(float(st.growth_rate("grain_boundary", 1e-6, 40e-6, 40e-6, -5.0)))
+    over = np.asarray(st.growth_rate("power_law", np.array([30e-6, 45e-6]), 40e-6, 60e-6, 1000.0,
+                                     {"max_neck_ratio": 1.5}))
+    assert over[0] > 0 and np.isnan(over[1])  # max_neck_ratio > 1 cannot grow a neck beyond min(r)
+
+
 def test_pair_temperature_is_the_mean():
     assert float(st.pair_temperature(900.0, 1000.0)) == 950.0
     harmonic = 2 * 900.0 * 1000.0 / 1900.0
