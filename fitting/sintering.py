@@ -420,8 +420,41 @@ def conductivity_along_ramp(fits: dict, times=None) -> dict:
     return out
 
 
+def bed_conductivity_along_ramp(fit: SinteringFit, times=(0.5, 3.5, 6.5, 9.5)) -> dict:
+    """``lambda_pow`` of a powder-bed REV along the ramp, each contact's neck grown by ``fit`` (the bed fit).
+
+    The bed: :func:`fitting.reference.powder_bed_450` (45-150 um spheres, settled once), the 150 um cube of
+    :func:`sintercond.packing.rev_box` (Rizza & Galati's PB case on a bed of our own); each contact of the
+    cube grows its own neck from a point contact with its own radii; ``n``, ``S_ss/S_0``, ``phi`` and the
+    per-pair ``gamma`` (``D`` the larger diameter) from :func:`sintercond.geometry.rev_measures`; ``lambda_0``
+    from their Table 1 at each time.
+
+    Returns:
+      ``time_s``, ``mean_neck_um``, ``lambda_mean``, ``lambda_std`` (over the cube's contacts, W/(m K)),
+      ``n``, ``sss_over_s0``, ``phi`` and ``pairs``.
+    """
+    from fitting.reference import powder_bed_450
+    from sintercond import packing
+
+    times = np.asarray(times, float)
+    centres, radii, box = packing.rev_box(powder_bed_450(), 150.0)
+    t_table, _, lambda0_table = tt.ti6al4v_conductivity_table()
+    grown = functools.lru_cache(maxsize=None)(
+        lambda r_i, r_j: grown_necks(fit, r_i * UM, r_j * UM, times)[:, 0] / UM)  # radii in um
+    out = {k: [] for k in ("mean_neck_um", "lambda_mean", "lambda_std", "n", "sss_over_s0", "phi", "pairs")}
+    for k, time in enumerate(times):
+        m = geometry.rev_measures(centres, radii, box, necks=lambda r_i, r_j, k=k: float(grown(r_i, r_j)[k]))
+        tau2 = tt.tortuosity_squared(m.sss_over_s0, m.gamma, m.n, m.phi)
+        lam = np.asarray(tt.powder_conductivity(m.n, tau2, np.interp(time, t_table, lambda0_table)))
+        for key, value in (("mean_neck_um", np.mean(m.neck_radii)), ("lambda_mean", lam.mean()), ("lambda_std", lam.std()),
+                           ("n", m.n), ("sss_over_s0", m.sss_over_s0), ("phi", m.phi), ("pairs", len(m.pairs))):
+            out[key].append(value)
+    return {"time_s": times, **{k: np.array(v) for k, v in out.items()}}
+
+
 __all__ = [
-    "IdentifiabilityWarning", "NeckSeries", "SERIES", "SinteringFit", "conductivity_along_ramp", "exponent_valley",
+    "IdentifiabilityWarning", "NeckSeries", "SERIES", "SinteringFit", "bed_conductivity_along_ramp",
+    "conductivity_along_ramp", "exponent_valley",
     "fit_kinetics", "grown_necks", "lattice_conductivity", "neck_series", "ramp_temperature_mean",
     "synthetic_series",
 ]

@@ -153,3 +153,16 @@ def test_conductivity_along_the_ramp_against_the_paper(fits):
     # the FE-fitted law is a few per cent above the linear one at these a/r
     assert np.all(out["k_star_bcc_fitted"] > out["k_star_bcc_rojek"])
     assert np.all(out["k_star_bcc_fitted"] < 1.1 * out["k_star_bcc_rojek"])
+
+
+def test_bed_conductivity_rises_with_the_grown_necks_as_table_9():
+    """On our shipped bed's 150 um cube, each contact grown by the bed fit: lambda_pow rises along the ramp by
+    Table 9's factor (the necks and lambda_0 drive the rise), within 10 %."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fs.IdentifiabilityWarning)
+        fit = fs.fit_kinetics(fs.neck_series("bed"), "power_law", exponent=6.0, size_exponent=None)
+    out = fs.bed_conductivity_along_ramp(fit)
+    t9 = rizza_galati_table(9)
+    assert np.all(np.diff(out["mean_neck_um"]) > 0) and np.all(np.diff(out["lambda_mean"]) > 0)
+    paper = np.array([t9[f"lambda_{t}"].mean() for t in out["time_s"]])
+    np.testing.assert_allclose(out["lambda_mean"] / out["lambda_mean"][0], paper / paper[0], rtol=0.1)
