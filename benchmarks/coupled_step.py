@@ -397,7 +397,7 @@ def main():
             best, differences = compare_orders(centres, radii, temperature, args.steps, args.compare_orders)
             print(f"{len(radii):,} spheres, {args.steps} steps: ms/step (wall, CPU) " + ", ".join(
                 f"{order} {best[order, 'wall']:.2f}, {best[order, 'cpu']:.2f}" for order in ("lattice", "morton"))
-                + "; max differences: positions %.2g m, velocities %.2g m/s, temperatures %.2g K" % tuple(differences))
+                + "; max differences: positions {:.2g} m, velocities {:.2g} m/s, temperatures {:.2g} K".format(*differences))
         return
     found = None if args.no_peers else lammps_executable(args.lammps)
     if found is None:

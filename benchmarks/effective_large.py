@@ -22,12 +22,13 @@ sys.path.insert(0, "benchmarks")
 import numpy as np
 from thermal_step import jittered_packing
 from sintercond import network, thermal
+from sintercond import steady
 from sintercond.conductance import rojek_pair_conductance
 n = int(sys.argv[1])
 t0 = time.perf_counter()
 centres, radii = jittered_packing(n)
 order = network.morton_order(centres)
-k = thermal.steady_state_conductivity(centres[order], radii[order], 7.0, axis=0, tol=1e-10)
+k = steady.steady_state_conductivity(centres[order], radii[order], 7.0, axis=0, tol=1e-10)
 elapsed = time.perf_counter() - t0
 k_lattice = float(rojek_pair_conductance(0.53e-4, 0.53e-4, 0.06e-4, 7.0)) / 1e-4
 print(json.dumps({"n": len(radii), "seconds": elapsed, "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,

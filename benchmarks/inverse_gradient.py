@@ -30,7 +30,6 @@ Prints the table and rewrites its section of benchmarks/RESULTS.md.
 
 import argparse
 import json
-import math
 import os
 import pathlib
 import resource
@@ -206,7 +205,8 @@ def main():
                              ratio, f"{r['xla_gb']:.3f}", f"{r['rss_gb']:.2f}" if r["rss_gb"] is not None else "-",
                              agree])
                 print(rows[-1], flush=True)
-    header = ["steps", "variant", "seconds", "/ forward (same process, best of alternating runs)", "XLA memory GB", "peak RSS growth GB",
+    header = ["steps", "variant", "seconds", "/ forward (same process, best of alternating runs)", "XLA memory GB",
+              "peak RSS growth GB",
               "grad rel. diff to adjoint"]
     body = (f"{n:,} particles (sintered SC lattice, 6 contacts each), float64, 8 probes read every 10 steps, "
             f"loss = sum of squared readings, gradient d/d(kappa, c).\n\n" + markdown_table(header, rows) +

@@ -27,7 +27,7 @@ The same physics in every pair of codes:
   ``neck_model="intersection"``.
 
 sintercond runs as a small driver in a subprocess using the public API
-(``network.contact_table``, ``thermal.simulate`` under ``jax.jit`` with the
+(``network.contact_table``, ``simulate.simulate_table`` under ``jax.jit`` with the
 table as an argument, ``np.save``) and reports its own phases; it runs with
 JAX's persistent compilation cache off, then cold (empty directory) and warm
 (the same directory again). A peer that is not installed is skipped with a
@@ -98,7 +98,8 @@ def driver(out, side, steps, peer, cache_dir):
     start = time.perf_counter()
     import jax
 
-    from sintercond import network, thermal
+    from sintercond import network
+    from sintercond.simulate import simulate_table
     from sintercond._cache import enable_compilation_cache
 
     if cache_dir != "off":
@@ -114,7 +115,7 @@ def driver(out, side, steps, peer, cache_dir):
     phases["build"] = time.perf_counter() - t
     t = time.perf_counter()
     dt = time_step()
-    run = jax.jit(lambda t0, table, capacity: thermal.simulate(t0, table, capacity, dt, n_steps=steps,
+    run = jax.jit(lambda t0, table, capacity: simulate_table(t0, table, capacity, dt, n_steps=steps,
                                                                save_every=steps)[0])
     args = (jax.numpy.asarray(temperature), table, jax.numpy.asarray(capacity))
     compiled = run.lower(*args).compile()
@@ -347,7 +348,7 @@ def main():
         f"best of {args.repeats} (cold cache: a new directory each time; warm: after one run that fills it). "
         "sintercond phases are its driver's own clock (import "
         "includes JAX; build = packing + `contact_table`; compile = `jit(...).lower().compile()` of "
-        "`thermal.simulate`); LAMMPS/LIGGGHTS 'loop' is their reported loop time; 'rest' is the whole process less the "
+        "`simulate.simulate_table`); LAMMPS/LIGGGHTS 'loop' is their reported loop time; 'rest' is the whole process less the "
         "phases (interpreter or executable start-up, reading the input, exit). 'max |dT|' compares the final "
         "temperatures (K) with the peer that runs the same law (sintercond rows) or with sintercond (peer rows): "
         "LAMMPS `heat radius` is `2 kappa a_Hertz` = sintercond `batchelor_obrien` + `neck_model='hertz'`; "

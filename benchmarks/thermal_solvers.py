@@ -24,6 +24,8 @@ from _common import best_time, markdown_table, new_figure, number, save_figure, 
 from thermal_step import jittered_packing
 
 from sintercond import network, thermal
+from sintercond.simulate import simulate_table
+from sintercond import steady
 from sintercond.conductance import pair_conductance
 
 
@@ -80,7 +82,7 @@ def transient_error_table():
         for factor in factors:
             steps = max(1, int(round(t_end / (factor * limit))))
             dt = t_end / steps
-            run = jax.jit(lambda t, dt=dt, steps=steps, method=method: thermal.simulate(
+            run = jax.jit(lambda t, dt=dt, steps=steps, method=method: simulate_table(
                 t, table, jnp.asarray(capacity), dt, n_steps=steps, save_every=steps,
                 fixed_mask=jnp.asarray(fixed), fixed_temperature=jnp.asarray(held), method=method)[0])
             result = np.asarray(run(jnp.asarray(t0)))
@@ -106,18 +108,18 @@ def main():
     fixed = hot | cold
     held = jnp.where(hot, 1000.0, 300.0)
     start = jnp.where(fixed, held, 300.0)
-    reference = thermal.steady_state(table, fixed, held, tol=1e-15)
+    reference = steady.steady_state(table, fixed, held, tol=1e-15)
     target = 1e-6 * 700.0
     limit = float(thermal.stable_time_step(capacity, table))
 
     rows = []
-    steady = jax.jit(lambda: thermal.steady_state(table, fixed, held, tol=1e-10))
-    t_steady = best_time(steady, repeats=5)
-    rows.append(("steady state (CG)", "-", "1 solve", f"{float(jnp.max(jnp.abs(steady() - reference))):.1e}",
+    solve = jax.jit(lambda: steady.steady_state(table, fixed, held, tol=1e-10))
+    t_steady = best_time(solve, repeats=5)
+    rows.append(("steady state (CG)", "-", "1 solve", f"{float(jnp.max(jnp.abs(solve() - reference))):.1e}",
                  f"{t_steady:.3f}"))
     for name, method, dt, chunk in (("explicit Euler", "explicit", 0.9 * limit, 2000),
                                     ("backward Euler (CG)", "implicit", 100 * limit, 20)):
-        advance = jax.jit(lambda t, dt=dt, method=method, chunk=chunk: thermal.simulate(
+        advance = jax.jit(lambda t, dt=dt, method=method, chunk=chunk: simulate_table(
             t, table, capacity, dt, n_steps=chunk, save_every=chunk, fixed_mask=fixed, fixed_temperature=held,
             method=method)[0])
         jax.block_until_ready(advance(start))  # compile
@@ -154,7 +156,7 @@ def main():
         return jax.lax.fori_loop(0, steps, body, (t, positions))[0]
 
     general = jax.jit(lambda t: general_loop(t, velocity))
-    static = jax.jit(lambda t: thermal.simulate(t, table, capacity, dt, n_steps=steps, save_every=steps)[0])
+    static = jax.jit(lambda t: simulate_table(t, table, capacity, dt, n_steps=steps, save_every=steps)[0])
     np.testing.assert_allclose(np.asarray(general(start)), np.asarray(static(start)), rtol=1e-12)
     general = jax.jit(general_loop)
     t_general = best_time(general, start, velocity)

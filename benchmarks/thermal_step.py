@@ -5,7 +5,7 @@ Usage: python benchmarks/thermal_step.py [--sizes 10000 100000 1000000]
 A jittered, sintered simple-cubic packing (spacing a, radii 0.53 a +- 2 %,
 positions +- 2 % of a; ~6 contacts per particle), float64, explicit Euler
 ``T += dt / C * (sum_j K_ij T_j - (sum_j K_ij) T_i)``. JAX runs 200 steps in
-one ``lax.scan`` (sintercond.thermal.simulate); SciPy runs the same update
+one ``lax.scan`` (sintercond.simulate.simulate_table); SciPy runs the same update
 with a CSR matrix of the same network in a Python loop. Both on the same
 particle order: random, then Morton-sorted. Prints the table and rewrites
 its section of benchmarks/RESULTS.md.
@@ -23,6 +23,7 @@ import scipy.sparse as sp
 from _common import markdown_table, new_figure, number, save_figure, write_section
 
 from sintercond import network, thermal
+from sintercond.simulate import simulate_table
 
 STEPS = 200
 
@@ -102,7 +103,7 @@ def main():
             capacity = jnp.asarray(4 / 3 * np.pi * r**3 * 4430 * 560)
             dt = float(thermal.stable_time_step(capacity, table))
             temperature = jnp.asarray(np.random.default_rng(2).uniform(300, 1000, len(r)))
-            run = jax.jit(lambda t: thermal.simulate(t, table, capacity, dt, n_steps=STEPS, save_every=STEPS)[0])
+            run = jax.jit(lambda t: simulate_table(t, table, capacity, dt, n_steps=STEPS, save_every=STEPS)[0])
             old = jax.jit(lambda t: previous_step_loop(t, table.neighbors, table.conductance, capacity, dt))
             t_jax, t_old = best_alternating((run, old), temperature, repeats=7)
             # SciPy CSR of the same network
@@ -133,7 +134,7 @@ def main():
     body = (
         "## Thermal step: static conduction, particle-steps per second\n\n"
         "Jittered sintered SC packing (~6 contacts per particle), float64 explicit Euler at the stable step, "
-        f"{STEPS} steps: JAX `thermal.simulate` (now `simulate.rollout`: padded contact table, checkpointed "
+        f"{STEPS} steps: JAX `simulate.simulate_table` (on `simulate.rollout`: padded contact table, checkpointed "
         "`lax.scan`) against the previous commit's step (the plain gather-and-sum in `lax.scan` + `fori_loop`, "
         "as `thermal.simulate` had it before the simulator redesign; timed alternately with the new one in the "
         "same process, best of 7 each) and SciPy CSR mat-vec in a Python loop (best of 5), on the same particle "

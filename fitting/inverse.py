@@ -32,7 +32,7 @@ Precision: float64 by default. Built in float32 (``SINTERCOND_ENABLE_X64=0``)
 the readings of a 10 K flash at 300 K stay within 1e-3 K of float64 over
 400 steps and the gradient within 1e-4 relative (tests/test_inverse.py).
 :meth:`ProbeExperiment.temperatures` with ``gradient="autodiff"`` runs the
-same model through :func:`sintercond.thermal.simulate` for JAX's own
+same model through :func:`sintercond.simulate.simulate_table` for JAX's own
 differentiation (forward mode for Gauss-Newton Jacobians; reverse mode as
 the reference the adjoint is tested against).
 """
@@ -118,7 +118,7 @@ class ProbeExperiment:
 
         ``gradient="adjoint"``: reverse-mode derivatives by the checkpointed
         discrete adjoint (no forward mode). ``"autodiff"``: the same numbers
-        from :func:`sintercond.thermal.simulate`, differentiable by JAX in
+        from :func:`sintercond.simulate.simulate_table`, differentiable by JAX in
         both modes. Beyond the explicit stability limit
         (:meth:`max_diffusivity_ratio`) the readings are NaN (flagged, never a
         silently wrong history).

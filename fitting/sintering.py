@@ -55,7 +55,7 @@ from sintercond import geometry
 from sintercond import sintering as st
 from sintercond import tortuosity as tt
 from sintercond.network import contact_pairs
-from sintercond.thermal import steady_state_network_conductivity
+from sintercond.steady import steady_state_network_conductivity
 
 UM = 1e-6
 SERIES = ("80-80", "80-58.6", "bed")
@@ -90,7 +90,7 @@ class NeckSeries:
     necks_um: np.ndarray = dataclasses.field(metadata={"static": False})
     name: str = dataclasses.field(default="", metadata={"static": True})
 
-    def with_necks(self, necks_um) -> "NeckSeries":
+    def with_necks(self, necks_um) -> NeckSeries:
         """The same series with other observed necks (synthetic data)."""
         return dataclasses.replace(self, necks_um=np.asarray(necks_um, dtype=np.float64))
 
@@ -333,7 +333,7 @@ def lattice_conductivity(centres, radii, box, necks, kappa, law="rojek", axis=0,
     ``necks(r_i, r_j)`` (m) through ``law`` at the overlap ``H(a)``
     (:func:`sintercond.sintering.neck_overlap`); the steady pipe-network solve
     holds the first plane of spheres at 1 K and the last at 0 K
-    (:func:`sintercond.thermal.steady_state_network_conductivity`). For SC and
+    (:func:`sintercond.steady.steady_state_network_conductivity`). For SC and
     BCC (every site a centre of inversion symmetry) the linear field is then
     the exact solution, so this is the infinite lattice's conductivity. The
     approach ``H(a)`` (at most 2 % of the spacing on the ramp) is left out of

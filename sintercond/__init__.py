@@ -51,6 +51,22 @@ from sintercond.neck import (  # noqa: E402
 
 __version__ = "0.1.0"
 
+_SUBMODULES = frozenset({
+    "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "heat_sources", "io",
+    "materials", "mechanics", "neck", "neighbors", "network", "packing", "pair_list", "plots", "run", "scene",
+    "simulate", "sintering", "state", "steady", "sweep", "thermal", "tortuosity", "walls",
+})
+
+
+def __getattr__(name):
+    """``sc.simulate``, ``sc.run``, ...: the submodules, imported on first use (the simulator pulls in jax-md)."""
+    if name in _SUBMODULES:
+        import importlib
+
+        return importlib.import_module(f"sintercond.{name}")
+    raise AttributeError(f"module 'sintercond' has no attribute {name!r}")
+
+
 __all__ = [
     "CONDUCTANCE_LAWS",
     "ConductanceLaw",

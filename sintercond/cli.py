@@ -178,7 +178,8 @@ def effective_box(scene, bed):
 
 
 def _effective(args) -> int:
-    from sintercond import packing, thermal
+    from sintercond import packing
+    from sintercond import steady
     from sintercond.scene import load_scene
 
     from sintercond.scene import SceneError
@@ -191,7 +192,7 @@ def _effective(args) -> int:
     box = effective_box(scene, bed)
     c = scene["conduction"]
     kappa = scene["material"]["conductivity"]
-    k_star = thermal.steady_state_conductivity(bed.centres, bed.radii, kappa, axis=args.axis, law=c["law"],
+    k_star = steady.steady_state_conductivity(bed.centres, bed.radii, kappa, axis=args.axis, law=c["law"],
                                                params=c.get("params"), neck_model=c.get("neck_model"), box=box)
     where = ("the lattice cell" if box is None else
              f"the container cut at the mean surface height, {box[1][0]:.4g} x {box[1][1]:.4g} x {box[1][2]:.4g} m")

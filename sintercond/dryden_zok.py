@@ -139,7 +139,7 @@ def _lagrange(nodes, x):
     return np.prod(factors, axis=2) / denom[None, :]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _gauss(n):
     x, w = legendre.leggauss(n)
     return (x + 1) / 2, w / 2  # on [0, 1]

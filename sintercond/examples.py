@@ -116,7 +116,7 @@ class ConductivityEstimate:
     """Three readings of ``k*`` along ``x`` (W/(m K)) of one packing, and the heat of the run (J), MECHANICS.md erratum 9.
 
     Attributes:
-      k_steady: :func:`sintercond.thermal.steady_state_conductivity` (spheres
+      k_steady: :func:`sintercond.steady.steady_state_conductivity` (spheres
         touching ``x = 0`` held hot, ``x = L`` cold, no wall resistance; ``A = L H``).
       k_wall: the hot wall's power at the end of the run ``P L / (A (T_hot - T_cold))``
         (the wall contacts' resistance included; the steady flux once the run is long enough).
@@ -177,7 +177,7 @@ def heat_run(centres, radii, lateral_size, height, duration=EXAMPLE_5_3["duratio
     end at ``duration``): exact for a settled bed whose modulus does not
     change with the temperature.
     """
-    from sintercond import thermal
+    from sintercond import steady
     from sintercond.walls import PlaneWall
 
     d = EXAMPLE_5_3
@@ -205,7 +205,7 @@ def heat_run(centres, radii, lateral_size, height, duration=EXAMPLE_5_3["duratio
     capacity = np.asarray(particles.mass) * d["specific_heat"]
     temperature = np.asarray(final.particles.temperature)
     stored = float(np.sum(capacity * (temperature - d["initial_temperature"])))
-    k_steady = thermal.steady_state_conductivity(centres, radii, d["conductivity"], axis=0, law="conductivity",
+    k_steady = steady.steady_state_conductivity(centres, radii, d["conductivity"], axis=0, law="conductivity",
                                                  neck_model="hertz", box=(np.zeros(3), np.array([L, L, height])))
     p_hot, p_cold = saved[-1]
     estimate = ConductivityEstimate(

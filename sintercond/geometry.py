@@ -78,7 +78,7 @@ def circle_rectangle_area(cx, cy, r, x0, x1, y0, y1):
     return np.maximum(area, 0.0)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _tanh_sinh(level=6):
     """Tanh-sinh nodes and weights on ``[-1, 1]`` (step 2^-level on ``[-3.2, 3.2]``)."""
     h = 2.0**-level

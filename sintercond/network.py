@@ -47,7 +47,7 @@ class ContactTable:
     wall_conductance: jax.Array | None = None
     wall_temperature: jax.Array | None = None
 
-    def with_walls(self, wall_conductance, wall_temperature) -> "ContactTable":
+    def with_walls(self, wall_conductance, wall_temperature) -> ContactTable:
         """The same network coupled to conducting walls (per particle ``K_iw`` and ``T_w``)."""
         return dataclasses.replace(self, wall_conductance=jnp.asarray(wall_conductance),
                                    wall_temperature=jnp.asarray(wall_temperature))
@@ -142,7 +142,7 @@ def ell_table(n_particles, i, j, *pair_values):
     return tuple(out)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _compiled_law(law, neck_model):
     return jax.jit(functools.partial(pair_conductance, law, neck_model=neck_model))
 

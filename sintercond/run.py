@@ -517,7 +517,7 @@ def observe(scene, model, state, probe) -> Observation:
             q = k_w * (wall["temperature"] - temperature)
             conducting_power += q if model.physics.mechanics else 0.0  # the thermal simulator's P_i holds it
             flows[k] = float(np.sum(q))
-    for column, k, mode, mask in model.wall_heat:
+    for _, k, mode, mask in model.wall_heat:
         if mode == "held":
             flows[k] = -float(np.sum((np.asarray(power) + conducting_power)[mask]))
     heat = tuple(flows[spec[1]] for spec in model.wall_heat)

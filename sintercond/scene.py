@@ -105,9 +105,10 @@ _SCHEMA = {
                            doc="a particle is heated when its centre lies within spot_radius + r of the beam axis"),
         "absorptance": Key(float, FRACTION, True, doc="absorbed fraction a"),
         "speed": Key(float, _within(0.0, 1e3, "m/s"), True, "m/s", doc="speed along the path"),
-        "path": Key(list, ("a non-empty list of [x, y] points (m)", lambda v: True), True, "m", doc="[[x, y], ...] waypoints in absolute coordinates of the packing "
-                                                "(the container's corner or the lattice's first sphere side at 0), "
-                                                "each within the packing's lateral extent widened by spot_radius"),
+        "path": Key(list, ("a non-empty list of [x, y] points (m)", lambda v: True), True, "m",
+                    doc="[[x, y], ...] waypoints in absolute coordinates of the packing "
+                        "(the container's corner or the lattice's first sphere side at 0), "
+                        "each within the packing's lateral extent widened by spot_radius"),
     },
     "convection": {
         "environment_temperature": Key(float, TEMPERATURE, True, "K", doc="T_E of the gas"),
@@ -210,8 +211,9 @@ _PACKING = {
     },
     "simple_cubic": {
         "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
-        "counts": Key(list, ("a list of 3 integers in [1, 10000]", lambda v: True), True, doc="[nx, ny, nz] spheres per axis, integers >= 1; at most "
-                                             f"{MAX_LATTICE_PARTICLES} in all"),
+        "counts": Key(list, ("a list of 3 integers in [1, 10000]", lambda v: True), True,
+                      doc="[nx, ny, nz] spheres per axis, integers >= 1; at most "
+                          f"{MAX_LATTICE_PARTICLES} in all"),
         "spacing": Key(float, _within(1e-8, 1.0, "m"), True, "m", doc="centre distance of neighbours"),
         "radius": Key(float, _within(1e-8, 1.0, "m"), True, "m",
                       doc="sphere radius; the lattice conducts only for radius > spacing/2 (overlap "

@@ -16,6 +16,9 @@ and inverse fits, prescribed motion, the benchmarks) goes through here:
   observable reach any of its leaves by JAX's own reverse or forward mode.
 * :class:`SimState` is the whole state (particles, contacts, step counter and
   time step) as registered frozen dataclasses; a checkpoint holds all of it.
+* :func:`simulate_table` advances a table network built once
+  (:func:`sintercond.network.contact_table`) without building a state by
+  hand: a convenience over :func:`rollout`.
 * :func:`rollout` scans the step over ``jax.checkpoint``-ed segments of about
   ``sqrt(n_steps)`` steps and saves observables chosen by :class:`SaveAt`
   (probe temperatures, means, heat flows), not whole states: reverse mode
@@ -74,7 +77,8 @@ from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow, did_rebuild
 from sintercond.pair_list import (HalfPairs, allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs,
                                   half_pairs_overflowed, map_pair_blocks, padded_half_pairs, pair_exchange, pair_sum)
-from sintercond.network import network_laplacian
+from sintercond._validation import require_positive
+from sintercond.network import ContactTable, network_laplacian
 from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
 
@@ -982,3 +986,65 @@ def _unchanged_leaves(sim, prep, leaves, treedef):
     """Per leaf of the flattened state: whether one step returns it unchanged (the same value, untouched)."""
     jaxpr = jax.make_jaxpr(lambda *xs: jax.tree.leaves(sim.advance_fn(treedef.unflatten(xs), prep)))(*leaves).jaxpr
     return [out is var for var, out in zip(jaxpr.invars, jaxpr.outvars)]
+
+
+@dataclasses.dataclass(frozen=True)
+class _TemperatureSource:
+    """Adapts a ``source(temperature, t)`` callable to the simulator's ``fn(state, t, params)``."""
+
+    source: object
+
+    def __call__(self, state, t, params):
+        return self.source(state.particles.temperature, t)
+
+
+def simulate_table(temperature, table: ContactTable, capacity, dt, n_steps, save_every=1, fixed_mask=None,
+             fixed_temperature=None, method="explicit", source=None, start_step=0, probes=None):
+    """Advance a table network ``n_steps`` steps; returns ``(final, saved [n_steps // save_every, n])``.
+
+    A convenience over :func:`rollout` for a network
+    already built at its conductivity: ``method`` ``"explicit"`` (check
+    ``dt <= thermal.stable_time_step`` first) or ``"implicit"`` (backward Euler, any
+    ``dt``; conduction only). ``source(temperature, t)``: heat powers (W), a
+    hashable callable (explicit only), called with the time
+    ``(start_step + k) dt`` of step ``k``. ``probes``: indices of the
+    particles to save (``saved`` is then ``[.., len(probes)]``); None saves
+    all. ``n_steps`` must be a multiple of ``save_every``.
+    """
+    if method not in ("explicit", "implicit"):
+        raise ValueError(f"method must be 'explicit' or 'implicit'; got {method!r}")
+    if not (isinstance(n_steps, int) and isinstance(save_every, int) and n_steps >= 1 and save_every >= 1):
+        raise ValueError(f"n_steps and save_every must be integers >= 1; got {n_steps!r}, {save_every!r}")
+    if n_steps % save_every:
+        raise ValueError(f"n_steps ({n_steps}) must be a multiple of save_every ({save_every})")
+    for name, value in (("dt (s)", dt), ("capacity (J/K)", capacity)):
+        if not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(value)):
+            require_positive(name, np.atleast_1d(np.asarray(value, np.float64)))
+    return _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature,
+                           method, source, start_step, probes)
+
+
+@functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
+def _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature, method,
+                    source, start_step, probes):
+    if method == "implicit" and source is not None:
+        raise ValueError("source terms need method='explicit'")
+    walls = table.wall_conductance is not None
+    physics = Physics(conductance="table", integrator=method, held=fixed_mask is not None,
+                                 conducting_walls=int(walls),
+                                 source=None if source is None else _TemperatureSource(source))
+    n = temperature.shape[0]
+    capacity = jnp.broadcast_to(jnp.asarray(capacity, temperature.dtype), (n,))
+    fixed = jnp.zeros(n, bool) if fixed_mask is None else jnp.broadcast_to(fixed_mask, (n,))
+    held = temperature if fixed_temperature is None else jnp.broadcast_to(
+        jnp.asarray(fixed_temperature, temperature.dtype), (n,))
+    particles = ParticleState(positions=jnp.zeros((n, 3), temperature.dtype), radii=jnp.ones(n, temperature.dtype),
+                              temperature=temperature, mass=capacity, material=jnp.zeros(n, jnp.int32), fixed=fixed,
+                              fixed_temperature=held)
+    contacts = table_contacts(table, table.wall_conductance, table.wall_temperature)
+    state = init_state(particles, contacts, dt, start_step)
+    params = Params(conductivity=jnp.ones(1, temperature.dtype), specific_heat=jnp.ones(1, temperature.dtype))
+    saveat = SaveAt(save_every, None if probes is None else probe_temperatures(probes))
+    sim = simulator(physics)
+    final, saved = rollout(sim, state, params, n_steps, saveat)
+    return final.particles.temperature, saved

@@ -74,7 +74,7 @@ def preheating_temperature(t, t_start=0.0, t_end=9.5, temperature_start=845.0, t
     return temperature_start + step * (temperature_end - temperature_start) / steps
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def ti6al4v_conductivity_table():
     """Rizza & Galati (2024) Table 1: ``(time s, temperature K, lambda_0 W/(m K))`` arrays."""
     with importlib.resources.files("sintercond.data").joinpath("ti6al4v_conductivity_rizza2024.csv").open() as f:

@@ -91,10 +91,11 @@ def test_contact_table_refuses_a_nan_radius():
     ({"n_steps": 10, "save_every": 3}, "save_every"), ({"dt": -1e-3}, "dt"),
 ])
 def test_simulate_refuses_bad_arguments(kwargs, field):
-    from sintercond import network, thermal
+    from sintercond import network
+    from sintercond.simulate import simulate_table
 
     centres = np.array([[0.0, 0, 0], [1.9, 0, 0]])
     table = network.contact_table(centres, np.array([1.0, 1.0]), 1.0)
     args = {"dt": 1e-3, "n_steps": 10, "save_every": 5, **kwargs}
     with pytest.raises(ValueError, match=field):
-        thermal.simulate(np.array([1.0, 0.0]), table, 1.0, args.pop("dt"), **args)
+        simulate_table(np.array([1.0, 0.0]), table, 1.0, args.pop("dt"), **args)

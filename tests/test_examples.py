@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from sintercond import examples, packing
+from sintercond import examples
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import pytest
 
 from fitting.core import Bounded, Free, Positive, least_squares
 from fitting.reference import fe_neck_conductance
-from fitting.slope import fit_slope, linear_law
+from fitting.slope import fit_slope
 
 
 @pytest.mark.parametrize("transform,value", [(Free(), -3.2), (Positive(), 1e-3), (Positive(), 40.0),
@@ -178,12 +178,13 @@ def test_progress_report_from_inside_the_compiled_loop(capfd):
 def test_fitted_law_changes_a_lattice_k_star_by_the_laws_ratio():
     """Equal spheres on a simple-cubic lattice: every pair has the same a/r, so k* scales exactly with the
     half conductance, K_fitted / K_rojek = f(a/r) / (1.064 a/r) -- the smooth law's change to a packing."""
-    from sintercond import conductance, neck_radius, thermal
+    from sintercond import conductance, neck_radius
+    from sintercond import steady
 
     spacing, r = 1e-4, 0.53e-4
     grid = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), -1).reshape(-1, 3) * spacing
     radii = np.full(len(grid), r)
-    k = {law: thermal.steady_state_conductivity(grid, radii, 10.0, axis=0, law=law) for law in ("rojek", "fitted")}
+    k = {law: steady.steady_state_conductivity(grid, radii, 10.0, axis=0, law=law) for law in ("rojek", "fitted")}
     x = float(neck_radius(r, r, 2 * r - spacing)) / r
     f = float(conductance.fitted_half_conductance_ratio(x, conductance.fitted_neck_law_coefficients()))
     assert k["fitted"] / k["rojek"] == pytest.approx(f / (1.064 * x), rel=1e-10)

@@ -289,7 +289,7 @@ def test_contact_velocity_and_friction_torque():
 # rolling resistance
 
 
-def _rolling(spring, omega_i, omega_j=np.zeros(3), normal=Z, dt=1e-5, delta=DELTA, f_n=F_N, xi=0.0, mu_r=0.2, **kw):
+def _rolling(spring, omega_i, omega_j=(0.0, 0.0, 0.0), normal=Z, dt=1e-5, delta=DELTA, f_n=F_N, xi=0.0, mu_r=0.2, **kw):
     return forces.rolling_resistance_torque(jnp.asarray(spring), jnp.asarray(omega_i), jnp.asarray(omega_j),
                                             jnp.asarray(normal), dt, delta, f_n, R_STAR, J_STAR, G_STAR, xi, mu_r, **kw)
 

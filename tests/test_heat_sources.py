@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from sintercond import heat_sources as hs
-from sintercond import network, thermal
+from sintercond import network
+from sintercond.simulate import simulate_table
 
 
 def test_nozzle_linear_attenuation():
@@ -57,7 +58,7 @@ def test_lone_particle_cools_exponentially_by_convection():
 
     rate = k_env / r * 4 * np.pi * r**2 / c  # C dT/dt = -h A (T - T_E)
     t_end = 2.0 / rate
-    final, _ = thermal.simulate(jnp.array([800.0]), table, c, t_end / 4000, n_steps=4000, save_every=4000, source=source)
+    final, _ = simulate_table(jnp.array([800.0]), table, c, t_end / 4000, n_steps=4000, save_every=4000, source=source)
     assert float(final[0]) == pytest.approx(300 + 500 * np.exp(-2.0), rel=5e-4)
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from sintercond import geometry, network, packing, simulate, thermal
+from sintercond.simulate import simulate_table
 from sintercond.run import advance
 from sintercond.state import ParticleState
 
@@ -71,7 +72,7 @@ def test_static_motion_equals_the_static_solver():
     capacity = jnp.full(len(radii), 1e-3)
     dt = 0.5 * float(thermal.stable_time_step(capacity, table))
     t0 = jnp.asarray(np.linspace(300, 1000, len(radii)))
-    static, _ = thermal.simulate(t0, table, capacity, dt, n_steps=200, save_every=200)
+    static, _ = simulate_table(t0, table, capacity, dt, n_steps=200, save_every=200)
     still, _ = _moving_run(t0, simulate.affine_shrinkage(centres, 0.0), radii, capacity, dt, 200, 50, 1.25, 0.0)
     np.testing.assert_allclose(np.asarray(still.temperature), np.asarray(static), rtol=1e-12)
 

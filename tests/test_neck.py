@@ -274,7 +274,8 @@ def test_small_overlap_limits():
 
 @pytest.mark.parametrize(
     "r_i,r_j,h",
-    [(1.0, 3.0, 0.2), (1.0, 3.0, 0.06), (1.0, 1.0, 0.2), (1.0, 1.0, 1e-4), (2.0, 0.5, 0.15), (1.0, 1e3, 0.3), (1e3, 1.0, 1e-3), (1.0, 3.0, 0.41)],
+    [(1.0, 3.0, 0.2), (1.0, 3.0, 0.06), (1.0, 1.0, 0.2), (1.0, 1.0, 1e-4), (2.0, 0.5, 0.15), (1.0, 1e3, 0.3), (1e3, 1.0, 1e-3),
+     (1.0, 3.0, 0.41)],
 )
 def test_gradients_match_finite_differences(r_i, r_j, h):
     # FD step small against h: a ~ sqrt(h) varies on the scale of h itself.
@@ -422,7 +423,8 @@ def test_jit_vmap_and_plain_agree():
     np.testing.assert_allclose(vmapped, plain, rtol=1e-15)
     np.testing.assert_allclose(looped, plain[:20], rtol=1e-15)
     # broadcasting: one radius against many overlaps
-    np.testing.assert_allclose(neck_radius(1.0, 3.0, h[:5] % 0.4), jax.vmap(lambda x: neck_radius(1.0, 3.0, x))(h[:5] % 0.4), rtol=1e-15)
+    np.testing.assert_allclose(neck_radius(1.0, 3.0, h[:5] % 0.4), jax.vmap(lambda x: neck_radius(1.0, 3.0, x))(h[:5] % 0.4),
+                               rtol=1e-15)
 
 
 FLOAT32_VALUE_RTOL = 5e-7  # measured 2.0e-7 max over 1e5 pairs (float32 eps 1.2e-7)

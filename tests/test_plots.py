@@ -78,13 +78,16 @@ def test_sintercond_run_writes_the_picture(tmp_path):
 
 
 def test_every_figure_linked_from_the_docs_exists_and_decodes():
-    """Every PNG embedded in benchmarks/RESULTS.md and README.md is there, non-empty, and not blank."""
+    """Every PNG embedded in benchmarks/RESULTS.md, docs/devlog/*.md and README.md is there, non-empty, and not blank."""
     import pathlib
     import re
 
     root = pathlib.Path(__file__).resolve().parents[1]
     links = [(root / "benchmarks" / m) for m in re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)",
                                                            (root / "benchmarks" / "RESULTS.md").read_text())]
+    for page in sorted((root / "docs" / "devlog").glob("*.md")):  # links relative to the page
+        links += [(page.parent / m) for m in re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", page.read_text())]
+    assert root / "docs" / "devlog" / "../../benchmarks/figures/inverse_gradient_pipeadj.png" in links
     links += [(root / m) for m in re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", (root / "README.md").read_text())]
     assert root / "docs" / "default_scene.png" in links
     for path in links:

@@ -6,7 +6,6 @@ interrupted-and-resumed run with an uninterrupted one.
 """
 
 import copy
-import dataclasses
 import math
 import xml.etree.ElementTree as ET
 
@@ -39,7 +38,6 @@ def test_builtin_scenes_are_listed_valid_and_within_limits(capsys):
 
 def test_the_5_1_scene_builds_examples_example_5_1():
     """The scene file and the Python builder are one model: the same physics spec, parameters and initial state."""
-    import jax
 
     model = runner.build_model(load_scene("quintana2020_5_1"))
     sim, state, params, n = examples.example_5_1()

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from fitting.core import Positive, least_squares
-from sintercond import network, simulate, thermal
+from sintercond import network, simulate
+from sintercond.simulate import simulate_table
+from sintercond import steady
 from sintercond.conductance import rojek_pair_conductance
 from sintercond.state import ParticleState
 
@@ -206,7 +208,7 @@ def test_thermal_simulate_is_the_rollout():
     capacity = state.particles.mass * 560.0
     power = params.pulse.power
     source = _Pulse(power)
-    final, _ = thermal.simulate(state.particles.temperature, table, capacity, float(state.dt), 100, 100,
+    final, _ = simulate_table(state.particles.temperature, table, capacity, float(state.dt), 100, 100,
                                 state.particles.fixed, state.particles.fixed_temperature, source=source)
     via_sim, _ = simulate.rollout(sim, state, params, 100, simulate.SaveAt(100))
     np.testing.assert_allclose(final, via_sim.particles.temperature, rtol=1e-13)
@@ -224,15 +226,15 @@ def test_steady_state_conductivity_is_differentiable():
     """k* is linear in kappa and in Rojek's slope (exact for any packing without contact resistance);
     its contact-resistance derivative equals central differences (implicit CG derivative)."""
     centres, radii = _packing()
-    k_star = thermal.steady_state_conductivity(centres, radii, 7.0, axis=0)
-    d_kappa = jax.grad(lambda k: thermal.steady_state_conductivity(centres, radii, k, axis=0))(7.0)
+    k_star = steady.steady_state_conductivity(centres, radii, 7.0, axis=0)
+    d_kappa = jax.grad(lambda k: steady.steady_state_conductivity(centres, radii, k, axis=0))(7.0)
     assert float(d_kappa) == pytest.approx(float(k_star) / 7.0, rel=1e-9)
-    d_slope = jax.grad(lambda s: thermal.steady_state_conductivity(centres, radii, 7.0, axis=0,
+    d_slope = jax.grad(lambda s: steady.steady_state_conductivity(centres, radii, 7.0, axis=0,
                                                                    params={"slope": s}))(1.064)
     assert float(d_slope) == pytest.approx(float(k_star) / 1.064, rel=1e-9)
 
     def with_resistance(r):
-        return thermal.steady_state_conductivity(centres, radii, 7.0, axis=0, params={"contact_resistance": r})
+        return steady.steady_state_conductivity(centres, radii, 7.0, axis=0, params={"contact_resistance": r})
 
     g = jax.grad(with_resistance)(200.0)
     fd = _central_difference(lambda r: float(with_resistance(r)), 200.0)

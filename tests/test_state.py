@@ -21,7 +21,8 @@ def _state():
 def test_capacity_per_material_and_held_values():
     s = _state()
     volume = 4 / 3 * np.pi * 0.52e-4**3
-    np.testing.assert_allclose(heat_capacity(s, [560.0, 385.0]), volume * np.array([4430 * 560, 8960 * 385, 4430 * 560]), rtol=1e-15)
+    np.testing.assert_allclose(heat_capacity(s, [560.0, 385.0]), volume * np.array([4430 * 560, 8960 * 385, 4430 * 560]),
+                               rtol=1e-15)
     np.testing.assert_array_equal(s.temperature, [1000.0, 600.0, 900.0])
 
 

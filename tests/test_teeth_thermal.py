@@ -1,5 +1,5 @@
 """Behaviour of the thermal DEM, the network builder, scene runs and the flash experiment that no other test
-pinned: each test names the deliberate bug it catches. Only public APIs are used (thermal.simulate,
+pinned: each test names the deliberate bug it catches. Only public APIs are used (simulate.simulate_table,
 network.contact_table / wall_conductance, run.build_model / run_scene / resume, fitting.inverse), so these
 tests keep their teeth when the simulator's internals are redesigned."""
 
@@ -17,7 +17,8 @@ import pytest
 from scipy.optimize import brentq
 
 from fitting import inverse
-from sintercond import simulate, network, thermal
+from sintercond import simulate, network
+from sintercond.simulate import simulate_table
 from sintercond import run as runner
 from sintercond.scene import validate_scene
 from test_scene_run import SMALL as _SMALL
@@ -43,9 +44,9 @@ def test_source_clock_continues_across_calls():
     ``start_step = N``) must both give it."""
     c, dt, n, b = 2e-3, 1e-3, 40, 3.0
     start = jnp.array([300.0])
-    one, _ = thermal.simulate(start, _lone_particle(), c, dt, n_steps=2 * n, save_every=n, source=_ramp)
-    half, _ = thermal.simulate(start, _lone_particle(), c, dt, n_steps=n, save_every=n, source=_ramp)
-    two, _ = thermal.simulate(half, _lone_particle(), c, dt, n_steps=n, save_every=n, source=_ramp, start_step=n)
+    one, _ = simulate_table(start, _lone_particle(), c, dt, n_steps=2 * n, save_every=n, source=_ramp)
+    half, _ = simulate_table(start, _lone_particle(), c, dt, n_steps=n, save_every=n, source=_ramp)
+    two, _ = simulate_table(half, _lone_particle(), c, dt, n_steps=n, save_every=n, source=_ramp, start_step=n)
     expected = 300.0 + b * dt**2 / c * (2 * n) * (2 * n - 1) / 2
     assert float(one[0]) == pytest.approx(expected, rel=1e-14)
     assert float(two[0]) == pytest.approx(expected, rel=1e-14)

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from sintercond import geometry, network, packing, thermal
+from sintercond.simulate import simulate_table
+from sintercond import steady
 from sintercond.conductance import rojek_pair_conductance
 
 A, R = 1.0e-4, 0.52e-4  # lattice spacing and radius (m): sintered SC lattice, h = 2R - A
@@ -53,12 +55,12 @@ def test_insulated_packing_conserves_heat(bed):
     capacity = jnp.asarray(4 / 3 * np.pi * radii**3 * 4430 * 560)  # Ti6Al4V rho c (J/K)
     temperature = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
     dt = float(thermal.stable_time_step(capacity, t))
-    final, saved = thermal.simulate(temperature, t, capacity, dt, n_steps=400, save_every=100)
+    final, saved = simulate_table(temperature, t, capacity, dt, n_steps=400, save_every=100)
     energy = jnp.sum(capacity * saved, axis=1)
     np.testing.assert_allclose(energy, float(jnp.sum(capacity * temperature)), rtol=1e-13)
     # discrete maximum principle at the stable step
     assert float(saved.min()) >= float(temperature.min()) - 1e-9 and float(saved.max()) <= float(temperature.max()) + 1e-9
-    implicit, _ = thermal.simulate(temperature, t, capacity, 50 * dt, n_steps=8, save_every=8, method="implicit")
+    implicit, _ = simulate_table(temperature, t, capacity, 50 * dt, n_steps=8, save_every=8, method="implicit")
     assert float(jnp.sum(capacity * implicit)) == pytest.approx(float(jnp.sum(capacity * temperature)), rel=1e-11)
 
 
@@ -72,11 +74,11 @@ def test_two_particle_relaxation_matches_analytic():
     temperature = jnp.array([1000.0, 300.0])
     errors = []
     for n_steps in (100, 200, 400):
-        final, _ = thermal.simulate(temperature, t, capacity, t_end / n_steps, n_steps=n_steps, save_every=n_steps)
+        final, _ = simulate_table(temperature, t, capacity, t_end / n_steps, n_steps=n_steps, save_every=n_steps)
         errors.append(abs(float(final[0] - final[1]) - 700 * np.exp(-rate * t_end)))
     assert errors[0] / errors[1] == pytest.approx(2.0, rel=0.05) and errors[1] / errors[2] == pytest.approx(2.0, rel=0.05)
     assert errors[-1] < 2e-3 * 700
-    final, _ = thermal.simulate(temperature, t, capacity, t_end / 400, n_steps=400, save_every=400, method="implicit")
+    final, _ = simulate_table(temperature, t, capacity, t_end / 400, n_steps=400, save_every=400, method="implicit")
     assert abs(float(final[0] - final[1]) - 700 * np.exp(-rate * t_end)) < 2e-3 * 700
 
 
@@ -96,7 +98,7 @@ def test_chain_converges_to_the_heat_equation():
         capacity = 1e-3
         dt = 0.05 * float(thermal.stable_time_step(capacity, t))
         steps = 2000
-        final, _ = thermal.simulate(mode, t, capacity, dt, n_steps=steps, save_every=steps, fixed_mask=held,
+        final, _ = simulate_table(mode, t, capacity, dt, n_steps=steps, save_every=steps, fixed_mask=held,
                                     fixed_temperature=0.0)
         rate = -np.log(float(final[n // 2]) / float(mode[n // 2])) / (steps * dt)
         ratios.append(rate / (np.pi**2 * k * A**2 / capacity / length**2))
@@ -111,23 +113,23 @@ def test_explicit_implicit_and_steady_agree():
     cold = jnp.asarray(centres[:, 0] == centres[:, 0].max())
     fixed = hot | cold
     held = jnp.where(hot, 900.0, 300.0)
-    steady = thermal.steady_state(t, fixed, held)
-    np.testing.assert_allclose(steady, 900 - 600 * centres[:, 0] / centres[:, 0].max(), rtol=1e-11)  # linear
+    field = steady.steady_state(t, fixed, held)
+    np.testing.assert_allclose(field, 900 - 600 * centres[:, 0] / centres[:, 0].max(), rtol=1e-11)  # linear
     capacity = 1e-3
     dt = float(thermal.stable_time_step(capacity, t))
     start = jnp.where(fixed, held, 300.0)
-    explicit, _ = thermal.simulate(start, t, capacity, dt, n_steps=4000, save_every=4000, fixed_mask=fixed,
+    explicit, _ = simulate_table(start, t, capacity, dt, n_steps=4000, save_every=4000, fixed_mask=fixed,
                                    fixed_temperature=held)
-    implicit, _ = thermal.simulate(start, t, capacity, 200 * dt, n_steps=100, save_every=100, fixed_mask=fixed,
+    implicit, _ = simulate_table(start, t, capacity, 200 * dt, n_steps=100, save_every=100, fixed_mask=fixed,
                                    fixed_temperature=held, method="implicit")
-    np.testing.assert_allclose(explicit, steady, rtol=1e-8)
-    np.testing.assert_allclose(implicit, steady, rtol=1e-8)
+    np.testing.assert_allclose(explicit, field, rtol=1e-8)
+    np.testing.assert_allclose(implicit, field, rtol=1e-8)
 
 
 @pytest.mark.parametrize("shape", [(2, 1, 1), (5, 1, 1), (4, 3, 2)])
 def test_sc_lattice_conductivity_is_pair_conductance_over_spacing(shape):
     centres, radii = sc_lattice(*shape)
-    k_star = thermal.steady_state_conductivity(centres, radii, 20.0, axis=0)
+    k_star = steady.steady_state_conductivity(centres, radii, 20.0, axis=0)
     assert k_star == pytest.approx(float(rojek_pair_conductance(R, R, 2 * R - A, 20.0)) / A, rel=1e-12)
 
 
@@ -149,7 +151,7 @@ def test_unstable_step_is_refused():
         thermal.check_time_step(-1.0, 1e-3, t)
     # and the limit is real: 2.5x above it the explicit step blows up (largest mode |1 - 2.5 * lambda| > 1)
     start = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
-    final, _ = thermal.simulate(start, t, 1e-3, 2.5 * limit, n_steps=200, save_every=200)
+    final, _ = simulate_table(start, t, 1e-3, 2.5 * limit, n_steps=200, save_every=200)
     assert float(jnp.max(jnp.abs(final))) > 1e4
 
 
@@ -164,7 +166,7 @@ def test_quintana_ruiz_5_3_setup_inside_hashin_shtrikman():
     bed = packing.powder_bed(320.0, 480.0, diameter_range=(45.0, 150.0), seed=7)
     centres, radii, box = packing.rev_box(bed, 200.0)
     m = geometry.rev_measures(centres, radii, box)
-    k_star = thermal.steady_state_conductivity(centres * 1e-6, radii * 1e-6, 100.0, axis=2, law="conductivity",
+    k_star = steady.steady_state_conductivity(centres * 1e-6, radii * 1e-6, 100.0, axis=2, law="conductivity",
                                                box=(box[0] * 1e-6, box[1] * 1e-6))
     lower, upper = hashin_shtrikman_bounds(0.0, 100.0, m.n)
     assert float(lower) <= k_star <= float(upper)
@@ -183,17 +185,17 @@ def test_conducting_walls_in_series():
     table = network.contact_table(centres, radii, 20.0).with_walls(k_w + k_w2, np.where(k_w > 0, 1000.0, 300.0))
     k_12 = float(rojek_pair_conductance(R, R, 2 * R - A, 20.0))
     q = 700.0 / (2 / k_w[0] + 1 / k_12)
-    steady = np.asarray(thermal.steady_state(table, jnp.zeros(2, bool), jnp.zeros(2)))
-    np.testing.assert_allclose(steady, [1000 - q / k_w[0], 300 + q / k_w[0]], rtol=1e-12)
+    field = np.asarray(steady.steady_state(table, jnp.zeros(2, bool), jnp.zeros(2)))
+    np.testing.assert_allclose(field, [1000 - q / k_w[0], 300 + q / k_w[0]], rtol=1e-12)
     # the wall counts in the stable step, and explicit and implicit runs reach the same field
     capacity = 1e-3
     dt = float(thermal.stable_time_step(capacity, table))
     assert dt == pytest.approx(capacity / (k_w[0] + k_12), rel=1e-12)
-    explicit, _ = thermal.simulate(jnp.full(2, 300.0), table, capacity, dt, n_steps=20000, save_every=20000)
-    implicit, _ = thermal.simulate(jnp.full(2, 300.0), table, capacity, 50 * dt, n_steps=400, save_every=400,
+    explicit, _ = simulate_table(jnp.full(2, 300.0), table, capacity, dt, n_steps=20000, save_every=20000)
+    implicit, _ = simulate_table(jnp.full(2, 300.0), table, capacity, 50 * dt, n_steps=400, save_every=400,
                                    method="implicit")
-    np.testing.assert_allclose(explicit, steady, rtol=1e-9)
-    np.testing.assert_allclose(implicit, steady, rtol=1e-9)
+    np.testing.assert_allclose(explicit, field, rtol=1e-9)
+    np.testing.assert_allclose(implicit, field, rtol=1e-9)
 
 
 def test_periodic_packing_contacts_and_conservation():
@@ -210,7 +212,7 @@ def test_periodic_packing_contacts_and_conservation():
     np.testing.assert_allclose(np.sort(np.asarray(t.conductance), axis=1)[:, -2:], k, rtol=1e-14)
     capacity = 1e-3
     start = jnp.asarray([1000.0, 300, 300, 300, 300])
-    final, _ = thermal.simulate(start, t, capacity, float(thermal.stable_time_step(capacity, t)), n_steps=3000,
+    final, _ = simulate_table(start, t, capacity, float(thermal.stable_time_step(capacity, t)), n_steps=3000,
                                 save_every=3000)
     np.testing.assert_allclose(final, 440.0, rtol=1e-9)  # a ring equilibrates to the mean
 

@@ -4,7 +4,7 @@ import jax
 import numpy as np
 import pytest
 
-from sintercond import NECK_MODELS, neck_radius, walls
+from sintercond import NECK_MODELS, walls
 from sintercond.conductance import pair_conductance
 
 MODELS = ("coble", "hertz", "intersection", "volume_conserving")

@@ -1,0 +1,112 @@
+"""The import direction of the package (docs/architecture.md): no cycle, and no module importing a layer above it.
+
+Every import is counted, at module level or inside a function: a function-level import of a higher layer is the
+same dependency, only deferred. Old names kept for one release are resolved by string (``thermal.__getattr__``) and
+are checked separately below.
+"""
+
+import ast
+import importlib
+import pathlib
+import warnings
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+# lowest first; a module may import its own layer and those below it
+LAYERS = {
+    "private": ["_numerics", "_validation", "_symmetric", "_cache"],
+    "state": ["state"],
+    "laws": ["neck", "conductance", "forces", "materials", "heat_sources", "walls", "sintering", "effective",
+             "dryden_zok", "tortuosity", "geometry"],
+    "space": ["neighbors", "pair_list"],
+    "lifts": ["network", "mechanics", "thermal"],
+    "drive": ["simulate", "steady"],
+    "use": ["scene", "packing", "run", "io", "plots", "cli", "sweep", "examples"],
+}
+RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}
+
+
+def _modules():
+    return {f"sintercond.{p.stem}": p for p in (ROOT / "sintercond").glob("*.py") if p.stem != "__init__"}
+
+
+def _imports(path):
+    """The sintercond and fitting modules ``path`` imports, anywhere in it."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in ("sintercond", "fitting"):
+            if node.module in ("sintercond", "fitting"):
+                found |= {f"{node.module}.{a.name}" for a in node.names}
+            else:
+                found.add(node.module)
+        elif isinstance(node, ast.Import):
+            found |= {a.name for a in node.names if a.name.split(".")[0] in ("sintercond", "fitting")}
+    return found
+
+
+def test_every_module_has_a_layer():
+    assert set(_modules()) == set(RANK), set(_modules()) ^ set(RANK)
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    names = list(LAYERS)
+    upward = []
+    for module, path in _modules().items():
+        for dep in _imports(path):
+            if dep.startswith("fitting"):
+                upward.append(f"{module} -> {dep} (fitting sits above the package)")
+            elif dep in RANK and RANK[dep] > RANK[module]:
+                upward.append(f"{module} ({names[RANK[module]]}) -> {dep} ({names[RANK[dep]]})")
+    assert not upward, upward
+
+
+def test_no_import_cycle():
+    graph = {m: _imports(p) & set(_modules()) - {m} for m, p in _modules().items()}
+    graph |= {f"fitting.{p.stem}": _imports(p) for p in (ROOT / "fitting").glob("*.py") if p.stem != "__init__"}
+    state, stack, cycles = {}, [], []
+
+    def visit(m):
+        state[m] = "open"
+        stack.append(m)
+        for d in sorted(graph.get(m, ())):
+            if state.get(d) == "open":
+                cycles.append(stack[stack.index(d):] + [d])
+            elif d in graph and d not in state:
+                visit(d)
+        stack.pop()
+        state[m] = "done"
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
+    assert not cycles, [" -> ".join(c) for c in cycles]
+
+
+def test_import_sintercond_as_sc_gives_every_submodule():
+    import sintercond as sc
+
+    for module in _modules():
+        name = module.split(".")[1]
+        if not name.startswith("_"):
+            assert getattr(sc, name) is importlib.import_module(module), name
+    with pytest.raises(AttributeError, match="no attribute 'nonexistent'"):
+        sc.nonexistent  # noqa: B018
+
+
+@pytest.mark.parametrize("old, new", [("simulate", "sintercond.simulate:simulate_table"),
+                                      ("steady_state", "sintercond.steady:steady_state"),
+                                      ("steady_state_conductivity", "sintercond.steady:steady_state_conductivity"),
+                                      ("steady_state_network_conductivity",
+                                       "sintercond.steady:steady_state_network_conductivity")])
+def test_moved_thermal_names_still_resolve_with_a_deprecation_warning(old, new):
+    from sintercond import thermal
+
+    module, name = new.split(":")
+    with pytest.warns(DeprecationWarning, match=f"thermal.{old} moved to {module}.{name}"):
+        assert getattr(thermal, old) is getattr(importlib.import_module(module), name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(AttributeError):
+            thermal.no_such_function  # noqa: B018
