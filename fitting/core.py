@@ -8,6 +8,14 @@ the relative loss change or a step limit) is one compiled function. At the
 optimum the Gauss-Newton covariance ``s^2 (J^T J)^-1`` of the parameters
 (``J`` the Jacobian of the weighted residuals, ``s^2`` the residual variance)
 gives standard errors.
+
+A model run through a simulation may be invalid at some parameters without
+being NaN (a neighbour list that overflowed and dropped pairs): with
+``invalid=True`` the model returns ``(prediction, flag)`` and the loop ORs the
+flags of every evaluation it makes (the trial steps and the Jacobians
+included), so :func:`least_squares` raises :class:`InvalidEvaluation` if any
+iterate was computed from an invalid state, instead of a fit that silently
+used one.
 """
 
 from __future__ import annotations
@@ -59,6 +67,10 @@ class Bounded:
         return jnp.log(p) - jnp.log1p(-p)
 
 
+class InvalidEvaluation(RuntimeError):
+    """The model flagged one of the evaluations a fit made (``least_squares(..., invalid=True)``)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class FitResult:
     """Outcome of :func:`least_squares`.
@@ -89,7 +101,7 @@ class FitResult:
 def least_squares(model: Callable, x, y, params0: Mapping[str, float], transforms: Mapping | None = None,
                   weights=None, relative=False, learning_rate=0.05, max_steps=5000, grad_tol=1e-10,
                   loss_tol=1e-14, polish_steps=3, jacobian_model: Callable | None = None,
-                  report_every=0, method="adam") -> FitResult:
+                  report_every=0, method="adam", invalid=False, invalid_message=None) -> FitResult:
     """Fit ``model(params, x) ~ y`` by weighted least squares: optax Adam, or Levenberg-Marquardt.
 
     Args:
@@ -111,21 +123,28 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
         parameters) or ``"levenberg_marquardt"`` (damped Gauss-Newton on the unconstrained variables
         with forward-mode Jacobians of ``jacobian_model``: a handful of steps for a few parameters;
         ``learning_rate`` is then unused). Both loops are one compiled ``lax.while_loop``.
+      invalid: the model (and ``jacobian_model``) returns ``(prediction, flag)``, ``flag`` a boolean scalar
+        true where the evaluation must not be used (e.g. an overflowed pair list).
+      invalid_message: what :class:`InvalidEvaluation` says to do about a flag (e.g. the setting to raise).
 
     Returns:
       :class:`FitResult`.
+
+    Raises:
+      InvalidEvaluation: ``invalid=True`` and any evaluation of the fit was flagged.
     """
     names = tuple(params0)
-    _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method)
+    _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method, invalid)
     transforms = tuple((n, (transforms or {}).get(n, Free())) for n in names)
     y = jnp.asarray(y)
     w = jnp.ones_like(y) if weights is None else jnp.broadcast_to(jnp.asarray(weights, y.dtype), y.shape)
     program = _fit_program(model, model if jacobian_model is None else jacobian_model, transforms, bool(relative),
                            method, float(learning_rate), int(max_steps), float(grad_tol), float(loss_tol),
-                           int(report_every))
+                           int(report_every), bool(invalid))
     u0 = jnp.stack([jnp.asarray(t.inverse(jnp.asarray(params0[n], y.dtype)), y.dtype) for n, t in transforms])
     with jax.numpy_dtype_promotion("standard"):  # optax mixes its int32 step count with floats
-        u, steps, history = program.run(u0, x, y, w)
+        u, steps, history, flagged = program.run(u0, x, y, w)
+    flags = [bool(flagged)]
     transforms = dict(transforms)
     # Gauss-Newton covariance in the constrained parameters
     theta = program.constrained(u)
@@ -133,15 +152,23 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
     # Adam gets close; a few Gauss-Newton steps finish the job (exact for a
     # linear model), kept only if they lower the loss and respect the bounds
     for _ in range(polish_steps):
-        r, jac = program.residuals_and_jacobian(theta, x, y, w)
+        r, jac, flag = program.residuals_and_jacobian(theta, x, y, w)
+        flags.append(bool(flag))
         candidate = theta - jnp.linalg.solve(jac.T @ jac, jac.T @ r)
         inside = all(bool(jnp.isfinite(transforms[n].inverse(candidate[k]))) for k, n in enumerate(names))
-        r_candidate, _ = program.residuals_and_jacobian(candidate, x, y, w)
+        r_candidate, _, flag = program.residuals_and_jacobian(candidate, x, y, w)
+        flags.append(bool(flag))
         if inside and float(jnp.sum(r_candidate**2)) < float(jnp.sum(r**2)):
             theta = candidate
         else:
             break
-    r, jac = program.residuals_and_jacobian(theta, x, y, w)
+    r, jac, flag = program.residuals_and_jacobian(theta, x, y, w)
+    flags.append(bool(flag))
+    if any(flags):
+        where = "the optimiser's loop" if flags[0] else "the Gauss-Newton polish or the covariance"
+        raise InvalidEvaluation(f"the model flagged an evaluation in {where} (parameters near "
+                                f"{dict(zip(names, np.asarray(theta).tolist()))}): the fit would have used it"
+                                + (f"; {invalid_message}" if invalid_message else ""))
     if not bool(jnp.all(jnp.isfinite(theta))):
         raise FloatingPointError(f"the fit diverged: parameters {dict(zip(names, np.asarray(theta).tolist()))}; "
                                  "check params0, the transforms' ranges and learning_rate")
@@ -160,7 +187,7 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
                      int(steps) < int(max_steps))
 
 
-def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method):
+def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method, invalid=False):
     """Raise ``ValueError`` naming the argument for input :func:`least_squares` cannot fit (before compiling)."""
     from sintercond._validation import fail_where
 
@@ -204,6 +231,11 @@ def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, metho
         out = jax.eval_shape(model, {n: jnp.asarray(v, y_np.dtype) for n, v in params0.items()}, x)
     except Exception as err:  # noqa: BLE001 - any failure to trace the model is the caller's to see, named
         raise ValueError(f"model(params0, x) cannot be evaluated: {type(err).__name__}: {err}") from None
+    if invalid:
+        if not (isinstance(out, tuple) and len(out) == 2 and getattr(out[1], "shape", None) == ()):
+            raise ValueError("with invalid=True, model(params0, x) must return (prediction, flag), flag a boolean "
+                             f"scalar; got {out!r}")
+        out = out[0]
     if getattr(out, "shape", None) != y_np.shape:
         raise ValueError(f"model(params0, x) has shape {getattr(out, 'shape', None)} but y has shape {y_np.shape}; "
                          "they must be equal")
@@ -214,22 +246,25 @@ class _FitProgram:
     """The compiled pieces of one kind of fit (cached: calling least_squares again on data of the same
     shapes reuses them instead of compiling anew)."""
 
-    run: Callable  # (u0, x, y, w) -> (u, steps, loss history)
+    run: Callable  # (u0, x, y, w) -> (u, steps, loss history, any evaluation flagged)
     constrained: Callable  # u -> theta
-    residuals_and_jacobian: Callable  # (theta, x, y, w) -> (weighted residuals, d/dtheta), forward mode
+    residuals_and_jacobian: Callable  # (theta, x, y, w) -> (weighted residuals, d/dtheta, flagged), forward mode
 
 
 @functools.lru_cache(maxsize=16)
 def _fit_program(model, forward_model, transforms, relative, method, learning_rate, max_steps, grad_tol, loss_tol,
-                 report_every) -> _FitProgram:
+                 report_every, invalid=False) -> _FitProgram:
     names = tuple(n for n, _ in transforms)
 
     def constrained(u):
         return jnp.stack([t.forward(u[k]) for k, (_, t) in enumerate(transforms)])
 
     def weighted_residuals(fn, theta, x, y, w):
+        """``(weighted residuals, flag)``; the flag is False for a model without one."""
         scale = jnp.abs(y) if relative else 1.0
-        return jnp.ravel(w * (fn(dict(zip(names, theta)), x) - y) / scale)
+        out = fn(dict(zip(names, theta)), x)
+        prediction, flag = out if invalid else (out, jnp.asarray(False))
+        return jnp.ravel(w * (prediction - y) / scale), jnp.asarray(flag, bool)
 
     def report(k, value, g_norm):
         if report_every:
@@ -240,7 +275,8 @@ def _fit_program(model, forward_model, transforms, relative, method, learning_ra
     def run(u0, x, y, w):
         if method == "adam":
             def loss(u):
-                return 0.5 * jnp.mean(weighted_residuals(model, constrained(u), x, y, w) ** 2)
+                r, flag = weighted_residuals(model, constrained(u), x, y, w)
+                return 0.5 * jnp.mean(r**2), flag
 
             loop = _adam_loop(loss, optax.adam(learning_rate), max_steps, grad_tol, loss_tol, report, y.dtype)
         else:
@@ -253,35 +289,48 @@ def _fit_program(model, forward_model, transforms, relative, method, learning_ra
         def r(t):
             return weighted_residuals(forward_model, t, x, y, w)
 
-        return r(theta), jax.jacfwd(r)(theta)
+        jac, (residual, flag) = jax.jacfwd(_with_itself_as_aux(r), has_aux=True)(theta)
+        return residual, jac, flag
 
     return _FitProgram(jax.jit(run), jax.jit(constrained), residuals_and_jacobian)
 
 
+def _with_itself_as_aux(residuals):
+    """``u -> (r, (r, flag))`` from ``residuals(u) -> (r, flag)``: one evaluation gives the Jacobian's primal and aux."""
+
+    def f(u):
+        r, flag = residuals(u)
+        return r, (r, flag)
+
+    return f
+
+
 def _adam_loop(loss, optimizer, max_steps, grad_tol, loss_tol, report, dtype):
-    """Optax loop: ``u0 -> (u, steps, loss history)`` (traced inside the compiled fit program)."""
+    """Optax loop: ``u0 -> (u, steps, loss history, flagged)`` (traced inside the compiled fit program).
+
+    ``loss(u) -> (value, flag)``; ``flagged`` is the OR of the flags of every evaluation."""
 
     def run(u0):
         state = optimizer.init(u0)
         history = jnp.full(max_steps, jnp.nan, dtype)
 
         def cond(carry):
-            _, _, k, _, g_norm, change = carry
+            _, _, k, _, g_norm, change, _ = carry
             return (k < max_steps) & (g_norm > grad_tol) & (change > loss_tol)
 
         def body(carry):
-            u, state, k, history, _, _ = carry
-            value, grad = jax.value_and_grad(loss)(u)
+            u, state, k, history, _, _, flagged = carry
+            (value, flag), grad = jax.value_and_grad(loss, has_aux=True)(u)
             updates, state = optimizer.update(grad, state, u)
             u_new = optax.apply_updates(u, updates)
             previous = jnp.where(k > 0, history[jnp.maximum(k - 1, 0)], jnp.inf)
             change = jnp.abs(previous - value) / jnp.maximum(jnp.abs(value), 1e-300)
             report(k, value, jnp.linalg.norm(grad))
-            return u_new, state, k + 1, history.at[k].set(value), jnp.linalg.norm(grad), change
+            return u_new, state, k + 1, history.at[k].set(value), jnp.linalg.norm(grad), change, flagged | flag
 
-        init = (u0, state, 0, history, jnp.inf, jnp.inf)
-        u, _, k, history, _, _ = jax.lax.while_loop(cond, body, init)
-        return u, k, history
+        init = (u0, state, 0, history, jnp.inf, jnp.inf, jnp.asarray(False))
+        u, _, k, history, _, _, flagged = jax.lax.while_loop(cond, body, init)
+        return u, k, history, flagged
 
     return run
 
@@ -289,28 +338,29 @@ def _adam_loop(loss, optimizer, max_steps, grad_tol, loss_tol, report, dtype):
 def _levenberg_marquardt_loop(residuals, max_steps, grad_tol, loss_tol, report, dtype):
     """Compiled Levenberg-Marquardt (Marquardt's diagonal scaling, damping x1/3 on success, x2 on failure).
 
-    The loss history records the loss after every iteration (accepted or not)."""
+    The loss history records the loss after every iteration (accepted or not). ``residuals(u) -> (r, flag)``;
+    the loop also returns the OR of the flags of every evaluation (trial steps included)."""
 
     def loss_and_jacobian(u):
-        r = residuals(u)
-        return r, jax.jacfwd(residuals)(u)
+        jac, (r, flag) = jax.jacfwd(_with_itself_as_aux(residuals), has_aux=True)(u)
+        return r, jac, flag
 
     def run(u0):
         history = jnp.full(max_steps, jnp.nan, dtype)
-        r, jac = loss_and_jacobian(u0)
+        r, jac, flag0 = loss_and_jacobian(u0)
 
         def cond(carry):
-            *_, k, _, g_norm, change = carry
+            *_, k, _, g_norm, change, _ = carry
             return (k < max_steps) & (g_norm > grad_tol) & (change > loss_tol)
 
         def body(carry):
-            u, r, jac, damping, k, history, _, _ = carry
+            u, r, jac, damping, k, history, _, _, flagged = carry
             value = 0.5 * jnp.mean(r**2)
             grad = jac.T @ r / r.shape[0]
             a = jac.T @ jac
             diag = jnp.maximum(jnp.diag(a), 1e-12 * jnp.max(jnp.diag(a)))
             step = -jnp.linalg.solve(a + damping * jnp.diag(diag), jac.T @ r)
-            r_new, jac_new = loss_and_jacobian(u + step)
+            r_new, jac_new, flag = loss_and_jacobian(u + step)
             new_value = 0.5 * jnp.mean(r_new**2)
             better = jnp.isfinite(new_value) & (new_value < value)
             u, r, jac = (jnp.where(better, u + step, u), jnp.where(better, r_new, r),
@@ -322,11 +372,11 @@ def _levenberg_marquardt_loop(residuals, max_steps, grad_tol, loss_tol, report, 
             change = jnp.where(damping > 1e12, 0.0, change)  # no step lowers the loss any more
             report(k, jnp.minimum(value, new_value), jnp.linalg.norm(grad))
             return (u, r, jac, damping, k + 1, history.at[k].set(jnp.minimum(value, new_value)),
-                    jnp.linalg.norm(grad), change)
+                    jnp.linalg.norm(grad), change, flagged | flag)
 
         init = (u0, r, jac, jnp.asarray(1e-3, dtype), 0, history, jnp.asarray(jnp.inf, dtype),
-                jnp.asarray(jnp.inf, dtype))
-        u, _, _, _, k, history, _, _ = jax.lax.while_loop(cond, body, init)
-        return u, k, history
+                jnp.asarray(jnp.inf, dtype), flag0)
+        u, _, _, _, k, history, _, _, flagged = jax.lax.while_loop(cond, body, init)
+        return u, k, history, flagged
 
     return run

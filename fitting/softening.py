@@ -95,9 +95,8 @@ class SofteningExperiment:
         (:func:`sintercond.simulate.rollout`'s ``step_checkpoint``). The
         coupled step has hundreds of small intermediates per step: storing
         them (one write each per step, then a read) costs more than
-        running the step once more: the gradient is 1.4x faster on a
-        62-sphere bed at 1e3-1e4 steps and 2x at 1e5 (benchmarks/RESULTS.md,
-        softening gradient). The same numbers either way (round-off);
+        running the step once more (faster: docs/devlog/softening_gradient.md,
+        branch softbwd). The same numbers either way (round-off);
         forward mode is unaffected.
     """
 
@@ -180,8 +179,13 @@ class SofteningExperiment:
 
     def log_model(self, logs: Mapping, columns):
         """Model for :func:`fitting.core.least_squares`: ``{"log_E0": ..}`` -> the readings of ``columns``, flat."""
+        return self.log_model_and_overflow(logs, columns)[0]
+
+    def log_model_and_overflow(self, logs: Mapping, columns):
+        """:meth:`log_model` and whether the run's lists overflowed (``least_squares(..., invalid=True)``)."""
         values = {name[4:]: jnp.exp(v) for name, v in logs.items()}
-        return jnp.ravel(self.predict(values)[:, columns])
+        state, saved = self.rollout(values)
+        return jnp.ravel(saved[:, columns]), state.overflow
 
 
 def _overlap_on_floor(state):
@@ -382,10 +386,13 @@ def fit_softening(experiment: SofteningExperiment, data, sigma, fit=("E0", "thet
     weights = np.broadcast_to(1.0 / sigma[columns], (data.shape[0], len(columns))).ravel()
     logs0 = {f"log_{k}": math.log(start[k]) for k in fit}
     options = {"max_steps": 60 if method == "levenberg_marquardt" else 2000, "loss_tol": 1e-12, **options}
-    result = least_squares(experiment.log_model, jnp.asarray(columns), data[:, columns].ravel(), logs0,
-                           {k: Free() for k in logs0}, weights=weights, method=method, **options)
+    # every evaluation of the fit (trial steps, Jacobians) reports whether its lists overflowed: a fit that would
+    # have used a run that dropped pairs raises instead
+    result = least_squares(experiment.log_model_and_overflow, jnp.asarray(columns), data[:, columns].ravel(), logs0,
+                           {k: Free() for k in logs0}, weights=weights, method=method, invalid=True,
+                           invalid_message="the contact lists overflowed (pairs were dropped); rebuild the experiment "
+                                           "with more room (bed_experiment's capacity_multiplier)", **options)
     values = {k: math.exp(result.params[f"log_{k}"]) for k in fit}
-    experiment.readings(values)  # the fitted run must have kept every pair: raises if its lists overflowed
     log_cov = np.asarray(result.covariance)
     stderr = {k: values[k] * float(np.sqrt(log_cov[i, i])) for i, k in enumerate(fit)}
     notes = []
@@ -473,7 +480,7 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     room for twice the loose pile's pairs; the heating run's are then sized
     on the settled bed with ``capacity_multiplier`` spare room (half as many
     pair slots: the laws run on every slot, so the run, its gradient and the
-    fits are ~1.3-1.5x faster; :meth:`SofteningExperiment.readings` and
+    fits are faster; :meth:`SofteningExperiment.readings` and
     :func:`fit_softening` raise if they ran out). At ``t = 0`` the floor
     turns to ``floor_temperature``. Readings: ``n_probes`` particle
     temperatures from the bottom to the top of the bed's central column,

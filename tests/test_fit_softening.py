@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from fitting import softening as sf
+from fitting.core import InvalidEvaluation
 from sintercond import examples, forces, mechanics, simulate
 from sintercond.state import particle_state
 from sintercond.walls import PlaneWall
@@ -310,6 +311,11 @@ def test_bed_heating_lists_sized_on_the_settled_bed_and_overflow_is_an_error(sma
         state.mechanics, spring=state.mechanics.spring[:need // 2])))
     with pytest.raises(ValueError, match="overflowed"):
         starved.readings(starved.nominal())
+    # inside a fit every evaluation reports its overflow: the fit refuses instead of using the starved runs
+    data = small_bed.readings(small_bed.nominal())
+    with pytest.raises(InvalidEvaluation, match="overflowed.*capacity_multiplier"):
+        sf.fit_softening(starved, data, [1e-2] * (data.shape[1] - 1) + [1e-6], fit=("E0",), max_steps=1,
+                         polish_steps=0)
     with pytest.raises(ValueError, match="capacity_multiplier"):
         sf.bed_experiment(capacity_multiplier=0.5)
 
@@ -318,6 +324,7 @@ _SETTLED_BED_READINGS = """
 import json, sys
 import numpy as np
 from fitting import softening as sf
+from fitting.core import InvalidEvaluation
 ex = sf.bed_experiment(lateral_size=8e-3, height=6e-3, t_end=0.004, save_every=10, n_probes=3, bed=sf.settled_bed())
 print(json.dumps(np.asarray(ex.readings(ex.nominal())).tolist()))
 """

@@ -72,6 +72,47 @@ def test_nonlinear_fit_and_stopping():
         least_squares(model, x, y, {"rate": 1.0}, method="bfgs")
 
 
+@pytest.mark.parametrize("method", ["levenberg_marquardt", "adam"])
+def test_a_fit_refuses_when_any_evaluation_on_its_path_was_flagged(method):
+    """A model may be invalid without being NaN (a pair list that overflowed): with invalid=True every evaluation
+    the loop makes reports it, so a fit whose path crossed a flagged region raises, even when it ends outside it."""
+    from fitting.core import InvalidEvaluation
+
+    x = jnp.linspace(0.0, 2.0, 40)
+
+    def model(p, x):
+        return p["amplitude"] * jnp.exp(-p["rate"] * x) + p["offset"]
+
+    truth = {"amplitude": 3.0, "rate": 1.7, "offset": 0.4}
+    y = model(truth, x)
+    start = {"amplitude": 1.0, "rate": 1.0, "offset": 0.0}
+    transforms = {"amplitude": Positive(), "rate": Bounded(0.1, 10.0)}
+    options = {"method": method, "max_steps": 200 if method == "levenberg_marquardt" else 20000}
+    clean = least_squares(model, x, y, start, transforms, **options)
+    assert clean.params["amplitude"] == pytest.approx(3.0, rel=1e-4)
+
+    def never(p, x):
+        return model(p, x), p["amplitude"] > 100.0
+
+    same = least_squares(never, x, y, start, transforms, invalid=True, **options)
+    assert same.params == clean.params  # the flag changes nothing when it is never raised
+
+    def on_the_way(p, x):  # flagged while the amplitude climbs through (2, 2.5): the fit passes, ends at 3
+        return model(p, x), (p["amplitude"] > 2.0) & (p["amplitude"] < 2.5)
+
+    with pytest.raises(InvalidEvaluation, match="optimiser's loop.*raise the capacity"):
+        least_squares(on_the_way, x, y, start, transforms, invalid=True, invalid_message="raise the capacity",
+                      **options)
+
+    def at_the_end(p, x):  # flagged only near the optimum: the polish and the covariance see it
+        return model(p, x), jnp.abs(p["amplitude"] - 3.0) < 1e-3
+
+    with pytest.raises(InvalidEvaluation):
+        least_squares(at_the_end, x, y, start, transforms, invalid=True, **options)
+    with pytest.raises(ValueError, match=r"must return \(prediction, flag\)"):
+        least_squares(model, x, y, start, transforms, invalid=True, **options)
+
+
 def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
     import json
     import pathlib
