@@ -38,7 +38,7 @@ them (MECHANICS.md, "What users comparing with LAMMPS will see"):
   symplectic Euler (Eqs. 43-46): one force evaluation per step in both.
 
 Timings: sintercond runs in this process through the host driver
-(``run.advance``, one compiled chunk of ``--steps`` steps, the neighbour list
+(``rollout.advance``, one compiled chunk of ``--steps`` steps, the neighbour list
 reallocated if it overflows), timed on the second run of the compiled chunk
 (compile and set-up reported separately); LAMMPS's own "Loop time" of the
 run, and its whole process. Both report the final kinetic energy and mean
@@ -66,8 +66,8 @@ import numpy as np
 from _common import markdown_table, write_section
 from peers_thermal import lammps_executable, loop_time
 
-from sintercond import mechanics, network, pair_list, simulate
-from sintercond.run import _compiled_chunk, advance
+from sintercond import mechanics, network, pair_list, rollout, simulate
+from sintercond.rollout import advance
 from sintercond.scene import restitution_damping_ratio
 from sintercond.state import particle_state
 from sintercond.walls import PlaneWall
@@ -202,7 +202,13 @@ def sintercond_run(centres, radii, temperature, steps, variant, dt=None, order="
     kinetic = 0.5 * float(np.sum(mass[:, None] * v**2))
     statistics = neighbor_statistics(sim, fns, starts[-1], params, steps, run_time)
     return (dt, setup, first - run_time, run_time, kinetic, float(np.mean(final.particles.temperature)),
-            report["reallocations"], statistics)
+            report.reallocations, statistics)
+
+
+def _compiled_chunk(sim, steps):
+    """``advance``'s compiled chunk of ``steps`` steps, returning the state alone."""
+    run = rollout.compiled_chunk(sim, steps)
+    return lambda state, params: run(state, params)[0]
 
 
 def compare_orders(centres, radii, temperature, steps, repeats, variant="float64"):
@@ -365,7 +371,7 @@ def main():
     parser.add_argument("--lammps", default=None)
     parser.add_argument("--order", default="lattice", choices=("lattice", "morton"),
                         help="sintercond's particle numbering (LAMMPS sorts its atoms spatially on its own); "
-                             "Morton order ran no faster than the lattice order (benchmarks/RESULTS.md)")
+                             "Morton order ran no faster than the lattice order (docs/devlog/coupled_step.md)")
     parser.add_argument("--no-peers", action="store_true", help="sintercond only (e.g. on a GPU machine)")
     parser.add_argument("--compare-orders", type=int, default=0, metavar="REPEATS",
                         help="only time lattice against Morton order (float64, alternating, min of REPEATS); "

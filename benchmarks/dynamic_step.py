@@ -9,7 +9,7 @@ shrinking affinely at a strain rate that moves the outermost particles about
 ``Physics(contacts="dynamic", conductance="lifted")``: conductances from the
 current overlaps at every step (Rojek's law with the volume-conserving neck,
 or Batchelor-O'Brien with the Hertz neck), once per pair of the half pair
-list, in jitted chunks of 100 steps compiled once (as `sintercond.run.advance`
+list, in jitted chunks of 100 steps compiled once (as `sintercond.rollout.advance`
 runs them; best of 3 runs after a warm-up). Variants: skin 0 (jax-md rebuilds the Dense list, and the half list
 with it, at every step: what the old `moving.py` did) and a skin of 0.1 a
 (rebuilt once a particle moved 0.05 a). Times exclude compilation; the
@@ -73,7 +73,7 @@ def setup(centres, radii, skin, rate, law):
 
 
 def time_steps(sim, state, params, steps, reallocate, chunk=100, repeats=3):
-    """Seconds per step of ``steps`` steps in compiled chunks of ``chunk`` (compiled once, as `run.advance` does).
+    """Seconds per step of ``steps`` steps in compiled chunks of ``chunk`` (compiled once, as `rollout.advance` does).
 
     A run whose lists overflowed is redone from a reallocated start (the lists sized for its end, as the
     host driver does), before timing. Best of ``repeats`` runs after a warm-up (compilation) run;

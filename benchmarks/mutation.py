@@ -9,8 +9,9 @@ mutant is applied to that copy, the covering tests run there with
 ``python -m pytest -x -q -p no:cacheprovider`` (first failure stops them)
 under a time limit, and the module is restored before the next mutant. A
 mutant is *killed* when the tests fail (or time out), *survives* when they
-pass. The working tree is never touched. Prints a table and rewrites the
-``mutation`` section of benchmarks/RESULTS.md (not with ``--only`` or
+pass. The working tree is never touched. Prints a table, writes every
+mutant's row to benchmarks/results/mutation.csv and the counts per module to
+the ``mutation`` section of benchmarks/RESULTS.md (not with ``--only`` or
 ``--no-write``). ``--check`` only verifies that every snippet is found once.
 
 Mutants of the simulator (network, neighbors, walls, simulate, thermal, run)
@@ -22,6 +23,7 @@ after changing tests.
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import shutil
 import subprocess
@@ -238,7 +240,7 @@ MUTANTS = [
     ("equilibrium neck of the larger sphere", SINTER,
      'return jnp.minimum(r_i, r_j) * jnp.sin(0.5 * jnp.deg2rad(params["dihedral_angle"]))',
      'return jnp.maximum(r_i, r_j) * jnp.sin(0.5 * jnp.deg2rad(params["dihedral_angle"]))', SINT),
-    ("damped newton", SINTER, "u_end - residual * shape(a_end)", "u_end - 0.5 * residual * shape(a_end)", SINT),
+    ("damped newton", SINTER, "u_end - residual * shape(x_end)", "u_end - 0.5 * residual * shape(x_end)", SINT),
     ("viscous without 3/2", SINTER, "return 1.5 * _equivalent_radius(r_i, r_j)", "return _equivalent_radius(r_i, r_j)",
      SINT),
     ("ramp floor reading", SINTER, "step_temperatures = temperature_start + k * (",
@@ -332,19 +334,28 @@ def main():
     for r in survivors:
         print(f"survived: {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}")
     if args.only is None and not args.no_write:
-        from _common import command_line, markdown_table, write_section
+        from _common import RESULTS, command_line, markdown_table, write_section
 
+        # every mutant's row goes to a CSV beside RESULTS.md; the section keeps the counts per module
+        table = RESULTS.parent / "results" / "mutation.csv"
+        table.parent.mkdir(exist_ok=True)
+        with table.open("w", newline="") as f:
+            csv.writer(f).writerows([("mutant", "module", "result", "tests", "seconds"), *rows])
+        per_module = []
+        for module in modules:
+            mine = [r for r in rows if r[1] == module]
+            per_module.append((module, len(mine), sum(r[2].startswith("killed") for r in mine),
+                               f"{sum(float(r[4]) for r in mine):.0f}"))
         body = (
             "## Mutation testing\n\n"
             "Small deliberate bugs (benchmarks/mutation.py: each replaces one snippet of one module) run against "
             "the tests that cover that module (`pytest -x`, first failure stops). Killed: the tests fail. "
-            f"{summary}.\n\n"
-            + markdown_table(("mutant", "module", "result", "tests", "seconds"), rows)
+            f"{summary}. Every mutant's result: [results/mutation.csv](results/mutation.csv).\n\n"
+            + markdown_table(("module", "mutants", "killed", "seconds"), per_module)
             + ("\n\nSurvivors:\n" + "\n".join(f"- {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}"
                                              for r in survivors) if survivors else "\n\nNo survivors.")
         )
         write_section("mutation", command_line(), body)
-
 
 if __name__ == "__main__":
     main()

@@ -24,7 +24,7 @@ Variants, each in its own process so that its peak memory is its own:
   one pass with 3 tangents); no checkpoints needed, memory O(1) in the steps. Extra
   information: the issue-12 target is on reverse mode through the checkpointed segments.
 
-All compiled with ``mechanics.COMPILER_OPTIONS`` (as ``run.advance`` compiles a mechanical chunk).
+All compiled with ``mechanics.COMPILER_OPTIONS`` (as ``rollout.advance`` compiles a mechanical chunk).
 Times: the variant and the forward program in the same process (best of alternating runs when
 they take under 20 s; one run each beyond).
 Memory: XLA's buffer assignment of the compiled program (temporaries + arguments + outputs)

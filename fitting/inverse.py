@@ -25,14 +25,14 @@ once on the way back, so memory is ``O(sqrt(n_steps))`` particle-sized arrays
 and the gradient sweeps the network three times per step (forward, recompute,
 adjoint). Each sweep is one gather over the table; the adjoint carries
 ``a mu`` so that its gather reads one array, and the recompute writes ``H``
-in place into one buffer shared by all segments: about 3.3-3.5x the forward
-time on a CPU, where the three gathers alone are 3x (benchmarks/RESULTS.md).
+in place into one buffer shared by all segments (its cost against the forward:
+benchmarks/RESULTS.md, ``inverse_gradient``; what was tried: docs/devlog/thermal_gradient.md).
 
 Precision: float64 by default. Built in float32 (``SINTERCOND_ENABLE_X64=0``)
 the readings of a 10 K flash at 300 K stay within 1e-3 K of float64 over
 400 steps and the gradient within 1e-4 relative (tests/test_inverse.py).
 :meth:`ProbeExperiment.temperatures` with ``gradient="autodiff"`` runs the
-same model through :func:`sintercond.simulate.simulate_table` for JAX's own
+same model through :func:`sintercond.simulate.rollout` for JAX's own
 differentiation (forward mode for Gauss-Newton Jacobians; reverse mode as
 the reference the adjoint is tested against).
 """
@@ -118,7 +118,7 @@ class ProbeExperiment:
 
         ``gradient="adjoint"``: reverse-mode derivatives by the checkpointed
         discrete adjoint (no forward mode). ``"autodiff"``: the same numbers
-        from :func:`sintercond.simulate.simulate_table`, differentiable by JAX in
+        from :func:`sintercond.simulate.rollout`, differentiable by JAX in
         both modes. Beyond the explicit stability limit
         (:meth:`max_diffusivity_ratio`) the readings are NaN (flagged, never a
         silently wrong history).

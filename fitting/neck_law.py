@@ -5,7 +5,7 @@ it tends to the isothermal-disc-on-a-half-space limit ``(4/pi) x`` as
 ``x -> 0`` (the ``x ln x`` term carries the fast departure from it, as in
 Dryden & Zok's Eq. 30) and matches the FE data of fitting/data within
 0.25 % from ``a/r = 0.1`` to 0.85, where Rojek's ``1.064 x`` is off by up to
-6.6 %.
+6.6 % below ``a/r = 0.6`` and by 12.6 % at 0.85.
 
 ``python -m fitting.neck_law`` refits and writes the coefficients, with their
 provenance, to ``sintercond/data/fitted_neck_law.json``, which

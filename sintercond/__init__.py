@@ -54,7 +54,7 @@ __version__ = "0.1.0"
 _SUBMODULES = frozenset({
     "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "heat_sources", "io",
     "materials", "mechanics", "neck", "neighbors", "network", "packing", "pair_list", "plots", "run", "scene",
-    "simulate", "sintering", "state", "steady", "sweep", "thermal", "tortuosity", "walls",
+    "rollout", "simulate", "sintering", "state", "steady", "sweep", "thermal", "tortuosity", "walls",
 })
 
 

@@ -16,8 +16,7 @@ def materialized(x):
 
     XLA's CPU fusion copies cheap elementwise producers into every consumer
     that reads them. A gather of ``a * b`` then reads both ``a`` and ``b`` at
-    every gathered index (about twice the cost of gathering one array;
-    benchmarks/RESULTS.md, ``inverse_gradient``), and a per-contact scalar
+    every gathered index (docs/devlog/thermal_gradient.md), and a per-contact scalar
     chain (a force magnitude, a stiffness) is evaluated again in each
     ``[c, 3]`` output that uses it, once per component (the contact laws,
     :func:`sintercond.mechanics.pair_loads`). ``optimization_barrier`` is
@@ -25,8 +24,7 @@ def materialized(x):
     consumers, so ``x`` goes through a two-term sum with zero (``x + 0 = x``).
     float32 is summed in float64 (exact both ways): XLA:CPU gives float32
     reductions to its YNNPACK library fusions, which write the stacked pair
-    out and sum it in a second kernel (about 15 of the 26 ms of the float32
-    coupled step at 1e5 spheres, benchmarks/RESULTS.md).
+    out and sum it in a second kernel (docs/devlog/coupled_step.md, branch mat).
     """
     wide = x.dtype == jnp.float32 and jax.config.read("jax_enable_x64")
     y = x.astype(jnp.float64) if wide else x

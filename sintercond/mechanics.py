@@ -173,10 +173,10 @@ COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_cpu_prefer_vector
 """XLA options for compiling a mechanical step (``jax.jit(f, compiler_options=...)``, per executable).
 
 On the CPU, XLA's newer fusion emitters turn the contact laws' many
-elementwise fusions over the pairs into code ~1.5x slower than the classic
+elementwise fusions over the pairs into slower code than the classic
 emitters, and LLVM's 512-bit vectors (a preference: CPUs without AVX-512
-keep their widest) run the step 2-5 % faster than XLA's default of 256
-(benchmarks/coupled_step.py; RESULTS.md). The fields belong to XLA's
+keep their widest) run the step a little faster than XLA's default of 256
+(measured by benchmarks/coupled_step.py; docs/devlog/coupled_step.md, branch lawfuse). The fields belong to XLA's
 DebugOptions and only the CPU compiler reads them (not checked on a GPU)."""
 
 

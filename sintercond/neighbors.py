@@ -189,7 +189,7 @@ def _grid(region, reach, periodic) -> _Grid:
 
 def _cell_order(key):
     """The permutation sorting ``key`` ``[n]`` (int32, ascending, ties by index): one sort of ``key n + index``
-    in int64 under x64 (XLA sorts one int64 operand ~5x faster than a key and its index), else an argsort."""
+    in int64 under x64 (XLA sorts one int64 operand faster than a key and its index), else an argsort."""
     n = key.shape[0]
     if not jax.config.jax_enable_x64:
         return jnp.argsort(key).astype(jnp.int32)

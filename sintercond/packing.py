@@ -432,7 +432,7 @@ class SettleReport:
 
 
 class DemSettled(typing.NamedTuple):
-    """A settled DEM state and what continues it (``sim``, ``params``, ``neighbor_fns`` for :func:`sintercond.run.advance`).
+    """A settled DEM state and what continues it (``sim``, ``params``, ``neighbor_fns`` for :func:`sintercond.rollout.advance`).
 
     The state is float64 (the settle runs under ``jax.enable_x64`` whatever
     the default); continue it with 64-bit floats on.
@@ -504,8 +504,8 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     :func:`dem_physics`): Hertz normal force with damping, Mindlin friction
     with history, rolling resistance, gravity ``g = 9.81 m/s^2 (-z)`` and the
     plane ``walls``, symplectic Euler, in compiled chunks of ``check_every``
-    steps (the loop of :func:`sintercond.run.advance`, with the settled
-    figures computed in the same compiled chunk: one compilation per settle;
+    steps (the loop of :func:`sintercond.rollout.advance`, with the settled
+    figures computed in the same compiled chunk;
     a neighbour list that overflowed is reallocated with
     :func:`sintercond.simulate.reallocate_neighbors` and the chunk redone).
     Every particle is held at
@@ -537,6 +537,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         (naming the quantity that missed its threshold and its value).
     """
     from sintercond import mechanics, simulate
+    from sintercond.rollout import ListOverflow, advance
     from sintercond.state import particle_state
 
     if not isinstance(material, DemMaterial):
@@ -579,35 +580,22 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         state = simulate.init_state(particles, contacts, dt,
                                     mechanics=mechanics.mechanical_state(physics, centres, contacts))
         sim = simulate.simulator(physics, fns)
-        mass, inertia = particles.mass, 0.4 * particles.mass * particles.radii**2
-        weight = mass * GRAVITY
-        energy_scale = jnp.sum(weight * particles.radii)
-
-        def chunk(s, p):
-            """``check_every`` steps, then the settled figures of the end state from one probe step (one compilation)."""
-            s = simulate.rollout(sim, s, p, check_every, simulate.SaveAt(check_every, _nothing), checkpoint=False)[0]
-            probe = sim.step_fn(s, p)
-            v, w = s.mechanics.velocity, s.mechanics.spin
-            kinetic = 0.5 * jnp.sum(mass[:, None] * v**2) + 0.5 * jnp.sum(inertia[:, None] * w**2)
-            force = mass[:, None] * (probe.mechanics.velocity - v) / s.dt
-            return s, kinetic / energy_scale, jnp.max(jnp.linalg.norm(force, axis=1) / weight), probe.overflow
-
-        compiled = jax.jit(chunk, compiler_options=mechanics.compiler_options(sim.physics))
-        reallocate = simulate.reallocate_neighbors(fns)
+        energy_scale = float(jnp.sum(particles.mass * GRAVITY * particles.radii))
         max_steps = check_every * int(math.ceil(max_time / dt / check_every))
-        reallocations, kinetic, force = 0, math.inf, math.inf
-        while int(state.step) < max_steps and not (kinetic < kinetic_tol and force < force_tol):
-            new, kinetic_new, force_new, probe_overflow = compiled(state, params)
-            if bool(new.overflow) or bool(probe_overflow):  # a list ran out of room: a wider one, the chunk redone
-                state = reallocate(state, new)
-                reallocations += 1
-                if reallocations > 100:
-                    raise PackingError("the DEM neighbour list keeps overflowing")
-                continue
-            _finite_positions(new)
-            state, kinetic, force = new, float(kinetic_new), float(force_new)
-        figures = {"kinetic": kinetic, "force": force}
-        info = {"reallocations": reallocations}
+        figures = {"kinetic": math.inf, "force": math.inf}
+
+        def settled(s, measured):
+            kinetic, force = measured
+            figures.update(kinetic=float(kinetic) / energy_scale, force=float(force))
+            return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
+
+        try:
+            state, report = advance(sim, state, params, max_steps, check_every, settled,
+                                    reallocate=simulate.reallocate_neighbors(fns), check=_finite_positions,
+                                    measure=_settle_figures)
+        except ListOverflow:
+            raise PackingError("the DEM neighbour list keeps overflowing") from None
+        info = {"reallocations": report.reallocations}
         final = np.asarray(state.particles.positions)
     if not (figures["kinetic"] < kinetic_tol and figures["force"] < force_tol):
         missed = []
@@ -625,8 +613,14 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
 
 
 
-def _nothing(state):
-    return ()
+def _settle_figures(sim, state, params):
+    """:func:`dem_settle`'s figures of a chunk's end state, from one probe step: ``((kinetic energy (J), largest net
+    force over weight), the probe step overflowed)``; the net force is ``m dv/dt`` over that step."""
+    probe = sim.step_fn(state, params)
+    p, v, w = state.particles, state.mechanics.velocity, state.mechanics.spin
+    kinetic = 0.5 * jnp.sum(p.mass[:, None] * v**2) + 0.5 * jnp.sum(0.4 * p.mass[:, None] * p.radii[:, None]**2 * w**2)
+    force = p.mass[:, None] * (probe.mechanics.velocity - v) / state.dt
+    return (kinetic, jnp.max(jnp.linalg.norm(force, axis=1) / (p.mass * GRAVITY))), probe.overflow
 
 
 def _finite_positions(state):

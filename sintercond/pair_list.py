@@ -189,8 +189,7 @@ def map_pair_blocks(fn, pairs, *per_pair):
     :data:`PAIR_BLOCKS_FROM` blocks of :data:`PAIR_BLOCK` pairs is evaluated
     one block at a time (``lax.map``): the same arithmetic per pair, but
     each intermediate of the laws stays in the cache instead of making its
-    own pass through memory (1.2-1.3x on the 1e5-sphere coupled step,
-    benchmarks/RESULTS.md). A capacity that is not a whole number of blocks
+    own pass through memory (docs/devlog/coupled_step.md, branch blocked). A capacity that is not a whole number of blocks
     (:func:`half_pair_capacity` allocates one) is padded, at the cost of a
     copy. Elsewhere, and for shorter lists, one call.
     """

@@ -13,7 +13,6 @@ inputs.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
 import sys
 import time
@@ -26,6 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sintercond import forces, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
+from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
 from sintercond.scene import SceneError, restitution_damping_ratio, validate_scene
 from sintercond.state import particle_state
@@ -353,66 +353,6 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
                           t_wall)
         k_wall = k_wall + k_w
     return k_wall, t_wall
-
-
-def advance(sim, state, params, n_steps, chunk, on_chunk=None, reallocate=None, progress=None, check=None):
-    """The one host loop: advance ``n_steps`` in compiled chunks of ``chunk`` steps (the last one may be shorter).
-
-    After every chunk the host checks the state: a neighbour list that
-    overflowed (``state.overflow``) is reallocated by ``reallocate(start,
-    end) -> start`` and the chunk redone from its saved start, so no contact
-    is lost; ``check(state)`` raises on an unphysical state (default:
-    non-finite temperatures). Then ``on_chunk(state)`` (outputs,
-    checkpoints) runs; returning True stops early. The same compiled chunk
-    runs on the same inputs whatever the history, so a run resumed from a
-    checkpoint is bitwise identical to an uninterrupted one.
-
-    Returns:
-      ``(state, report)`` with the number of chunks and reallocations.
-    """
-    compiled = {}
-    reallocations = chunks = 0
-    target = int(state.step) + n_steps
-    check = check or _finite_temperatures
-    while int(state.step) < target:
-        length = min(chunk, target - int(state.step))
-        if length not in compiled:
-            compiled[length] = _compiled_chunk(sim, length)
-        new = compiled[length](state, params)
-        if bool(new.overflow):
-            if reallocate is None:
-                raise RuntimeError("the neighbour list overflowed and no reallocation was given")
-            state = reallocate(state, new)
-            reallocations += 1
-            if reallocations > 100:
-                raise RuntimeError("the neighbour list keeps overflowing; raise its capacity")
-            continue
-        check(new)
-        state = new
-        chunks += 1
-        if progress is not None:
-            progress(length)
-        if on_chunk is not None and on_chunk(state):
-            break
-    return state, {"chunks": chunks, "reallocations": reallocations}
-
-
-def _finite_temperatures(state):
-    if not bool(jnp.all(jnp.isfinite(state.particles.temperature))):
-        raise FloatingPointError(f"non-finite temperature at step {int(state.step)}; reduce the time step")
-
-
-@functools.lru_cache(maxsize=16)
-def _compiled_chunk(sim, chunk):
-    """The jitted chunk of ``sim`` (hashable), kept across :func:`advance` calls: a second run does not recompile."""
-    def run_chunk(state, params):
-        return simulate.rollout(sim, state, params, chunk, simulate.SaveAt(chunk, _nothing), checkpoint=False)[0]
-
-    return jax.jit(run_chunk, compiler_options=mechanics.compiler_options(sim.physics))
-
-
-def _nothing(state):
-    return ()
 
 
 MAX_TEMPERATURE = 1e5

@@ -1,7 +1,10 @@
 """One simulator: a static physics spec, differentiable ``Params``, one step, one rollout.
 
-Every stepping path of the package (``sintercond run``, the flash experiment
-and inverse fits, prescribed motion, the benchmarks) goes through here:
+Every stepping path of the package (``sintercond run``, settling, the
+softening fits, prescribed motion, the benchmarks) goes through here; the
+flash experiment's readings do too, while its gradient is a hand-written
+discrete adjoint over :func:`sintercond.thermal.explicit_update`
+(:mod:`fitting.inverse`), tested against reverse mode through :func:`rollout`:
 
 * :class:`Physics` is a frozen, hashable description of *what* is simulated
   (conduction law and neck model, static or dynamic contacts, integrator,
@@ -55,7 +58,7 @@ evaluated once per pair of the half list from the current overlaps at every
 step, and heat (and force) is added to one end and taken from the other
 (:func:`sintercond.pair_list.pair_exchange`): conserved by construction.
 Overflow of either list is a flag in the state, recovered by the host
-driver (:func:`sintercond.run.advance` with :func:`reallocate_neighbors`).
+driver (:func:`sintercond.rollout.advance` with :func:`reallocate_neighbors`).
 """
 
 from __future__ import annotations
@@ -133,7 +136,7 @@ class Physics:
         (``mu_wall = 0``; without rolling resistance, ``mu_r_wall = 0``):
         their tangential (rolling) law, whose force would be exactly zero,
         is not evaluated and its springs are not stored (a bed in such
-        walls runs and differentiates ~1.3x faster, benchmarks/RESULTS.md).
+        walls runs and differentiates faster; docs/devlog/softening_gradient.md).
         :func:`rollout` rejects concrete nonzero coefficients; under
         ``jit`` they are not checked and would be ignored.
       softening: Young's modulus from the temperature, Eq. 42 (erratum 6).
@@ -766,7 +769,7 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
 
 
 def reallocate_neighbors(neighbor_fns):
-    """A ``reallocate(start, end)`` for :func:`sintercond.run.advance`: room for the chunk that overflowed.
+    """A ``reallocate(start, end)`` for :func:`sintercond.rollout.advance`: room for the chunk that overflowed.
 
     The Dense list is allocated at the chunk's end positions, with room for
     the most neighbours and cell-range particles any build of the chunk met

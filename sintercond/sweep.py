@@ -11,8 +11,7 @@ Results come back to the host as NumPy arrays.
 
 Several GPUs on one host: nothing to do, every visible device is used
 (``CUDA_VISIBLE_DEVICES`` selects them). Several hosts: call
-``jax.distributed.initialize()`` on every process first (README, "Sweeps on
-several GPUs or hosts"); ``jax.devices()`` then lists the devices of all
+``jax.distributed.initialize()`` on every process first (docs/sweeps.md); ``jax.devices()`` then lists the devices of all
 hosts; every process runs the same ``sweep`` on the same cases, feeds the
 devices it owns and gets every result back.
 """

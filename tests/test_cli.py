@@ -1,4 +1,4 @@
-"""The README's main job: `sintercond` with no arguments prints the Rojek demo table."""
+"""`sintercond` with no arguments prints the Rojek demo table (the README's main job is `sintercond run`)."""
 
 import subprocess
 import sys
