@@ -6,7 +6,7 @@ Each mutant is (module, original snippet, mutated snippet, tests): the snippet
 must occur exactly once in the module. The whole repository (git's tracked and
 untracked, not ignored, files) is copied once to a temporary directory; each
 mutant is applied to that copy, the covering tests run there with
-``python -m pytest -x -q -p no:cacheprovider`` (first failure stops them)
+``python -m pytest -x -q -n0 -p no:cacheprovider`` (first failure stops them)
 under a time limit, and the module is restored before the next mutant. A
 mutant is *killed* when the tests fail (or time out), *survives* when they
 pass. The working tree is never touched. Prints a table, writes every
@@ -298,7 +298,7 @@ def run(mutants, timeout):
             path.write_text(text.replace(original, mutated, 1))
             t0 = time.perf_counter()
             try:
-                proc = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests],
+                proc = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-n0", "-p", "no:cacheprovider", *tests],
                                       cwd=work, env=env, capture_output=True, text=True, timeout=timeout)
                 status = "survived" if proc.returncode == 0 else "killed"
                 if proc.returncode not in (0, 1):  # collection errors, crashes: killed, but say so

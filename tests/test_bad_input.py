@@ -427,6 +427,7 @@ def test_laws_under_jit_give_nan_for_invalid_materials_never_negative():
     assert np.isnan(f(-1.0)) and f(1.0) > 0
 
 
+@pytest.mark.slow
 def test_feng_float32_reverse_mode_gradients_are_finite():
     import jax
     import jax.numpy as jnp

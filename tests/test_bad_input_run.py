@@ -20,6 +20,7 @@ def _scene(**run):
     return validate_scene(scene)
 
 
+@pytest.mark.slow
 def test_simulated_time_ends_at_the_duration(tmp_path):
     scene = _scene(duration=1.3e-3, output_every=7, checkpoint_every=7)
     _, summary = runner.run_scene(scene, tmp_path, progress=False)
@@ -54,6 +55,7 @@ def test_run_prints_steps_and_stable_step_first(tmp_path, capsys):
     assert "stable step" in out.out + out.err and "steps" in out.out + out.err
 
 
+@pytest.mark.slow
 def test_summary_reports_the_bed(tmp_path):
     scene = copy.deepcopy(SMALL)
     scene["packing"] = {"kind": "powder_bed", "lateral_size": 400e-6, "height": 200e-6,

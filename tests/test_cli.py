@@ -23,12 +23,14 @@ def test_demo_rejects_bad_kappa(capsys):
     assert "--kappa must be finite and > 0" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_console_script_runs():
     # the installed entry point, as a user runs it
     result = subprocess.run([sys.executable, "-m", "sintercond.cli", "demo"], capture_output=True, text=True, check=True)
     assert "K_rojek" in result.stdout
 
 
+@pytest.mark.slow
 def test_effective_on_a_powder_bed(tmp_path, capsys):
     # before: "no particle reaches the box faces" on every powder bed
     scene = tmp_path / "bed.toml"

@@ -80,6 +80,7 @@ def test_rojek_contact_conductance():
     assert float(rojek_pair_conductance(*args, contact_conductance=1e-30)) == pytest.approx(1e-30, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_rojek_gradients_in_slope_and_kappa():
     r_i, r_j, h = 1e-3, 3e-3, 0.06e-3
     k = float(rojek_pair_conductance(r_i, r_j, h, KAPPA_CU))
@@ -130,6 +131,7 @@ def test_feng_two_discs():
     assert np.all(np.diff(ks) > 0) and ks[0] < 0.15 * kappa
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CONDUCTANCE_LAWS))
 def test_every_law_physics(name):
     r_i, r_j = 1.0, 1.7
@@ -160,6 +162,7 @@ def test_every_law_physics(name):
     np.testing.assert_allclose(law(r_i, r_j, h, 2.0), k, rtol=1e-15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CONDUCTANCE_LAWS))
 def test_every_law_gradients_match_finite_differences(name):
     check_grads(

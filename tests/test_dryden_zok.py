@@ -31,6 +31,7 @@ def test_kernel_pole_at_pi():
     np.testing.assert_allclose(np.asarray(dz.kernel(xi)) * (np.pi - xi), 1.0, atol=2e-3)
 
 
+@pytest.mark.slow
 def test_half_space_limit():
     alpha = np.array([1e-6, 1e-4, 1e-3])
     sigma = np.asarray(dz.dryden_zok_sigma(alpha))
@@ -48,6 +49,7 @@ def test_full_caps_conduct_like_the_bulk():
     assert float(dz.dryden_zok_sigma(np.pi / 2)) == pytest.approx(1.0, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_monotonic_and_bounded():
     alpha = np.linspace(1e-3, np.pi / 2, 200)
     sigma = np.asarray(dz.dryden_zok_sigma(alpha))
@@ -55,6 +57,7 @@ def test_monotonic_and_bounded():
     assert np.all((sigma > 0) & (sigma <= 1 + 1e-12))
 
 
+@pytest.mark.slow
 def test_asymptotes_to_the_degree_of_fig_2():
     alpha = np.linspace(0.01, np.pi / 2, 120)
     sigma = np.asarray(dz.dryden_zok_sigma(alpha))
@@ -64,6 +67,7 @@ def test_asymptotes_to_the_degree_of_fig_2():
     assert np.all(np.abs(np.asarray(dz.sigma_large_alpha(alpha[large])) - sigma[large]) < 2.5e-3)
 
 
+@pytest.mark.slow
 def test_bounds():
     alpha = np.linspace(0.01, np.pi / 2, 120)
     sigma = np.asarray(dz.dryden_zok_sigma(alpha))
@@ -80,6 +84,7 @@ def test_bounds():
     np.testing.assert_allclose(dz.sigma_lower_bound(alpha, terms=400), bound, atol=1e-4)
 
 
+@pytest.mark.slow
 def test_converges_with_nodes():
     reference = np.asarray(dz.dryden_zok_sigma(ALPHAS, nodes=256))
     errors = [np.max(np.abs(np.asarray(dz.dryden_zok_sigma(ALPHAS, nodes=n)) - reference)) for n in (16, 32, 48, 64, 96)]
@@ -87,6 +92,7 @@ def test_converges_with_nodes():
     assert errors[-1] < 1e-11  # the accuracy target is 1e-10 with at most 128 nodes
 
 
+@pytest.mark.slow
 def test_gradient_matches_finite_differences():
     for alpha in (0.05, 0.4, 1.0, 1.5):
         check_grads(dz.dryden_zok_sigma, (alpha,), order=1, modes=["fwd", "rev"], eps=1e-6, rtol=1e-6)
@@ -96,6 +102,7 @@ def test_gradient_matches_finite_differences():
     assert g == pytest.approx(g30, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_vmap_jit_and_loop_agree():
     batched = np.asarray(dz.dryden_zok_sigma(ALPHAS))
     looped = np.array([float(dz.dryden_zok_sigma(a)) for a in ALPHAS])
@@ -105,6 +112,7 @@ def test_vmap_jit_and_loop_agree():
     assert dz.dryden_zok_sigma(ALPHAS.reshape(3, 4)).shape == (3, 4)
 
 
+@pytest.mark.slow
 def test_out_of_range_is_nan():
     sigma = np.asarray(dz.dryden_zok_sigma(np.array([-0.1, 0.0, np.pi / 2 + 1e-9, 0.3])))
     assert np.all(np.isnan(sigma[:3])) and np.isfinite(sigma[3])
@@ -112,6 +120,7 @@ def test_out_of_range_is_nan():
         dz.dryden_zok_sigma(0.3, nodes=20)
 
 
+@pytest.mark.slow
 def test_float32():
     alpha = ALPHAS.astype(np.float32)
     s32 = dz.dryden_zok_sigma(jnp.asarray(alpha))
@@ -136,6 +145,7 @@ def test_effective_conductivity():
     assert np.isnan(dz.dryden_zok_conductivity(k, f, 1.0, 12.0))  # alpha = 2 > pi/2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("nodes", [360, 480])
 def test_fine_meshes_stay_finite(nodes):
     """Bug: from 360 nodes the geometric panels toward s = 1 shrank below the float64 spacing there, the

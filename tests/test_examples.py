@@ -29,12 +29,14 @@ def test_radii_follow_the_truncated_normal():
     assert radii.std() == pytest.approx(law.std(), rel=5e-3)  # 0.9866 sigma: the tails cut at 3 sigma
 
 
+@pytest.mark.slow
 def test_both_beds_settled_into_a_random_packing(ex):
     for bed in (ex.packing, ex.softened_packing):
         assert bed.settle.kinetic_ratio < bed.settle.kinetic_tol and bed.settle.force_ratio < bed.settle.force_tol
         assert 0.5 < bed.packing_fraction < 0.7 and bed.isolated == 0
 
 
+@pytest.mark.slow
 def test_k_star_lies_within_the_hashin_shtrikman_bounds(ex):
     for est, bed, bounds in ((ex.unsoftened, ex.packing, ex.bounds),
                              (ex.softened, ex.softened_packing, ex.softened_bounds)):
@@ -47,12 +49,14 @@ def test_k_star_lies_within_the_hashin_shtrikman_bounds(ex):
         assert est.k_wall == pytest.approx(est.k_steady, rel=0.3)  # same flux, wall resistance and L differ
 
 
+@pytest.mark.slow
 def test_heat_through_the_walls_is_the_heat_stored(ex):
     for est in (ex.unsoftened, ex.softened):
         assert est.heat_hot > 0 > est.heat_cold
         assert est.heat_hot + est.heat_cold == pytest.approx(est.stored, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_softening_raises_k_star(ex):
     assert ex.softened.k_steady > ex.unsoftened.k_steady
     assert ex.softened.k_wall > ex.unsoftened.k_wall

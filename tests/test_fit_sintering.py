@@ -45,6 +45,7 @@ def test_series_are_the_tables_on_the_erratum_ramp():
         fs.neck_series("fcc")
 
 
+@pytest.mark.slow
 def test_power_law_fits_reproduce_the_independent_figures(fits):
     """SINTERING.md (computed independently): n = 6 fixed, Arrhenius along the ramp: 80-58.6 RMSE ~0.05 um with
     Q ~29 kJ/mol, 80-80 ~0.24 um with Q ~42 kJ/mol; the clean series' apparent exponents ~3.7 and ~4.6."""
@@ -60,6 +61,7 @@ def test_power_law_fits_reproduce_the_independent_figures(fits):
         assert 1 / slope == pytest.approx(apparent, abs=0.15)
 
 
+@pytest.mark.slow
 def test_grain_boundary_fits_residuals_intervals_and_warnings(fits):
     for name, rmse in (("80-80", 0.3), ("80-58.6", 0.07)):
         f = fits[name]
@@ -81,6 +83,7 @@ def test_grain_boundary_fits_residuals_intervals_and_warnings(fits):
     assert np.log(rate_ref) == pytest.approx(f.fit.params["log_rate_ref"], rel=1e-12)
 
 
+@pytest.mark.slow
 def test_exponent_valley():
     """Each fixed exponent has its own best Q: Q rises with n (the valley), the misfit is flat near the best n."""
     n, q, dq, rmse = fs.exponent_valley(fs.neck_series("80-58.6"), exponents=(5.0, 6.0, 7.0, 8.0))
@@ -90,6 +93,7 @@ def test_exponent_valley():
     assert rmse.max() < 3 * rmse.min()
 
 
+@pytest.mark.slow
 def test_synthetic_recovery_has_the_stated_coverage(fits):
     """Truth = the 80-58.6 fit; noise 0.05 um; 40 realisations: the 95 % intervals cover the truth at about the
     nominal rate (binomial: 40 draws at p = 0.95 fall below 33 with probability < 0.1 %)."""
@@ -109,6 +113,7 @@ def test_synthetic_recovery_has_the_stated_coverage(fits):
     assert np.all(np.abs(np.mean(z, axis=0)) < 0.5)
 
 
+@pytest.mark.slow
 def test_lattice_conductivity_is_the_closed_form_of_the_lattice():
     """SC: k* = K / d (series chain); BCC: k* = (K_1 + 2 K_2) / a (the linear field of an inversion-symmetric
     lattice: each corner bonds once along the axis and to 4 centres half a cell ahead)."""
@@ -130,6 +135,7 @@ def test_lattice_conductivity_is_the_closed_form_of_the_lattice():
             pytest.approx(bcc_value, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_conductivity_along_the_ramp_against_the_paper(fits):
     out = fs.conductivity_along_ramp(fits)
     t2, t6 = rizza_galati_table(2), rizza_galati_table(6)
@@ -155,6 +161,7 @@ def test_conductivity_along_the_ramp_against_the_paper(fits):
     assert np.all(out["k_star_bcc_fitted"] < 1.1 * out["k_star_bcc_rojek"])
 
 
+@pytest.mark.slow
 def test_bed_conductivity_rises_with_the_grown_necks_as_table_9():
     """On our shipped bed's 150 um cube, each contact grown by the bed fit: lambda_pow rises along the ramp by
     Table 9's factor (the necks and lambda_0 drive the rise), within 10 %."""

@@ -27,6 +27,8 @@ from sintercond import examples, forces, mechanics, simulate
 from sintercond.state import particle_state
 from sintercond.walls import PlaneWall
 
+pytestmark = pytest.mark.slow  # fits through the coupled DEM
+
 SIGMA_5_1 = (0.5, 2e-9)  # K, m: 0.1 % of the overlap
 
 

@@ -40,6 +40,7 @@ def test_synthetic_slope_is_recovered_with_correct_coverage():
     assert inside / len(seeds) >= 0.85  # nominal 95 %
 
 
+@pytest.mark.slow
 def test_nonlinear_fit_and_stopping():
     x = jnp.linspace(0.0, 2.0, 40)
 
@@ -72,6 +73,7 @@ def test_nonlinear_fit_and_stopping():
         least_squares(model, x, y, {"rate": 1.0}, method="bfgs")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["levenberg_marquardt", "adam"])
 def test_a_fit_refuses_when_any_evaluation_on_its_path_was_flagged(method):
     """A model may be invalid without being NaN (a pair list that overflowed): with invalid=True every evaluation
@@ -113,6 +115,7 @@ def test_a_fit_refuses_when_any_evaluation_on_its_path_was_flagged(method):
         least_squares(model, x, y, start, transforms, invalid=True, **options)
 
 
+@pytest.mark.slow
 def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
     import json
     import pathlib
@@ -181,6 +184,7 @@ def test_reference_data_files():
                                                                                         abs=1e-6)
 
 
+@pytest.mark.slow
 def test_phi_fit_recovers_a_known_phi_and_fits_table6():
     import dataclasses
 
@@ -216,6 +220,7 @@ def test_progress_report_from_inside_the_compiled_loop(capfd):
     assert [line.split(":")[0] for line in out.strip().splitlines()] == ["step 0", "step 10", "step 20"]
 
 
+@pytest.mark.slow
 def test_fitted_law_changes_a_lattice_k_star_by_the_laws_ratio():
     """Equal spheres on a simple-cubic lattice: every pair has the same a/r, so k* scales exactly with the
     half conductance, K_fitted / K_rojek = f(a/r) / (1.064 a/r) -- the smooth law's change to a packing."""

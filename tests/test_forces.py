@@ -372,6 +372,7 @@ LAWS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(LAWS))
 def test_gradients_match_central_differences(name):
     fn, args = LAWS[name]
@@ -387,6 +388,7 @@ def test_which_branch_the_gradient_points_cover():
     assert not bool(stick) and bool(slip)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delta", [0.0, -1e-7, 1e-300, 1e-30])
 @pytest.mark.parametrize("zero_velocity", [True, False])
 def test_gradients_finite_at_the_edges(delta, zero_velocity):
@@ -529,6 +531,7 @@ def _laws(spring, v_t, normal, delta, f_n):
     return normal_force, friction, rolling
 
 
+@pytest.mark.slow
 def test_jit_equals_eager_and_vmap_equals_loop():
     args = _vector_args((16,))
     eager = _laws(*map(jnp.asarray, args))
@@ -545,6 +548,7 @@ def test_jit_equals_eager_and_vmap_equals_loop():
     assert slipping.any() and not slipping.all()  # both branches are in the batch
 
 
+@pytest.mark.slow
 def test_float32_within_tolerance():
     args = _vector_args((64,))
     wide = _laws(*(jnp.asarray(a, dtype=jnp.float64) for a in args))

@@ -41,6 +41,7 @@ def test_adjoint_and_simulate_give_the_same_readings(experiment):
     assert float(final[-1].mean()) > 300.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n_steps,save_every", [(403, 10), (400, 1), (37, 37), (1, 1)])
 def test_adjoint_gradient_equals_reverse_mode_and_finite_differences(n_steps, save_every):
     centres, radii = _lattice(4)
@@ -59,6 +60,7 @@ def test_adjoint_gradient_equals_reverse_mode_and_finite_differences(n_steps, sa
         assert float(adjoint[k]) == pytest.approx(fd, rel=1e-6, abs=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("heated", ["face", "edge"])
 def test_adjoint_with_held_particles_and_walls(heated):
     """150 steps: 11 segments of 13 and a tail of 7; probe 5 is held. The pulse heats a face (16 of 64 particles)
@@ -84,6 +86,7 @@ def test_adjoint_with_held_particles_and_walls(heated):
     np.testing.assert_allclose(adjoint, reverse, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_unstable_parameters_are_flagged(experiment):
     limit = experiment.max_diffusivity_ratio()
     assert limit == pytest.approx(20.0 / 500.0, rel=1e-12)
@@ -105,6 +108,7 @@ def test_bad_input_names_the_field(experiment):
         inverse.fit_conductivity(experiment, experiment.temperatures(7.0, 560.0), 560.0, kappa0=1e6)
 
 
+@pytest.mark.slow
 def test_kappa_recovered_from_noisy_probe_histories(experiment):
     clean = experiment.temperatures(KAPPA_TRUE, C_TRUE)
     noise = 0.05  # K, about 1 % of the probes' rise
@@ -120,6 +124,7 @@ def test_kappa_recovered_from_noisy_probe_histories(experiment):
     assert abs(np.mean(estimates) - KAPPA_TRUE) < 3 * np.std(estimates) + 1e-3
 
 
+@pytest.mark.slow
 def test_levenberg_marquardt_agrees_with_gradient_descent(experiment):
     noisy = experiment.temperatures(KAPPA_TRUE, C_TRUE) + 0.05 * jax.random.normal(jax.random.key(7), (40, 4))
     adam = inverse.fit_conductivity(experiment, noisy, C_TRUE, kappa0=3.0, noise=0.05, learning_rate=0.1,
@@ -131,6 +136,7 @@ def test_levenberg_marquardt_agrees_with_gradient_descent(experiment):
     assert lm.steps < 15 < adam.steps
 
 
+@pytest.mark.slow
 def test_float32_readings_and_gradient_against_float64(experiment):
     """The same experiment built with x64 off (a subprocess): readings within 1e-3 K, gradient within 1e-4."""
     import json

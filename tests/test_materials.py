@@ -117,6 +117,7 @@ def test_table_gradients_match_central_differences(theta):
     assert float(jnp.sum(d_values)) == pytest.approx(1.0, rel=1e-14)  # the weights of a linear interpolation
 
 
+@pytest.mark.slow
 def test_ti6al4v_conductivity_is_the_shipped_table():
     _, temperatures, conductivities = ti6al4v_conductivity_table()
     conductivity = materials.ti6al4v_conductivity_property()
@@ -158,6 +159,7 @@ def test_property_parameters_are_differentiable_leaves():
     assert float(jax.grad(modulus_at)(materials.Constant(2.0), 650.0).value) == 1.0
 
 
+@pytest.mark.slow
 def test_jit_vmap_and_float32():
     theta = np.linspace(250.0, 1300.0, 23)
     law = lambda t: materials.softened_modulus(t, E0, THETA_STAR, 1.5, 0.2e6)  # noqa: E731

@@ -58,6 +58,7 @@ def _overlap(s):
 # Example 5.1
 
 
+@pytest.mark.slow
 def test_example_5_1_settles_on_the_weight_and_hertz_overlap():
     sim, state, params, _ = examples.example_5_1(softening=False)
     final, saved = _run(sim, state, params, 10000, 100, lambda s: jnp.stack([_overlap(s), s.mechanics.velocity[0, 2]]))
@@ -79,6 +80,7 @@ def _loads(sim, state, params):
                                    state.mechanics, state.time, state.dt)
 
 
+@pytest.mark.slow
 def test_softened_overlap_follows_the_quasi_static_oracle():
     sim, state, params, _ = examples.example_5_1(softening=True)
     # start above the onset so that the modulus changes from the first contact on
@@ -93,6 +95,7 @@ def test_softened_overlap_follows_the_quasi_static_oracle():
     assert saved[-1, 1] > saved[0, 1] + 25  # and heat
 
 
+@pytest.mark.slow
 def test_example_5_1_softening_grows_the_contact_and_heats_faster():
     every = 1000  # 0.02 s
     obs = lambda s: jnp.stack([s.particles.temperature[0], _overlap(s)])  # noqa: E731
@@ -142,6 +145,7 @@ def _head_on(xi, dt, n_steps, v0=0.1):
     return _run(sim, state, params, n_steps, 10, obs)[1]
 
 
+@pytest.mark.slow
 def test_head_on_momentum_energy_and_restitution():
     dt = 1e-6
     # momentum: zero to round-off at every step
@@ -163,6 +167,7 @@ def test_head_on_momentum_energy_and_restitution():
         assert v[1] / 0.1 < 1.0  # energy decays
 
 
+@pytest.mark.slow
 def test_springs_follow_their_pairs_through_rebuilds():
     # 0 and 1 slide on each other (loaded springs); 2 arrives and hits 0: the table changes under them
     positions = [[0, 0, 0], [2 * R - 2e-6, 0, 0], [-2 * R - 3e-5, 1e-4, 0]]
@@ -198,6 +203,7 @@ def _incline(angle_deg, mu, mu_r, rolling=True, n_steps=5000):
     return np.asarray(_run(sim, state, params, n_steps, 100, obs)[1]), a
 
 
+@pytest.mark.slow
 def test_friction_holds_a_sphere_on_an_incline():
     saved, a = _incline(20.0, mu=0.5, mu_r=0.5)
     assert math.tan(a) < 0.5
@@ -205,6 +211,7 @@ def test_friction_holds_a_sphere_on_an_incline():
     assert abs(saved[-1, 1]) < 1e-9
 
 
+@pytest.mark.slow
 def test_beyond_the_friction_angle_it_slides_with_coulombs_acceleration():
     saved, a = _incline(20.0, mu=0.2, mu_r=0.5)
     assert math.tan(a) > 0.2
@@ -218,6 +225,7 @@ def test_without_rolling_resistance_it_rolls_at_five_sevenths():
     assert accel == pytest.approx(5.0 / 7.0 * G * math.sin(a), rel=1e-3)
 
 
+@pytest.mark.slow
 def test_frictionless_walls_skip_their_laws_exactly():
     """``Physics(wall_friction=False, wall_rolling=False)``: the same run, bit for bit, as the walls' tangential and
     rolling laws evaluated at mu_wall = mu_r_wall = 0 (zero force and torque there: a spring may load, capped at
@@ -261,6 +269,7 @@ def test_frictionless_walls_skip_their_laws_exactly():
 # jit, rollout, gradients
 
 
+@pytest.mark.slow
 def test_jit_equals_eager_with_every_law_on():
     wall = PlaneWall((0.0, 0.0, -R + 2e-6), (0.0, 0.0, 1.0), "conducting", 700.0)
     sim, state, params = _scene([[0, 0, 0], [2 * R - 3e-6, 1e-4, 0]], [[0.01, 0.02, -0.01], [-0.01, 0.0, 0.0]],
@@ -277,6 +286,7 @@ def test_jit_equals_eager_with_every_law_on():
     assert float(eager.particles.temperature[0]) > 300.0  # the wall heats
 
 
+@pytest.mark.slow
 def test_gradient_through_rollout_equals_central_differences():
     sim, state, params, _ = examples.example_5_1(softening=True)
     state = dataclasses.replace(state, particles=dataclasses.replace(state.particles,
@@ -319,6 +329,7 @@ def _forced_rebuild(state):
     return dataclasses.replace(state, contacts=dataclasses.replace(state.contacts, neighbor_list=nbrs))
 
 
+@pytest.mark.slow
 def test_a_sphere_held_by_friction_continues_bit_for_bit_through_a_forced_rebuild():
     sim, state, params = _stack()
     run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 2500, simulate.SaveAt(2500, lambda s: ()),
@@ -342,6 +353,7 @@ def test_a_sphere_held_by_friction_continues_bit_for_bit_through_a_forced_rebuil
     assert np.abs(lurch[0, 0]) > 100 * np.max(np.abs(drift))
 
 
+@pytest.mark.slow
 def test_tight_lists_redone_after_overflow_equal_roomy_ones_springs_included():
     from sintercond.rollout import advance
 
@@ -384,6 +396,7 @@ def test_tight_lists_redone_after_overflow_equal_roomy_ones_springs_included():
     close(tight.mechanics.spin, roomy.mechanics.spin)
 
 
+@pytest.mark.slow
 def test_momentum_of_a_colliding_cloud_is_conserved_to_round_off_float32_forces_close():
     rng = np.random.default_rng(12)
     grid = np.array(np.meshgrid(*[np.arange(3)] * 3, indexing="ij")).reshape(3, -1).T * 2.05 * R
@@ -414,6 +427,7 @@ def test_momentum_of_a_colliding_cloud_is_conserved_to_round_off_float32_forces_
         simulate.Physics(mechanics=True, contacts="dynamic", conductance="lifted", force_dtype="float16")
 
 
+@pytest.mark.slow
 def test_pair_pass_by_blocks_equals_one_pass(monkeypatch):
     from sintercond import pair_list
 

@@ -35,6 +35,7 @@ def _moving_run(t0, positions_fn, radii, capacity, dt, steps, chunk, capacity_mu
     return advance(sim, state, params, steps, chunk, reallocate=simulate.reallocate_neighbors(fns))
 
 
+@pytest.mark.slow
 def test_shrinking_packing_recovers_overflow_and_matches_a_roomy_run(bed):
     centres, radii = bed
     rate, dt, steps = 40.0, 2e-5, 400  # 1 - rate * t_end = 0.68: necks grow, new contacts appear
@@ -63,6 +64,7 @@ def test_shrinking_packing_recovers_overflow_and_matches_a_roomy_run(bed):
     assert float(jnp.sum(capacity * tight.temperature)) == pytest.approx(float(jnp.sum(capacity * t0)), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_static_motion_equals_the_static_solver():
     a, r = 1e-4, 0.52e-4
     g = np.arange(4) * a
@@ -86,6 +88,7 @@ def test_affine_shrinkage_is_a_linear_strain_toward_the_centroid():
     np.testing.assert_allclose(np.asarray(at), c0 + 0.9 * (centres - c0), rtol=1e-14)
 
 
+@pytest.mark.slow
 def test_either_list_overflowing_alone_is_flagged():
     """Bug caught (mutation 'dynamic skin overflow'): dropping the Dense list's flag survived the runs above, whose
     half list overflowed at the same time. Here each list is the tight one in turn, at the step that squeezes."""

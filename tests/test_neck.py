@@ -119,6 +119,7 @@ def test_rojek_first_newton_iterate_from_coble():
     assert a1 == pytest.approx(0.745039, abs=5e-7)
 
 
+@pytest.mark.slow
 def test_newton_starts_from_coble_clipped_to_the_smaller_radius():
     """Iteration 0 is Coble's neck sqrt(2 r* h), r* = 2 r_i r_j / (r_i + r_j) (Eqs. 11-12), clipped to
     min(r_i, r_j) (``iterations=0``). Mutant "coble start" (half of Coble's u) still converged in 5 steps,
@@ -140,6 +141,7 @@ def test_closed_form_necks_have_finite_zero_gradients_without_contact():
             assert float(fn(1.0, 3.0, h)) == 0.0 and all(float(x) == 0.0 for x in g), (fn.__name__, h, g)
 
 
+@pytest.mark.slow
 def test_neck_residual_derivative_is_6_a_hn():
     a = jnp.linspace(0.05, 0.99, 50)
     dz = jax.vmap(jax.grad(neck_residual), in_axes=(0, None, None, None))(a, 1.0, 3.0, 0.2)
@@ -163,6 +165,7 @@ def test_equal_sizes_against_printed_closed_form():
     assert neck_radius(1.0, 1.0, 0.08) == pytest.approx(0.3946, abs=5e-5)
 
 
+@pytest.mark.slow
 def test_equal_sizes_scale_with_radius():
     h_over_r = np.linspace(0.001, 0.66, 40)
     for r in (1e-6, 4e-5, 1.0, 7.5e3):
@@ -199,6 +202,7 @@ def test_volume_conserved(r_i, log_r, frac):
     assert abs(_volume_residual_relative(a, r_i, r_j, h)) < 1e-12
 
 
+@pytest.mark.slow
 def test_volume_conserved_batch_and_matches_bisection():
     r_i, r_j, h = _random_pairs(20000, seed=0)
     a = np.asarray(neck_radius(r_i, r_j, h))
@@ -206,6 +210,7 @@ def test_volume_conserved_batch_and_matches_bisection():
     np.testing.assert_allclose(a, _bisect_reference(r_i, r_j, h), rtol=1e-14)
 
 
+@pytest.mark.slow
 def test_run_to_convergence_matches_bisection_for_every_entry():
     """``iterations=None`` (a while_loop) must run until the slowest entry has converged.
 
@@ -237,6 +242,7 @@ def test_physical_root_between_lens_and_smaller_radius():
     assert np.all(a <= np.asarray(coble_radius(r_i, r_j, h)))  # Coble overestimates
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ratio", [1.0, 1.5, 3.0, 30.0, 1e3, 1e-3])
 def test_monotonic_in_overlap(ratio):
     h = np.linspace(0.0, 1.0, 2001)[1:] * float(max_overlap(1.0, ratio))
@@ -277,6 +283,7 @@ def test_small_overlap_limits():
     [(1.0, 3.0, 0.2), (1.0, 3.0, 0.06), (1.0, 1.0, 0.2), (1.0, 1.0, 1e-4), (2.0, 0.5, 0.15), (1.0, 1e3, 0.3), (1e3, 1.0, 1e-3),
      (1.0, 3.0, 0.41)],
 )
+@pytest.mark.slow
 def test_gradients_match_finite_differences(r_i, r_j, h):
     # FD step small against h: a ~ sqrt(h) varies on the scale of h itself.
     check_grads(neck_radius, (r_i, r_j, h), order=2, modes=["fwd", "rev"], eps=min(1e-6, 1e-3 * h), rtol=1e-5)
@@ -360,6 +367,7 @@ def test_no_nan_near_max_overlap(r_j, gap):
 # ---------------------------------------------------------------- policy beyond h_max
 
 
+@pytest.mark.slow
 def test_beyond_max_overlap_is_nan_and_flagged():
     h = np.array([-0.1, 0.0, 0.3, 2 / 3, 0.67, 5.0])
     a = np.asarray(neck_radius(1.0, 1.0, h))
@@ -412,6 +420,7 @@ def test_validate_names_field_and_range():
 # ---------------------------------------------------------------- transformations, dtypes
 
 
+@pytest.mark.slow
 def test_jit_vmap_and_plain_agree():
     r_i, r_j, h = _random_pairs(257, seed=7)
     plain = np.asarray(neck_radius(r_i, r_j, h))
@@ -431,6 +440,7 @@ FLOAT32_VALUE_RTOL = 5e-7  # measured 2.0e-7 max over 1e5 pairs (float32 eps 1.2
 FLOAT32_GRAD_RTOL = 1e-5  # measured 1.4e-6 max up to 0.99 h_max (3e-5 right at h_max)
 
 
+@pytest.mark.slow
 def test_float32_accuracy():
     """Float32 neck radii agree with float64 to FLOAT32_VALUE_RTOL, gradients to FLOAT32_GRAD_RTOL
     (h at most 99 % of max_overlap: the gradient has a square-root corner at h_max)."""
@@ -451,6 +461,7 @@ def test_float32_accuracy():
         np.testing.assert_allclose(np.asarray(x32), np.asarray(x64), rtol=FLOAT32_GRAD_RTOL, atol=1e-6 * np.abs(x64).max())
 
 
+@pytest.mark.slow
 def test_float32_keeps_dtype_for_every_model():
     x = jnp.asarray([0.5, 1.0], jnp.float32)
     for fn in neck.NECK_MODELS.values():
@@ -472,6 +483,7 @@ def test_intersection_radius_against_quintana_form():
     assert np.isnan(intersection_radius(1.0, 3.0, 2.5))
 
 
+@pytest.mark.slow
 def test_hertz_and_coble_closed_forms():
     assert hertz_radius(1.0, 3.0, 0.2) == pytest.approx(np.sqrt(0.75 * 0.2), rel=1e-15)
     assert coble_radius(1.0, 1.0, 0.2) == pytest.approx(np.sqrt(2 * 1.0 * 0.2), rel=1e-15)

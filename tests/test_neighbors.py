@@ -127,6 +127,7 @@ def free_list(radii, centres, skin, capacity_multiplier=1.25):
                                    capacity_multiplier=capacity_multiplier)
 
 
+@pytest.mark.slow
 def test_allocated_list_is_the_pairs_within_cutoff_plus_skin_in_float64():
     centres, radii = random_packing(250, seed=4)
     fns = free_list(radii, centres, skin=0.3)
@@ -141,6 +142,7 @@ def test_allocated_list_is_the_pairs_within_cutoff_plus_skin_in_float64():
     assert not bool(neighbors.did_rebuild(nbrs, after))
 
 
+@pytest.mark.slow
 def test_periodic_list_wraps():
     centres, radii = random_packing(200, seed=5)
     box = np.ptp(centres, axis=0) * 0.9  # centres outside the box too
@@ -150,6 +152,7 @@ def test_periodic_list_wraps():
     assert listed_pairs(nbrs.idx) == within(centres, fns.cutoff + fns.skin, periodic_box=box)
 
 
+@pytest.mark.slow
 def test_overflow_is_flagged_and_reallocation_recovers():
     centres, radii = random_packing(250, seed=6, spread=1.3)
     fns = free_list(radii, centres, skin=0.2, capacity_multiplier=1.0)
@@ -162,6 +165,7 @@ def test_overflow_is_flagged_and_reallocation_recovers():
     assert listed_pairs(nbrs.idx) == within(squeezed, fns.cutoff + fns.skin)
 
 
+@pytest.mark.slow
 def test_sorted_cell_list_is_the_brute_force_pairs_free_periodic_and_thin():
     """The sorted cell list's table against brute force within cutoff + skin (minimum image when periodic):
     a polydisperse packing with particles on and beyond the region's faces (free: they fall into the face
@@ -183,6 +187,7 @@ def test_sorted_cell_list_is_the_brute_force_pairs_free_periodic_and_thin():
         assert listed_pairs(nbrs.idx) == within(centres, reach, periodic_box=box)
 
 
+@pytest.mark.slow
 def test_sorted_cell_list_rebuilds_when_jax_md_does_and_recovers_either_overflow():
     """Rebuild steps against jax-md's own list (same skin test); a table whose rows, or whose cell ranges, are
     too small flags the overflow alone, and the reallocated list holds the brute-force pairs."""
@@ -219,6 +224,7 @@ def in_contact(positions, radii, idx):
     return valid & (d <= radii[:, None] + radii[j])
 
 
+@pytest.mark.slow
 def test_contact_age_survives_rebuilds_and_a_reallocation():
     # Each pair's contact age (steps in contact without a break) and the
     # neighbour it was first seen with ride along in [n, m, 2] history,
@@ -279,6 +285,7 @@ def test_remap_pair_history_padding_and_own_index():
     np.testing.assert_array_equal(out3[..., 2], 3 * np.where(out == -1.0, 0.0, out))
 
 
+@pytest.mark.slow
 def test_pair_conductances_compiled_equal_the_eager_law():
     from sintercond.conductance import CONDUCTANCE_LAWS, pair_conductance
 
@@ -315,6 +322,7 @@ def size_aware_pairs(positions, radii, skin):
     return list(zip(i.tolist(), j.tolist()))
 
 
+@pytest.mark.slow
 def test_half_pairs_are_the_size_aware_brute_force_pairs_sorted():
     centres, radii = random_packing(300, seed=9, polydispersity=0.8)  # polydisperse: far fewer than 2 r_max + skin
     skin = 0.15
@@ -335,6 +343,7 @@ def test_half_pairs_are_the_size_aware_brute_force_pairs_sorted():
     assert [tuple(p) for p in np.asarray(tight.pairs).tolist()] == expected[:50]
 
 
+@pytest.mark.slow
 def test_remap_half_pairs_follows_pairs_by_identity():
     rng = np.random.default_rng(3)
     n = 40
@@ -378,6 +387,7 @@ def test_pair_sum_conserves_to_round_off():
     np.testing.assert_array_equal(exchanged, total)
 
 
+@pytest.mark.slow
 def test_pair_blocks_equal_one_pass_padded_or_not(monkeypatch):
     monkeypatch.setattr(pair_list, "PAIR_BLOCK", 16)
     monkeypatch.setattr(pair_list, "PAIR_BLOCKS_FROM", 2)

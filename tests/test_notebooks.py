@@ -21,6 +21,8 @@ import sys
 
 import pytest
 
+pytestmark = pytest.mark.slow  # each notebook runs in a fresh kernel, compiling everything anew
+
 nbformat = pytest.importorskip("nbformat", reason="install the 'notebooks' extra")
 nbclient = pytest.importorskip("nbclient", reason="install the 'notebooks' extra")
 

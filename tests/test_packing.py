@@ -23,6 +23,7 @@ def test_diameters_follow_the_volume_uniform_distribution():
     assert np.sum(volume * d) / np.sum(volume) == pytest.approx(97.5, rel=5e-3)
 
 
+@pytest.mark.slow
 def test_bed_is_settled_and_reproducible(bed):
     lo, hi = bed.container
     assert np.all(bed.centres - bed.radii[:, None] >= lo - 1e-2 * bed.radii[:, None])
@@ -76,6 +77,7 @@ BEDS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lateral_size,height,diameters", BEDS)
 def test_beds_settle_to_the_asked_height(lateral_size, height, diameters):
     bed = packing.powder_bed(lateral_size, height, diameters, seed=1)
@@ -103,6 +105,7 @@ def test_refused_beds_say_why():
         packing.relax_under_gravity(packing.deposit_spheres(radii, 200.0, rng), radii, 200.0, max_steps=100)
 
 
+@pytest.mark.slow
 def test_the_packing_does_not_depend_on_the_jax_precision():
     code = ("import numpy as np, jax, sintercond; from sintercond import packing; "
             "assert jax.numpy.ones(1).dtype == ('float64' if jax.config.jax_enable_x64 else 'float32'); "
@@ -129,6 +132,7 @@ def dem_bed():
     return packing.powder_bed(DEM_BOX, 0.015, (4e-3, 8e-3), seed=1, method="dem", check_every=250)
 
 
+@pytest.mark.slow
 def test_dem_bed_meets_the_stated_thresholds(dem_bed):
     report = dem_bed.settle
     assert report.kinetic_tol == packing.KINETIC_TOL and report.force_tol == packing.FORCE_TOL
@@ -147,6 +151,7 @@ def _hertz_wall_force(penetration, radius, material):
     return 4.0 / 3.0 * material.E / (1.0 - material.nu**2) * np.sqrt(radius) * h**1.5
 
 
+@pytest.mark.slow
 def test_dem_bed_is_in_static_equilibrium_with_its_walls(dem_bed):
     # frictionless side walls (Example 5.3: mu = mu_r = 0 at the walls) carry no vertical load: the floor's Hertz
     # reactions, from the penetrations alone, must carry the whole weight; the x walls push equally
@@ -162,6 +167,7 @@ def test_dem_bed_is_in_static_equilibrium_with_its_walls(dem_bed):
     assert push_lo > 0  # the pile leans on its walls
 
 
+@pytest.mark.slow
 def test_dem_bed_is_a_random_packing(dem_bed):
     isolated, surface, coordination = _settled_figures(dem_bed, DEM_BOX)
     assert isolated == 0 and dem_bed.isolated == 0
@@ -171,6 +177,7 @@ def test_dem_bed_is_a_random_packing(dem_bed):
     assert 0 < dem_bed.max_overlap < 0.05  # E = 1 MPa: soft contacts, small overlaps
 
 
+@pytest.mark.slow
 def test_dem_bed_that_does_not_settle_says_what_missed():
     radii = np.full(30, 3e-3)
     with pytest.raises(packing.PackingError, match=r"did not settle within 0.002 s .*(kinetic energy|net force)"):

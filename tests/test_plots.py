@@ -29,6 +29,7 @@ def _hot_pixel_columns(image, panel_fraction=0.9):
     return np.nonzero(near)[1] / width
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("hot", [0, 4])
 def test_state_picture_colours_the_hot_particle(tmp_path, hot):
     """A row of five spheres along x, one at 900 K and the others at 300 K: the hottest colour is drawn where it is."""
@@ -68,6 +69,7 @@ def test_units_and_time_labels():
     assert plots.time_label(3e-7) == "0.3 µs"
 
 
+@pytest.mark.slow
 def test_sintercond_run_writes_the_picture(tmp_path):
     scene = copy.deepcopy(SMALL)
     scene["run"].update(duration=2e-3, formats=["vtp"])
@@ -77,6 +79,7 @@ def test_sintercond_run_writes_the_picture(tmp_path):
     assert _hot_pixel_columns(image).size > 20
 
 
+@pytest.mark.slow
 def test_every_figure_linked_from_the_docs_exists_and_decodes():
     """Every PNG embedded in benchmarks/RESULTS.md, docs/devlog/*.md and README.md is there, non-empty, and not blank."""
     import pathlib

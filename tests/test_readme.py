@@ -2,6 +2,8 @@
 
 import pathlib
 import re
+
+import pytest
 from urllib.parse import unquote
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -25,6 +27,7 @@ def test_readme_main_job_command_is_the_installed_entry_point():
     assert "python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && .venv/bin/sintercond run" in readme
 
 
+@pytest.mark.slow
 def test_every_python_block_of_the_readme_and_the_docs_runs_as_written():
     """Issue 10: README snippets used undefined names (jnp, centres, capacity, T0, readings). The ```python
     blocks of README.md and of every docs/*.md page run in order, each file in its own namespace, as a reader

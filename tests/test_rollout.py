@@ -26,6 +26,7 @@ def _conduction(n_side=4):
     return sim, simulate.init_state(particles, contacts, dt), params
 
 
+@pytest.mark.slow
 def test_chunks_are_one_rollout_bitwise():
     """30 steps as chunks of 7, 7, 7, 7 and 2 are the same numbers as one rollout of 30 steps."""
     sim, state, params = _conduction()
@@ -64,6 +65,7 @@ def _spread_and_mean(sim, state, params):
     return (jnp.max(t) - jnp.min(t), jnp.mean(t)), jnp.zeros((), bool)
 
 
+@pytest.mark.slow
 def test_an_overflow_with_no_reallocation_is_refused_and_a_flag_from_measure_counts_as_one():
     """A shrinking powder bed on a list with no spare room (tests/test_moving.py's run): new contacts overflow it."""
     bed = packing.powder_bed(320.0, 260.0, seed=11)
@@ -99,6 +101,7 @@ def test_a_state_that_fails_its_check_is_not_handed_on():
         rollout.advance(sim, state, bad, 30, 10, on_chunk=lambda s: pytest.fail("handed on"))
 
 
+@pytest.mark.slow
 def test_settling_runs_on_the_host_loop():
     """packing.dem_settle's chunks are rollout.advance's (measure: kinetic energy and net force of a probe step)."""
     r = np.full(2, 1e-3)

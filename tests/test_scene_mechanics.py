@@ -36,6 +36,7 @@ def test_builtin_scenes_are_listed_valid_and_within_limits(capsys):
     assert load_scene("quintana2020_5_1", duration=0.25)["run"]["duration"] == 0.25
 
 
+@pytest.mark.slow
 def test_the_5_1_scene_builds_examples_example_5_1():
     """The scene file and the Python builder are one model: the same physics spec, parameters and initial state."""
 
@@ -50,6 +51,7 @@ def test_the_5_1_scene_builds_examples_example_5_1():
     np.testing.assert_array_equal(model.state.particles.mass, state.particles.mass)
 
 
+@pytest.mark.slow
 def test_example_5_1_by_name_settles_to_the_closed_forms(tmp_path, capsys):
     """0.5 s of Example 5.1 from the command line: the sphere rests on the floor with the Hertz overlap of its
     weight, the contact force is m g (the paper's 1.23e-4 N), and the heat through the floor is k pi r delta /
@@ -94,6 +96,7 @@ PILE = {
 }
 
 
+@pytest.mark.slow
 def test_mechanics_run_resumes_bitwise_springs_included(tmp_path):
     """Five spheres settling into a pile on a hot floor against a held, sliding side wall, with friction and
     rolling (contact springs on pairs and walls): killed after 9 output chunks, past a reallocation of the contact
@@ -120,6 +123,7 @@ def test_mechanics_run_resumes_bitwise_springs_included(tmp_path):
     assert header == "ITEM: ATOMS id radius x y z temperature vx vy vz fx fy fz coordination"
 
 
+@pytest.mark.slow
 def test_user_step_above_the_mechanical_limit_is_refused():
     scene = copy.deepcopy(PILE)
     scene["run"]["dt"] = 1e-3
@@ -187,6 +191,7 @@ def test_bad_poured_packings_name_the_key(mutate, message):
         validate_scene(scene)
 
 
+@pytest.mark.slow
 def test_the_5_3_scene_pours_with_its_mechanics_section():
     """The built-in 5.3 scene, shrunk to 12 spheres: the radii are Example 5.3's distribution (the same
     sampler and seed), the pour uses the scene's contact material and meets its settled thresholds, and the

@@ -65,6 +65,7 @@ def test_unstable_dt_and_overlap_beyond_the_neck_model():
         validate_scene(scene)  # at validation, before the lattice and network are built
 
 
+@pytest.mark.slow
 def test_run_writes_outputs_and_resume_is_exact(tmp_path):
     long = copy.deepcopy(SMALL)
     long["run"]["duration"] = 9e-3  # 18 steps: chunks end at 5, 10, 15 and 18 (the last one shorter)
@@ -96,6 +97,7 @@ def test_vtp_is_valid_polydata(tmp_path):
     np.testing.assert_array_equal(np.array(temps.text.split(), float), np.arange(4.0) + 300)
 
 
+@pytest.mark.slow
 def test_cli_run_and_errors(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(
@@ -132,6 +134,7 @@ def test_walls_held_and_conducting(tmp_path):
         validate_scene(bad)
 
 
+@pytest.mark.slow
 def test_cli_effective(tmp_path):
     scene = tmp_path / "sc.toml"
     scene.write_text(

@@ -61,6 +61,7 @@ def _readings(sim, state, params, n_steps=120, every=10, checkpoint=True):
     return simulate.rollout(sim, state, params, n_steps, saveat, checkpoint)[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("walls", [False, True])
 def test_table_and_lifted_give_the_same_numbers_and_gradients(walls):
     table = _setup("table", walls=walls)
@@ -85,6 +86,7 @@ def _central_difference(f, x, rel=1e-6):
     return (f(x + h) - f(x - h)) / (2 * h)
 
 
+@pytest.mark.slow
 def test_gradients_through_rollout_equal_central_differences():
     sim, state, params, *_ = _setup("lifted", materials=2, walls=True)
     params = dataclasses.replace(params, law={"slope": jnp.asarray(1.064), "contact_resistance": jnp.asarray(50.0)})
@@ -170,6 +172,7 @@ def test_segments_do_not_change_the_numbers():
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_heat_is_conserved_by_the_lifted_network():
     sim, state, params, *_ = _setup("lifted", materials=2)
     physics = dataclasses.replace(sim.physics, held=False, pulse=False)
@@ -180,6 +183,7 @@ def test_heat_is_conserved_by_the_lifted_network():
         float(np.sum(capacity * state.particles.temperature)), rel=1e-13)
 
 
+@pytest.mark.slow
 def test_rojek_slope_recovered_by_gradient_descent_through_a_transient_dem():
     """The slope of Rojek's law (not only kappa) is identifiable from probe histories when kappa is known:
     a sintered packing held hot on one face, probes on the far side; truth s = 1.064 with 0.02 K noise."""
@@ -222,6 +226,7 @@ class _Pulse:
         return jnp.where(t < 2e-3, self.power, 0.0)
 
 
+@pytest.mark.slow
 def test_steady_state_conductivity_is_differentiable():
     """k* is linear in kappa and in Rojek's slope (exact for any packing without contact resistance);
     its contact-resistance derivative equals central differences (implicit CG derivative)."""

@@ -23,6 +23,7 @@ def _central(f, x, rel=1e-5):
 # geometry
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("r_i, r_j", RADIUS_PAIRS)
 def test_neck_overlap_inverts_neck_radius_over_the_domain(r_i, r_j):
     h_max = float(sc.max_overlap(r_i, r_j))
@@ -146,6 +147,7 @@ def test_isothermal_grain_boundary_growth_follows_the_sixth_power_law_at_small_n
     assert slope == pytest.approx(1 / 6, rel=2e-3)
 
 
+@pytest.mark.slow
 def test_grain_boundary_growth_is_exact_per_interval_and_stops_at_the_equilibrium_neck():
     r_i, r_j = 40e-6, 29.3e-6
     temperature = 1100.0
@@ -210,6 +212,7 @@ def test_preheating_history_is_rizza_galatis_ramp_with_the_erratum():
     ("power_law", {"K0": 1e-24, "activation_energy": 30.0, "exponent": 4.0, "size_exponent": -1.0}, 0.0),
     ("viscous", {"surface_energy": 0.03, "viscosity": 1e6, "activation_energy": 50.0}, 0.0),
 ])
+@pytest.mark.slow
 def test_grown_neck_gradients_equal_central_differences(law, params, a0):
     durations, temperatures, index = st.preheating_history(np.arange(0.5, 10.0, 1.0))
     r_i, r_j = 40e-6, 29.3e-6
@@ -234,6 +237,7 @@ def test_grown_neck_gradients_equal_central_differences(law, params, a0):
         assert g_temps[k] == pytest.approx(_central(along, temperatures[k], rel=1e-6), rel=1e-6)
 
 
+@pytest.mark.slow
 def test_point_contact_growth_has_no_nan_in_values_or_gradients():
     durations = np.array([0.0, 1e-9, 0.1])
     temperatures = np.array([900.0, 900.0, 900.0])
@@ -247,6 +251,7 @@ def test_point_contact_growth_has_no_nan_in_values_or_gradients():
         assert float(g_r) == 0.0
 
 
+@pytest.mark.slow
 def test_growth_vmaps_over_a_million_pairs_and_matches_single_pairs():
     rng = np.random.default_rng(0)
     n = 1_000_000
@@ -260,6 +265,7 @@ def test_growth_vmaps_over_a_million_pairs_and_matches_single_pairs():
         np.testing.assert_allclose(np.asarray(single), a[:, k], rtol=1e-14)
 
 
+@pytest.mark.slow
 def test_growth_float32_agrees_with_float64():
     durations, temperatures, _ = st.preheating_history(np.arange(0.5, 10.0, 1.0))
     r = np.linspace(20e-6, 60e-6, 64)
@@ -295,6 +301,7 @@ def test_growth_to_a_large_neck_matches_an_independent_ode_solution():
     assert float(ours) == pytest.approx(reference, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_temperatures_per_interval_broadcast_over_pairs_and_parameters_per_pair():
     """A 1-D history applies to every pair (it was broadcast along the pair axis when there were as many pairs as
     intervals); parameters may be given per pair, and one bad pair's parameter spoils only that pair."""

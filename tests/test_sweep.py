@@ -36,6 +36,7 @@ def _run(devices, chunk):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_eight_devices_give_the_numbers_of_one():
     one = _run(1, 1 << 20)
     eight = _run(8, 5000)  # several chunks, the last one padded

@@ -52,6 +52,7 @@ def test_source_clock_continues_across_calls():
     assert float(two[0]) == pytest.approx(expected, rel=1e-14)
 
 
+@pytest.mark.slow
 def test_chunked_scene_run_equals_one_uninterrupted_simulation(tmp_path):
     """Bug caught: with the source clock reset per chunk the beam restarts its path every ``output_every``
     steps (T_max 2465 K -> 2816 K on this scene, and another particle is hottest); the run tests only
@@ -145,6 +146,7 @@ def test_flash_energy_is_what_it_was_sized_for(flash):
                                rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_kappa_stderr_is_the_linearised_one_and_covers(flash):
     """Bug caught: a coverage test of 5 in 6 seeds at 2.5 sigma passes a stderr 2x too small 63 % of the time.
     Two checks with no chance in them: (1) the reported stderr equals the linearised one,
@@ -168,6 +170,7 @@ def test_kappa_stderr_is_the_linearised_one_and_covers(flash):
     assert 0.5 <= float(np.mean(np.square(z))) <= 1.8
 
 
+@pytest.mark.slow
 def test_run_killed_mid_way_resumes_identically(tmp_path):
     """A run killed by SIGKILL resumes from its last checkpoint and ends exactly as an uninterrupted run.
 

@@ -82,6 +82,7 @@ def test_two_particle_relaxation_matches_analytic():
     assert abs(float(final[0] - final[1]) - 700 * np.exp(-rate * t_end)) < 2e-3 * 700
 
 
+@pytest.mark.slow
 def test_chain_converges_to_the_heat_equation():
     # A chain of N particles with ends held at 0 relaxes its lowest mode at
     # (2K/C)(1 - cos(pi/(N-1))), the continuum rate pi^2 D / L^2 with D = K a^2 / C
@@ -106,6 +107,7 @@ def test_chain_converges_to_the_heat_equation():
     assert np.all(np.diff(errors) < 0) and errors[-1] < 2e-3
 
 
+@pytest.mark.slow
 def test_explicit_implicit_and_steady_agree():
     centres, radii = sc_lattice(6, 2, 2)
     t = network.contact_table(centres, radii, 20.0)
@@ -126,6 +128,7 @@ def test_explicit_implicit_and_steady_agree():
     np.testing.assert_allclose(implicit, field, rtol=1e-8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shape", [(2, 1, 1), (5, 1, 1), (4, 3, 2)])
 def test_sc_lattice_conductivity_is_pair_conductance_over_spacing(shape):
     centres, radii = sc_lattice(*shape)
@@ -155,6 +158,7 @@ def test_unstable_step_is_refused():
     assert float(jnp.max(jnp.abs(final))) > 1e4
 
 
+@pytest.mark.slow
 def test_quintana_ruiz_5_3_setup_inside_hashin_shtrikman():
     # A settled random bed between a hot and a cold face, k = 100 W/(m K), the
     # conductivity-based law (Quintana-Ruiz Eqs. 32-35, lens radius). Our bed is
@@ -217,6 +221,7 @@ def test_periodic_packing_contacts_and_conservation():
     np.testing.assert_allclose(final, 440.0, rtol=1e-9)  # a ring equilibrates to the mean
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("per_particle_scale", [False, True])
 def test_network_step_derivative_equals_plain_autodiff(bed, per_particle_scale):
     """explicit_update with a network (the written derivative, scale and capacity entering through
