@@ -12,6 +12,11 @@ import jax.numpy as jnp
 import numpy as np
 
 
+def all_concrete(*values) -> bool:
+    """No leaf of ``values`` (any pytrees) is a tracer: the input can be checked on the host."""
+    return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(values))
+
+
 def concrete_arrays(caller: str, *values):
     """The values as broadcast float64 NumPy arrays; ``TypeError`` under tracing."""
     try:
@@ -43,6 +48,20 @@ def require_positive(name: str, values, *, allow_zero: bool = False) -> None:
     else:
         bad, rule = ~(np.isfinite(values) & (values >= np.finfo(np.float64).tiny)), "> 0"
     fail_where(bad, lambda i: f"{name} must be finite and {rule}; got {float(values[i])!r} at index {i}")
+
+
+def require_law_params(caller: str, law, params, label) -> None:
+    """Raise ``ValueError`` unless every parameter of ``law`` (a conductance or kinetic law) is in its range.
+
+    Finite and > 0; ``law.params_allowing_zero`` >= 0; ``law.params_any_sign``
+    any finite value. ``label(name)`` is what the message calls the parameter.
+    """
+    for name, value in params.items():
+        (value,) = concrete_arrays(caller, value)
+        if name in law.params_any_sign:
+            require_finite(label(name), value)
+        else:
+            require_positive(label(name), value, allow_zero=name in law.params_allowing_zero)
 
 
 def law_params_valid(law, params, per_entry=False):

@@ -35,11 +35,10 @@ import math
 from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, safe_divide
-from sintercond._validation import concrete_arrays, law_params_valid, require_finite, require_positive
+from sintercond._validation import all_concrete, concrete_arrays, law_params_valid, require_law_params, require_positive
 from sintercond.neck import NECK_MODELS, validate_neck_inputs
 
 ROJEK_SLOPE = 1.064
@@ -225,7 +224,7 @@ def pair_conductance(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_
     """
     law = _resolve_law(law)
     params = _merge_params(law, params)
-    if _all_concrete(kappa_i, kappa_j, *params.values()):
+    if all_concrete(kappa_i, kappa_j, *params.values()):
         validate_law_inputs(law, params, kappa_i, kappa_j)
     kappa_j = kappa_i if kappa_j is None else kappa_j
     r_i, r_j, h, kappa_i, kappa_j = as_float_arrays(r_i, r_j, h, kappa_i, kappa_j)
@@ -257,10 +256,6 @@ def conductance_from_neck(law, a, r_i, r_j, h, kappa_i, kappa_j, params=None):
     return jnp.where(undefined, jnp.nan, jnp.where(contact, k, 0.0))
 
 
-def _all_concrete(*values) -> bool:
-    return not any(isinstance(v, jax.core.Tracer) for v in values)
-
-
 def validate_law_inputs(law, params, kappa_i, kappa_j=None, names=None):
     """Raise ``ValueError`` naming the argument unless the law's parameters and the conductivities are valid.
 
@@ -272,13 +267,8 @@ def validate_law_inputs(law, params, kappa_i, kappa_j=None, names=None):
     law = _resolve_law(law)
     params = _merge_params(law, params)
     names = names or {}
-    for name, value in params.items():
-        (value,) = concrete_arrays("validate_law_inputs", value)
-        label = names.get(name, f"params[{name!r}] of law {law.name!r}")
-        if name in law.params_any_sign:
-            require_finite(label, value)
-        else:
-            require_positive(label, value, allow_zero=name in law.params_allowing_zero)
+    require_law_params("validate_law_inputs", law, params, lambda name: names.get(name, f"params[{name!r}] of law "
+                                                                                     f"{law.name!r}"))
     kappas = {"kappa_i": kappa_i} if kappa_j is None else {"kappa_i": kappa_i, "kappa_j": kappa_j}
     for name, value in kappas.items():
         (value,) = concrete_arrays("validate_law_inputs", value)
@@ -320,7 +310,7 @@ def rojek_pair_conductance(r_i, r_j, h, kappa, slope=ROJEK_SLOPE, contact_conduc
     Returns:
       ``K_ij`` (W/K).
     """
-    if contact_conductance is not None and _all_concrete(contact_conductance):
+    if contact_conductance is not None and all_concrete(contact_conductance):
         (k_c,) = concrete_arrays("rojek_pair_conductance", contact_conductance)
         require_positive("contact_conductance (W/K)", k_c)
     contact_resistance = 0.0 if contact_conductance is None else 1.0 / jnp.asarray(contact_conductance)

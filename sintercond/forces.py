@@ -40,11 +40,10 @@ from __future__ import annotations
 
 import math
 
-import jax
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, materialized, safe_divide, safe_norm, safe_power, safe_sqrt
-from sintercond._validation import concrete_arrays, require_positive
+from sintercond._validation import all_concrete, concrete_arrays, require_positive
 
 SOLID_SPHERE_INERTIA = 0.4
 """``I = (2/5) m r^2`` of a solid sphere (Sect. 2): the factor ``I / (m r^2)``."""
@@ -631,7 +630,7 @@ def stable_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_co
       ValueError: for a concrete ``v_rel`` or ``delta`` outside that domain, naming it.
     """
     sized_by_load = delta is not None
-    if not any(isinstance(v, jax.core.Tracer) for v in (v_rel, delta)):
+    if all_concrete(v_rel, delta):
         # a step sized for no collision is inf, for a negative speed a plausible-looking number: refuse both
         (speed,) = concrete_arrays("stable_time_step", v_rel)
         require_positive("v_rel (m/s, the largest normal approach speed)", speed, allow_zero=sized_by_load)

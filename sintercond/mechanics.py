@@ -94,6 +94,76 @@ class MechanicalParams:
     E_min: Any = 0.0
 
 
+PARAMETER_RANGES = {
+    "E0": (1.0, 1e13, "Pa"),
+    "nu": (0.0, 0.5, ""),
+    "xi_con": (0.0, 10.0, ""),
+    "xi_fric": (0.0, 10.0, ""),
+    "xi_rol": (0.0, 10.0, ""),
+    "mu": (0.0, 10.0, ""),
+    "mu_r": (0.0, 10.0, ""),
+    "mu_wall": (0.0, 10.0, ""),
+    "mu_r_wall": (0.0, 10.0, ""),
+    "theta_star": (1.0, 1e4, "K"),
+    "rate": (0.0, 1e3, ""),
+    "E_min": (0.0, 1e13, "Pa"),
+}
+"""``field -> (low, high, unit)``: the closed range of each :class:`MechanicalParams` field. One set of rules: the
+Python API checks it (:func:`validate_mechanical_params`, called by :func:`sintercond.simulate.rollout` and
+:func:`sintercond.rollout.advance`) and the scene keys that set these fields use the same ranges
+(:mod:`sintercond.scene`)."""
+
+PER_MATERIAL = ("E0", "nu", "theta_star", "rate", "E_min")
+"""Fields that may be given per material (``[n_materials]``); the others are scalars."""
+
+
+def validate_mechanical_params(params, n_materials=None, names=None) -> None:
+    """Raise ``ValueError`` naming the field and its allowed range unless ``params`` can run.
+
+    Every given field finite and within :data:`PARAMETER_RANGES`; per-material
+    fields (:data:`PER_MATERIAL`) scalars or ``[n_materials]``, the rest
+    scalars; and ``E_min <= E0`` per material (a floor above the unsoftened
+    modulus makes every contact stiffer than the time step was sized for).
+
+    Args:
+      params: :class:`MechanicalParams`, or a mapping of its field names (e.g. a scene's values).
+      n_materials: the number of materials (None: not checked).
+      names: ``field -> name`` the messages use (default ``MechanicalParams.<field>``).
+    """
+    values = params if isinstance(params, dict) else {f.name: getattr(params, f.name)
+                                                       for f in dataclasses.fields(MechanicalParams)}
+    names = names or {}
+    label = lambda field: names.get(field, f"MechanicalParams.{field}")  # noqa: E731
+    arrays = {}
+    for field, value in values.items():
+        if value is None:
+            continue
+        low, high, unit = PARAMETER_RANGES[field]
+        what = f"{label(field)} must be finite and in [{low:g}, {high:g}]" + (f" {unit}" if unit else "")
+        try:
+            v = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what}; got {value!r}") from None
+        allowed_shapes = [()] + ([(n_materials,)] if field in PER_MATERIAL and n_materials else [])
+        if field in PER_MATERIAL and n_materials is None and v.ndim <= 1:
+            allowed_shapes.append(v.shape)
+        if v.shape not in allowed_shapes:
+            per = f" or one per material ({n_materials},)" if field in PER_MATERIAL and n_materials else ""
+            raise ValueError(f"{label(field)} must be a scalar{per}; got shape {v.shape}")
+        bad = ~(np.isfinite(v) & (v >= low) & (v <= high))
+        if bad.any():
+            raise ValueError(f"{what}; got {v[bad].ravel()[0]!r}" + ("" if v.ndim == 0 else
+                                                                     f" at material {int(np.argwhere(bad)[0][0])}"))
+        arrays[field] = v
+    if "E0" in arrays and "E_min" in arrays:
+        e0, e_min = np.broadcast_arrays(arrays["E0"], arrays["E_min"])
+        above = e_min > e0
+        if above.any():
+            k = tuple(np.argwhere(above)[0])
+            raise ValueError(f"{label('E_min')} ({float(e_min[k]):g} Pa) must not exceed {label('E0')} "
+                             f"({float(e0[k]):g} Pa): the softened modulus would rise above the unsoftened one")
+
+
 @pytree_dataclass
 class MechanicalState:
     """Motion and contact history (SI units); fields of laws that are off are None (nothing traced).

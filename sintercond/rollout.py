@@ -68,8 +68,10 @@ def advance(sim: simulate.Simulator, state: simulate.SimState, params: simulate.
       ``(state, Report)``.
 
     Raises:
+      ValueError: invalid input (:func:`sintercond.simulate.validate_inputs`), before anything compiles.
       ListOverflow: a list overflowed with no ``reallocate``, or kept overflowing.
     """
+    simulate.validate_inputs(sim, state, params)
     compiled = {}
     reallocations = chunks = 0
     target = int(state.step) + int(n_steps)

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from sintercond.conductance import CONDUCTANCE_LAWS
+from sintercond.mechanics import PARAMETER_RANGES, validate_mechanical_params
 from sintercond.neck import NECK_MODELS
 
 
@@ -57,6 +58,21 @@ def _within(low, high, unit="", low_open=False):
 def _choice(*options):
     return "one of " + ", ".join(repr(o).replace("'", '"') for o in options), (lambda v: v in options)
 
+
+def _parameter(field):
+    """The scene rule of a :class:`sintercond.mechanics.MechanicalParams` field: the Python API's range."""
+    low, high, unit = PARAMETER_RANGES[field]
+    return _within(low, high, unit)
+
+
+# scene key -> the MechanicalParams field it sets (mechanics and softening sections)
+MECHANICAL_FIELDS = {
+    "mechanics.young_modulus": "E0", "mechanics.poisson_ratio": "nu", "mechanics.friction": "mu",
+    "mechanics.rolling_friction": "mu_r", "mechanics.wall_friction": "mu_wall",
+    "mechanics.wall_rolling_friction": "mu_r_wall", "mechanics.damping": "xi_con",
+    "mechanics.tangential_damping": "xi_fric", "mechanics.rolling_damping": "xi_rol",
+    "softening.onset_temperature": "theta_star", "softening.rate": "rate", "softening.min_modulus": "E_min",
+}
 
 TEMPERATURE = _within(1.0, 1e4, "K")
 PACKING_KINDS = ("powder_bed", "simple_cubic", "spheres", "poured")
@@ -148,32 +164,34 @@ _SCHEMA = {
                                    "time step is sized for (Eq. 47 and MECHANICS.md erratum 8)"),
     },
     "mechanics": {
-        "young_modulus": Key(float, _within(1.0, 1e13, "Pa"), True, "Pa",
+        "young_modulus": Key(float, _parameter("E0"), True, "Pa",
                              doc="E0, Young's modulus (below the softening onset)"),
-        "poisson_ratio": Key(float, _within(0.0, 0.5), True, doc="nu"),
-        "friction": Key(float, _within(0.0, 10.0), False, default=0.0,
+        "poisson_ratio": Key(float, _parameter("nu"), True, doc="nu"),
+        "friction": Key(float, _parameter("mu"), False, default=0.0,
                         doc="mu, Coulomb friction between particles (Eq. 8); > 0 turns Mindlin friction on"),
-        "rolling_friction": Key(float, _within(0.0, 10.0), False, default=0.0,
+        "rolling_friction": Key(float, _parameter("mu_r"), False, default=0.0,
                                 doc="mu_r, rolling resistance between particles (Eq. 16); > 0 turns it on"),
-        "wall_friction": Key(float, _within(0.0, 10.0), False, default="friction",
+        "wall_friction": Key(float, _parameter("mu_wall"), False, default="friction",
                              doc="mu against every wall"),
-        "wall_rolling_friction": Key(float, _within(0.0, 10.0), False, default="rolling_friction",
+        "wall_rolling_friction": Key(float, _parameter("mu_r_wall"), False, default="rolling_friction",
                                      doc="mu_r against every wall"),
-        "damping": Key(float, _within(0.0, 10.0), False, default=1.0,
+        "damping": Key(float, _parameter("xi_con"), False, default=1.0,
                        doc="xi_con, normal damping ratio (Eq. 6; 1 critical for the linearised contact); or give "
                            "restitution"),
         "restitution": Key(float, _within(0.0, 1.0, low_open=True), False,
                            doc="coefficient of restitution e instead of damping: xi_con = sqrt(5/6) beta, "
                                "beta = -ln e / sqrt(pi^2 + ln^2 e) (Tsuji's form, as LAMMPS)"),
-        "tangential_damping": Key(float, _within(0.0, 10.0), False, default=1.0, doc="xi_fric (Eq. 11)"),
-        "rolling_damping": Key(float, _within(0.0, 10.0), False, default=0.0, doc="xi_rol (Eq. 18)"),
+        "tangential_damping": Key(float, _parameter("xi_fric"), False, default=1.0, doc="xi_fric (Eq. 11)"),
+        "rolling_damping": Key(float, _parameter("xi_rol"), False, default=0.0, doc="xi_rol (Eq. 18)"),
     },
     "softening": {
-        "onset_temperature": Key(float, TEMPERATURE, True, "K", doc="theta*, where softening starts (Eq. 42)"),
-        "rate": Key(float, _within(0.0, 1e3), False, default=1.0,
+        "onset_temperature": Key(float, _parameter("theta_star"), True, "K",
+                                 doc="theta*, where softening starts (Eq. 42)"),
+        "rate": Key(float, _parameter("rate"), False, default=1.0,
                     doc="r of E = max(E_min, E0 exp(min(0, r (1 - theta/theta*)))) (MECHANICS.md erratum 6; "
                         "1: the printed Eq. 42)"),
-        "min_modulus": Key(float, _within(0.0, 1e13, "Pa"), False, "Pa", default=0.0, doc="E_min, the floor"),
+        "min_modulus": Key(float, _parameter("E_min"), False, "Pa", default=0.0,
+                           doc="E_min, the floor (at most mechanics.young_modulus)"),
     },
     "run": {
         "duration": Key(float, _within(0.0, 1e6, "s", low_open=True), True, "s",
@@ -435,6 +453,16 @@ def _check_mechanics(scene):
     m = scene["mechanics"]
     if "restitution" in m and "damping" in m:
         raise SceneError("give mechanics.damping or mechanics.restitution, not both (restitution sets the damping)")
+    # the Python API's rules on the values the scene gives (ranges, as the keys', and E_min <= E0)
+    given = {}
+    for key, field in MECHANICAL_FIELDS.items():
+        section, name = key.split(".")
+        if name in scene.get(section, {}):
+            given[field] = scene[section][name]
+    try:
+        validate_mechanical_params(given, names={field: key for key, field in MECHANICAL_FIELDS.items()})
+    except ValueError as err:
+        raise SceneError(str(err)) from None
 
 
 def _check_packing(packing, conduction):

@@ -66,6 +66,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import warnings
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -80,7 +81,7 @@ from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow, did_rebuild
 from sintercond.pair_list import (HalfPairs, allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs,
                                   half_pairs_overflowed, map_pair_blocks, padded_half_pairs, pair_exchange, pair_sum)
-from sintercond._validation import require_positive
+from sintercond._validation import all_concrete, fail_where, require_positive
 from sintercond.network import ContactTable, network_laplacian
 from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -861,6 +862,99 @@ def _small_observable(shapes, state) -> bool:
     return 16 * size <= math.prod(state.particles.temperature.shape)
 
 
+MAX_INITIAL_OVERLAP = 0.5
+"""Deepest sphere-sphere overlap a mechanical run may start from, as a fraction of the smaller radius: Hertz's law
+(a small-strain law) would blow such spheres apart."""
+
+
+def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
+    """Raise ``ValueError`` naming the field and the allowed range unless ``(state, params)`` can run on ``sim``.
+
+    Checked on concrete input, before anything compiles (:func:`rollout` calls it
+    when nothing is traced, :func:`sintercond.rollout.advance` always): the
+    time step finite and > 0; conductivities and specific heats finite and > 0,
+    one per material, every particle's material among them; finite positions
+    and temperatures > 0 K; with mechanics the contact parameters
+    (:func:`sintercond.mechanics.validate_mechanical_params`, the scene's rules),
+    finite velocities and spins, and no two listed spheres at the same centre
+    or overlapping by more than :data:`MAX_INITIAL_OVERLAP` of the smaller
+    radius. Traced leaves are skipped (under ``jit`` they are the caller's).
+    """
+    if not all_concrete(state, params):
+        return
+    dt = np.asarray(state.dt, np.float64)
+    if not (dt.shape == () and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"SimState.dt (the time step) must be finite and > 0 s; got {state.dt!r}")
+    kappa = np.atleast_1d(np.asarray(params.conductivity, np.float64))
+    heat = np.atleast_1d(np.asarray(params.specific_heat, np.float64))
+    if kappa.ndim != 1 or heat.shape != kappa.shape:
+        raise ValueError(f"Params.conductivity and Params.specific_heat must be [n_materials] each; got shapes "
+                         f"{kappa.shape} and {heat.shape}")
+    require_positive("Params.conductivity (W/(m K))", kappa)
+    require_positive("Params.specific_heat (J/(kg K))", heat)
+    p = state.particles
+    material = np.asarray(p.material)
+    if material.size and not (0 <= material.min() and material.max() < len(kappa)):
+        raise ValueError(f"particle materials must index Params.conductivity ({len(kappa)} materials); got "
+                         f"materials {material.min()}..{material.max()}")
+    fail_where(~np.isfinite(np.asarray(p.positions)).all(axis=1),
+               lambda i: f"particle positions must be finite; particle {i[0]} is not")
+    require_positive("particle temperatures (K)", np.asarray(p.temperature, np.float64))
+    if not sim.physics.mechanics:
+        return
+    if params.mechanics is None:
+        raise ValueError("Physics.mechanics needs Params.mechanics (sintercond.mechanics.MechanicalParams)")
+    mechanics.validate_mechanical_params(params.mechanics, len(kappa))
+    m = state.mechanics
+    for name in ("velocity", "spin"):
+        value = np.asarray(getattr(m, name), np.float64)
+        fail_where(~np.isfinite(value).all(axis=-1), lambda i, name=name: f"MechanicalState.{name} must be finite; "
+                                                                          f"particle {i[0]} is not")
+    pairs = np.asarray(state.contacts.pairs.pairs)
+    n = p.radii.shape[0]
+    pairs = pairs[(pairs[:, 0] < n) & (pairs[:, 1] < n)]
+    if len(pairs):
+        x, r = np.asarray(p.positions, np.float64), np.asarray(p.radii, np.float64)
+        i, j = pairs[:, 0], pairs[:, 1]
+        distance = np.linalg.norm(x[i] - x[j], axis=1)
+        depth = (r[i] + r[j] - distance) / np.minimum(r[i], r[j])
+        _warn_float32_positions(p.positions, r[i] + r[j] - distance)
+        deep = depth > MAX_INITIAL_OVERLAP
+        if deep.any():
+            k = int(np.argmax(depth))
+            where = "at the same centre" if distance[k] <= 1e-12 * (r[i[k]] + r[j[k]]) else (
+                f"overlapping by {depth[k]:.3g} of the smaller radius ({r[i[k]] + r[j[k]] - distance[k]:.3g} m)")
+            raise ValueError(f"particles {int(i[k])} and {int(j[k])} are {where}; a mechanical run may start from "
+                             f"overlaps of at most {MAX_INITIAL_OVERLAP:g} of the smaller radius (Hertz's law would "
+                             "blow them apart): move them apart")
+
+
+class PrecisionWarning(UserWarning):
+    """The state's dtype cannot resolve what the run must resolve (float32 positions and nanometre overlaps)."""
+
+
+FLOAT32_OVERLAP_STEPS = 64
+"""Fewest float32 steps of the positions a touching pair's overlap should span before :class:`PrecisionWarning`."""
+
+
+def _warn_float32_positions(positions, overlaps):
+    """Warn when float32 positions resolve the contacts' overlaps in a few float32 steps only: contacts then open
+    and close on round-off (a stiff settled bed loses a third of its touching pairs), where float64 positions with
+    float32 laws (``Physics(force_dtype="float32")``) keep them."""
+    if positions.dtype != jnp.float32:
+        return
+    touching = overlaps[overlaps > 0]
+    if not touching.size:
+        return
+    ulp = float(np.spacing(np.float32(np.max(np.abs(np.asarray(positions))))))
+    smallest = float(np.median(touching))
+    if smallest < FLOAT32_OVERLAP_STEPS * ulp:
+        warnings.warn(f"float32 positions resolve the contacts' overlaps (median {smallest:.3g} m) in "
+                      f"{smallest / ulp:.0f} float32 steps of {ulp:.3g} m only: contacts will open and close on "
+                      "round-off. Run with float64 positions (SINTERCOND_ENABLE_X64=1, the default) and "
+                      "Physics(force_dtype='float32') for float32 contact laws", PrecisionWarning, stacklevel=3)
+
+
 def segment_length(n_steps: int) -> int:
     """``ceil(sqrt(n_steps))``: steps between the states reverse mode keeps."""
     return max(1, math.isqrt(max(n_steps, 1) - 1) + 1)
@@ -893,6 +987,7 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
         raise ValueError(f"n_steps ({n_steps}) must be a multiple of saveat.every ({every}); "
                          f"{n_steps // every * every} or {(n_steps // every + 1) * every} would do")
     observe = (lambda s: s.particles.temperature) if saveat.fn is None else saveat.fn
+    validate_inputs(sim, state, params)
     if sim.physics.mechanics and params.mechanics is not None:
         mechanics.check_wall_coefficients(sim.physics, params.mechanics)
     prep = sim.prepare_fn(state, params)
@@ -1021,7 +1116,7 @@ def simulate_table(temperature, table: ContactTable, capacity, dt, n_steps, save
     if n_steps % save_every:
         raise ValueError(f"n_steps ({n_steps}) must be a multiple of save_every ({save_every})")
     for name, value in (("dt (s)", dt), ("capacity (J/K)", capacity)):
-        if not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(value)):
+        if all_concrete(value):
             require_positive(name, np.atleast_1d(np.asarray(value, np.float64)))
     return _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature,
                            method, source, start_step, probes)

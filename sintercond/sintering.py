@@ -93,7 +93,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond._numerics import as_float_arrays, safe_power, sqrt_difference_of_squares
-from sintercond._validation import (concrete_arrays, fail_where, law_params_valid, require_finite,
+from sintercond._validation import (all_concrete, concrete_arrays, fail_where, law_params_valid, require_law_params,
                                     require_positive)
 from sintercond.neck import NeckStatus
 
@@ -467,7 +467,7 @@ def grow_neck(law, a0, r_i, r_j, temperatures, durations, params=None, *, quadra
     for name, value in (("quadrature_nodes", quadrature_nodes), ("newton_iterations", newton_iterations)):
         if not isinstance(value, int) or isinstance(value, bool) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1; got {value!r}")
-    if _all_concrete(a0, r_i, r_j, temperatures, durations, *params.values()):
+    if all_concrete(a0, r_i, r_j, temperatures, durations, *params.values()):
         validate_growth_inputs(law, a0, r_i, r_j, temperatures, durations, params)
     return _grow_neck_compiled(_ByIdentity(law), a0, r_i, r_j, temperatures, durations, params,
                                quadrature_nodes, newton_iterations)
@@ -595,10 +595,6 @@ def _params_valid(law, params):
     return ok
 
 
-def _all_concrete(*values) -> bool:
-    return not any(isinstance(v, jax.core.Tracer) for v in jax.tree_util.tree_leaves(values))
-
-
 def validate_growth_inputs(law, a0, r_i, r_j, temperatures, durations, params=None):
     """Raise ``ValueError`` naming the argument unless :func:`grow_neck` can grow these necks.
 
@@ -619,13 +615,8 @@ def validate_growth_inputs(law, a0, r_i, r_j, temperatures, durations, params=No
         raise ValueError(f"temperatures must have one row per interval ({durations.shape[0]} durations); "
                          f"got shape {temperatures.shape}")
     require_positive("durations (s)", durations, allow_zero=True)
-    for name, value in params.items():
-        (value,) = concrete_arrays("validate_growth_inputs", value)
-        label = f"params[{name!r}] of kinetic law {law.name!r} ({law.units[name]})"
-        if name in law.params_any_sign:
-            require_finite(label, value)
-        else:
-            require_positive(label, value, allow_zero=name in law.params_allowing_zero)
+    require_law_params("validate_growth_inputs", law, params,
+                       lambda name: f"params[{name!r}] of kinetic law {law.name!r} ({law.units[name]})")
     if "dihedral_angle" in params:
         angle = np.asarray(params["dihedral_angle"], dtype=np.float64)
         fail_where(np.atleast_1d(angle) > 180.0, lambda i: f"params['dihedral_angle'] must be in (0, 180] degrees; "

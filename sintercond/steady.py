@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import typing
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.sparse.linalg import cg
 
 from sintercond import simulate as sim_module
+from sintercond._validation import all_concrete
 from sintercond.conductance import validate_pair_conductance_inputs
 from sintercond.network import ContactTable, contact_pairs, ell_table, heat_inflow, laplacian, wall_inflow
 
@@ -67,7 +67,7 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
     float for concrete input, a JAX scalar under a transformation.
     """
     setup = _conductivity_setup(centres, radii, axis, law, neck_model, box)
-    concrete = not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves((kappa, params)))
+    concrete = all_concrete(kappa, params)
     if concrete:
         validate_pair_conductance_inputs(law, setup.pairs.r_i, setup.pairs.r_j, setup.pairs.overlap,
                                          np.broadcast_to(np.asarray(kappa, np.float64), setup.radii.shape)[setup.pairs.i],

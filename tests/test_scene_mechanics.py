@@ -148,6 +148,9 @@ def test_restitution_gives_the_tsuji_damping_ratio():
     (lambda s: s["physics"].update(gravity=[0.0, -9.81]), r"physics\.gravity must be a list of 3 numbers"),
     (lambda s: s["physics"].update(shear="voigt"), r"physics\.shear must be one of \"paper\", \"mindlin\""),
     (lambda s: s["softening"].pop("onset_temperature"), r"missing key softening\.onset_temperature"),
+    # issue 28: a floor above the modulus ran (and exploded) before
+    (lambda s: s["softening"].update(min_modulus=2 * s["mechanics"]["young_modulus"]),
+     r"softening\.min_modulus \(2e\+06 Pa\) must not exceed mechanics\.young_modulus \(1e\+06 Pa\)"),
     (lambda s: s["walls"][1].update(velocity=[0.0, "fast", 0.0]), r"walls\[1\]\.velocity must be a list of 3"),
     (lambda s: s["packing"].update(radii=[1e-3, 1e-3]), r"packing\.radii must be a list of 5 numbers in \[1e-08, 1\]"),
     (lambda s: s["packing"].update(centres=[[0.0, 0.0]]), r"packing\.centres\[0\] must be a list of 3 numbers"),
