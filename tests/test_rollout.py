@@ -95,10 +95,22 @@ def test_an_overflow_with_no_reallocation_is_refused_and_a_flag_from_measure_cou
 
 
 def test_a_state_that_fails_its_check_is_not_handed_on():
+    import dataclasses
+
     sim, state, params = _conduction()
-    bad = simulate.Params(conductivity=jnp.array([jnp.nan]), specific_heat=jnp.array([1.0]))
+    seen = []
+
+    def check(s):
+        if int(s.step) >= 20:
+            raise FloatingPointError("refused at step 20")
+
+    with pytest.raises(FloatingPointError, match="refused at step 20"):
+        rollout.advance(sim, state, params, 30, 10, on_chunk=lambda s: seen.append(int(s.step)), check=check)
+    assert seen == [10]
+    # the default check: a step far above the stable one overflows the temperatures to inf, then NaN
+    unstable = dataclasses.replace(state, dt=state.dt * 1e250)
     with pytest.raises(FloatingPointError, match="non-finite temperature at step 10"):
-        rollout.advance(sim, state, bad, 30, 10, on_chunk=lambda s: pytest.fail("handed on"))
+        rollout.advance(sim, unstable, params, 30, 10, on_chunk=lambda s: pytest.fail("handed on"))
 
 
 @pytest.mark.slow
