@@ -123,3 +123,7 @@ def test_settling_runs_on_the_host_loop():
     # resting one on the other on the floor: the centres sit near r and 3 r, less the Hertz overlaps
     z = np.sort(settled.centres[:, 2])
     assert z[0] == pytest.approx(1e-3, rel=2e-3) and z[1] - z[0] == pytest.approx(2e-3, rel=2e-3)
+    # the settling criterion stops at the first chunk that meets it: a settled pile settles again in one chunk
+    again = packing.dem_settle(settled.centres, r, packing.box_walls(4e-3), check_every=500, max_time=0.5)
+    assert again.report.steps == 500 and settled.report.steps > 500
+    assert again.report.kinetic_ratio < again.report.kinetic_tol and again.report.force_ratio < again.report.force_tol
