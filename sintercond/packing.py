@@ -590,12 +590,11 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
             return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
 
         try:
-            state, report = advance(sim, state, params, max_steps, check_every, settled,
-                                    reallocate=simulate.reallocate_neighbors(fns), check=_finite_positions,
-                                    measure=_settle_figures)
+            state, loop = advance(sim, state, params, max_steps, check_every, settled,
+                                  reallocate=simulate.reallocate_neighbors(fns), check=_finite_positions,
+                                  measure=_settle_figures)
         except ListOverflow:
             raise PackingError("the DEM neighbour list keeps overflowing") from None
-        info = {"reallocations": report.reallocations}
         final = np.asarray(state.particles.positions)
     if not (figures["kinetic"] < kinetic_tol and figures["force"] < force_tol):
         missed = []
@@ -607,7 +606,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
                            f"{dt:.3g} s): " + " and ".join(missed))
     report = SettleReport(int(state.step), float(state.time), dt, figures["kinetic"], float(kinetic_tol),
                           figures["force"], float(force_tol), _overlaps(final, radii, physics.walls), step_overlap,
-                          float(v_rel), info["reallocations"], time.perf_counter() - start)
+                          float(v_rel), loop.reallocations, time.perf_counter() - start)
     return DemSettled(final, state, sim, params, fns, report)
 
 
