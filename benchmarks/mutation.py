@@ -1,6 +1,6 @@
 """Mutation testing: do the tests catch small deliberate bugs in every module?
 
-Usage: python benchmarks/mutation.py [--only SUBSTRING] [--check] [--timeout S] [--no-write]
+Usage: python benchmarks/mutation.py [--only SUBSTRING [--merge]] [--check] [--timeout S] [--no-write]
 
 Each mutant is (module, original snippet, mutated snippet, tests): the snippet
 must occur exactly once in the module. The whole repository (git's tracked and
@@ -11,12 +11,13 @@ under a time limit, and the module is restored before the next mutant. A
 mutant is *killed* when the tests fail (or time out), *survives* when they
 pass. The working tree is never touched. Prints a table, writes every
 mutant's row to benchmarks/results/mutation.csv and the counts per module to
-the ``mutation`` section of benchmarks/RESULTS.md (not with ``--only`` or
-``--no-write``). ``--check`` only verifies that every snippet is found once.
+the ``mutation`` section of benchmarks/RESULTS.md (not with ``--no-write``, nor
+with ``--only`` unless ``--merge``: then those mutants' rows replace theirs
+in the record, and the section is rewritten from the whole record). ``--check`` only verifies that every snippet is found once.
 
 Mutants of the simulator (network, neighbors, walls, simulate, thermal, run)
 were re-aimed after the redesign landed.
-Too slow for CI (about half an hour on two cores); run it before a release or
+Too slow for CI (over an hour: one core per mutant); run it before a release or
 after changing tests.
 """
 
@@ -33,6 +34,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+CSV = ROOT / "benchmarks" / "results" / "mutation.csv"
 
 # Known survivors: mutant name -> why it is equivalent or left (listed in RESULTS.md).
 EXPLAINED = {
@@ -350,6 +352,8 @@ def main():
     parser.add_argument("--check", action="store_true", help="only check that every snippet is found once")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant")
     parser.add_argument("--no-write", action="store_true", help="do not rewrite RESULTS.md")
+    parser.add_argument("--merge", action="store_true",
+                        help="with --only: replace those mutants' rows in the record and rewrite RESULTS.md")
     args = parser.parse_args()
     mutants = [m for m in MUTANTS if args.only is None or args.only in m[0]]
     problems = _check(mutants)
@@ -358,35 +362,58 @@ def main():
         sys.exit(1 if problems else 0)
     rows = run(mutants, args.timeout)
     killed = sum(r[2].startswith("killed") for r in rows)
-    modules = sorted({m[1] for m in mutants})
-    summary = f"{killed} of {len(rows)} mutants killed ({100 * killed / len(rows):.1f} %) in {len(modules)} modules"
-    print(summary)
-    survivors = [r for r in rows if not r[2].startswith("killed")]
-    for r in survivors:
-        print(f"survived: {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}")
-    if args.only is None and not args.no_write:
-        from _common import RESULTS, command_line, markdown_table, write_section
+    print(f"{killed} of {len(rows)} mutants killed ({100 * killed / len(rows):.1f} %)")
+    for r in rows:
+        if not r[2].startswith("killed"):
+            print(f"survived: {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}")
+    if (args.only is None or args.merge) and not args.no_write:
+        write_record(rows)
 
-        # every mutant's row goes to a CSV beside RESULTS.md; the section keeps the counts per module
-        table = RESULTS.parent / "results" / "mutation.csv"
-        table.parent.mkdir(exist_ok=True)
-        with table.open("w", newline="") as f:
-            csv.writer(f).writerows([("mutant", "module", "result", "tests", "seconds"), *rows])
-        per_module = []
-        for module in modules:
-            mine = [r for r in rows if r[1] == module]
-            per_module.append((module, len(mine), sum(r[2].startswith("killed") for r in mine),
-                               f"{sum(float(r[4]) for r in mine):.0f}"))
-        body = (
-            "## Mutation testing\n\n"
-            "Small deliberate bugs (benchmarks/mutation.py: each replaces one snippet of one module) run against "
-            "the tests that cover that module (`pytest -x`, first failure stops). Killed: the tests fail. "
-            f"{summary}. Every mutant's result: [results/mutation.csv](results/mutation.csv).\n\n"
-            + markdown_table(("module", "mutants", "killed", "seconds"), per_module)
-            + ("\n\nSurvivors:\n" + "\n".join(f"- {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}"
-                                             for r in survivors) if survivors else "\n\nNo survivors.")
-        )
-        write_section("mutation", command_line(), body)
+
+def _recorded_rows() -> dict:
+    """The rows of benchmarks/results/mutation.csv by mutant name (empty if there is none)."""
+    if not CSV.exists():
+        return {}
+    with CSV.open(newline="") as f:
+        return {row[0]: tuple(row) for row in list(csv.reader(f))[1:]}
+
+
+def write_record(rows) -> None:
+    """Write every mutant's row to the CSV and the counts per module to RESULTS.md.
+
+    ``rows`` replace the recorded rows of the same mutants; recorded rows of mutants no longer in
+    :data:`MUTANTS` are dropped. The record must then cover every mutant (run the missing ones first).
+    """
+    from _common import command_line, markdown_table, write_section
+
+    merged = {**_recorded_rows(), **{r[0]: tuple(r) for r in rows}}
+    missing = [m[0] for m in MUTANTS if m[0] not in merged]
+    if missing:
+        raise SystemExit(f"the record lacks {len(missing)} mutants ({', '.join(missing[:5])}...): run them first")
+    rows = [merged[m[0]] for m in MUTANTS]
+    CSV.parent.mkdir(exist_ok=True)
+    with CSV.open("w", newline="") as f:
+        csv.writer(f).writerows([("mutant", "module", "result", "tests", "seconds"), *rows])
+    killed = sum(r[2].startswith("killed") for r in rows)
+    modules = sorted({r[1] for r in rows})
+    summary = f"{killed} of {len(rows)} mutants killed ({100 * killed / len(rows):.1f} %) in {len(modules)} modules"
+    per_module = []
+    for module in modules:
+        mine = [r for r in rows if r[1] == module]
+        per_module.append((module, len(mine), sum(r[2].startswith("killed") for r in mine),
+                           f"{sum(float(r[4]) for r in mine):.0f}"))
+    survivors = [r for r in rows if not r[2].startswith("killed")]
+    body = (
+        "## Mutation testing\n\n"
+        "Small deliberate bugs (benchmarks/mutation.py: each replaces one snippet of one module) run against "
+        "the tests that cover that module (`pytest -x`, first failure stops). Killed: the tests fail. "
+        f"{summary}. Every mutant's result: [results/mutation.csv](results/mutation.csv).\n\n"
+        + markdown_table(("module", "mutants", "killed", "seconds"), per_module)
+        + ("\n\nSurvivors:\n" + "\n".join(f"- {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}"
+                                         for r in survivors) if survivors else "\n\nNo survivors.")
+    )
+    write_section("mutation", command_line(), body)
+
 
 if __name__ == "__main__":
     main()
