@@ -52,7 +52,7 @@ from sintercond.neck import (  # noqa: E402
 __version__ = "0.1.0"
 
 _SUBMODULES = frozenset({
-    "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "heat_sources", "io",
+    "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "guards", "heat_sources", "io",
     "materials", "mechanics", "neck", "neighbors", "network", "packing", "pair_list", "plots", "run", "scene",
     "rollout", "simulate", "sintering", "state", "steady", "sweep", "thermal", "tortuosity", "walls",
 })

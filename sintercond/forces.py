@@ -226,6 +226,18 @@ def hertz_normal_force(delta, delta_dot, r_star, m_star, e_star, xi_con, *, no_t
     return jnp.where(delta > 0, force, 0.0)
 
 
+def hertz_elastic_energy(delta, r_star, e_star):
+    """Elastic energy stored in a Hertz contact, ``(8/15) sqrt(r*) E* delta^(5/2)`` (J): the integral of Eq. 2's
+    elastic part over the overlap; 0 for ``delta <= 0``.
+
+    Args:
+      delta: overlap (m); r_star, e_star: effective radius (m) and modulus (Pa).
+    """
+    delta, r_star, e_star = as_float_arrays(delta, r_star, e_star)
+    squeezed = jnp.where(delta > 0, delta, 0.0)
+    return (8.0 / 15.0) * safe_sqrt(r_star) * e_star * squeezed * squeezed * safe_sqrt(squeezed)
+
+
 def tangential_stiffness(delta, r_star, g_star):
     """Mindlin's tangential stiffness ``k_t = 8 G* sqrt(r* delta)`` (Eq. 7), N/m; 0 for ``delta <= 0``."""
     delta, r_star, g_star = as_float_arrays(delta, r_star, g_star)

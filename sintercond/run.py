@@ -24,10 +24,11 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import forces, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
+from sintercond import forces, guards, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
 from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
-from sintercond.scene import SceneError, restitution_damping_ratio, validate_scene
+from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, restitution_damping_ratio,
+                              validate_scene)
 from sintercond.state import particle_state
 
 
@@ -44,7 +45,8 @@ class Model:
     bed: dict = dataclasses.field(default_factory=dict)
     reallocate: Any = None  # simulate.reallocate_neighbors of a dynamic contact list, for advance
     wall_heat: tuple = ()  # (column, index of the scene wall, mode, held mask) of each held or conducting wall
-    limits: dict = dataclasses.field(default_factory=dict)  # {"thermal": s, "mechanical": s} stable steps
+    limits: dict = dataclasses.field(default_factory=dict)  # {"thermal", "mechanical", "wall", "beam": s} bounds
+    sized_speed: float | None = None  # with mechanics: the approach speed (m/s) the mechanical step is sized for
 
     @property
     def physics(self) -> simulate.Physics:
@@ -190,8 +192,13 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     with mechanics, of the smaller of that (at the initial contacts) and the
     mechanical step (:func:`sintercond.mechanics.stable_time_step`: Eq. 47
     and the tangential and rotational bounds of MECHANICS.md erratum 8, at
-    ``physics.impact_velocity``). A ``run.dt`` above the limit is refused,
-    naming it. Then the step is shortened to ``duration / n_steps`` so that
+    the approach speed ``physics.impact_velocity`` plus the fastest wall's
+    normal speed, at the unsoftened modulus: ``E_min <= E0``, so no state
+    the run reaches is stiffer); with moving walls, the step in which the
+    fastest moves :data:`sintercond.scene.WALL_STEP_FRACTION` of the smallest radius; with a
+    beam, the step in which its spot moves :data:`sintercond.scene.BEAM_STEP_FRACTION` of
+    its radius. A ``run.dt`` above any of them is refused, naming it and
+    the key that sets it. Then the step is shortened to ``duration / n_steps`` so that
     the run ends exactly at ``run.duration``. ``log(message)`` reports each phase.
     """
     log = log or (lambda message: None)
@@ -223,10 +230,9 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     state = simulate.init_state(particles, contacts, 1.0)
     run = scene["run"]
     sources = thermal.source_conductance(physics, particles.radii, params, _highest_temperature(scene))
-    limit = float(simulate.stable_time_step(sim, state, params, sources))
-    names = {"thermal": (f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = {limit:.6g} s (G_i: "
-                         "linearised convection and radiation)"), "mechanical": ""}
-    thermal_limit, mechanical_limit = limit, float("inf")
+    thermal_limit = float(simulate.stable_time_step(sim, state, params, sources))
+    bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
+                                         f"{thermal_limit:.6g} s (G_i: linearised convection and radiation)")}
     reallocate = None
     motion = None
     if mechanics_on(scene):
@@ -237,30 +243,49 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
         sim = simulate.simulator(physics, fns)
         reallocate = simulate.reallocate_neighbors(fns)
-        v_rel = scene["physics"].get("impact_velocity", 0.05)
+        impact = scene["physics"].get("impact_velocity", 0.05)
+        wall_speed, fastest = _fastest_wall(planes)
+        v_rel = impact + wall_speed
         mechanical_limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics,
                                                          v_rel))
-        names["mechanical"] = (f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and the symplectic-Euler "
-                               f"bounds of the stiffest contact at physics.impact_velocity = {v_rel:g} m/s)")
+        speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
+            f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")
+        bounds["mechanical"] = (mechanical_limit, f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and "
+                                                  f"the symplectic-Euler bounds of the stiffest contact, unsoftened, "
+                                                  f"at the approach speed {v_rel:g} m/s: {speed_source})")
+        if wall_speed > 0:
+            step = WALL_STEP_FRACTION * float(np.min(radii)) / wall_speed
+            bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
+                                    f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
         motion = mechanics.mechanical_state(physics, centres, contacts)
-        limit = min(thermal_limit, mechanical_limit)
+    beam = scene.get("beam")
+    if beam is not None and beam["speed"] > 0:
+        step = BEAM_STEP_FRACTION * beam["spot_radius"] / beam["speed"]
+        bounds["beam"] = (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam['speed']:g} m/s) moves "
+                                f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam['spot_radius']:g} m")
+    limit = min(bound for bound, _ in bounds.values())
     if run["dt"] == "auto":
         dt = 0.9 * limit if np.isfinite(limit) else run["duration"]
     else:
         dt = run["dt"]
-        for kind, bound in (("thermal", thermal_limit), ("mechanical", mechanical_limit)):
+        for kind, (bound, name) in bounds.items():
             if dt > bound:
-                raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds {names[kind]}; use dt <= {limit:.6g} s"
+                raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds {name}; use dt <= {limit:.6g} s"
                                  + (" or the implicit integrator" if kind == "thermal" and motion is None else ""))
     n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
     dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
     state = simulate.init_state(particles, contacts, dt, mechanics=motion)
     return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
                  _wall_heat_specs(scene, centres, radii, physics),
-                 {"thermal": thermal_limit, "mechanical": mechanical_limit})
+                 {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None)
 
 
-""":func:`sintercond.mechanics.stable_time_step` compiled once per spec and size (eager, it dispatches ~100 ops)."""
+def _fastest_wall(planes) -> tuple[float, int | None]:
+    """The largest normal speed of the scene's walls (m/s) and the index of that wall (None if none moves)."""
+    speeds = [abs(float(np.dot(w.velocity, w.normal))) for w in planes]
+    if not speeds or max(speeds) == 0:
+        return 0.0, None
+    return max(speeds), int(np.argmax(speeds))
 
 
 def _highest_temperature(scene) -> float:
@@ -295,7 +320,8 @@ def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
             position = float(np.max(centres[:, axis] + radii)) - depth
         point = np.zeros(3)
         point[axis] = position
-        planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall["mode"], wall.get("temperature")))
+        planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall["mode"], wall.get("temperature"),
+                                      tuple(float(v) for v in wall.get("velocity", (0.0, 0.0, 0.0)))))
     return planes
 
 
@@ -375,6 +401,21 @@ def physical_range_check(scene):
             raise FloatingPointError(
                 f"temperature left the physical range (0, {MAX_TEMPERATURE:g}] K at step {int(state.step)} "
                 f"(|T| up to {worst:.3g} K); likely cause: {', '.join(causes)} too large for the time step")
+    return check
+
+
+def run_check(scene, model, state):
+    """The ``check(state)`` of a scene's run from ``state``: :func:`physical_range_check`, and with mechanics
+    :func:`sintercond.guards.motion_guard` at the speed the step was sized for (``physics.impact_velocity``)."""
+    temperatures = physical_range_check(scene)
+    if model.sized_speed is None:
+        return temperatures
+    motion = guards.motion_guard(model.sim, state, model.params, model.sized_speed, "physics.impact_velocity")
+
+    def check(new):
+        temperatures(new)
+        motion(new)
+
     return check
 
 
@@ -566,7 +607,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     bar = tqdm(total=model.n_steps, initial=int(state.step), unit="step", disable=not progress, desc="sintercond run")
     try:
         state, _ = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
-                           reallocate=model.reallocate, progress=bar.update, check=physical_range_check(scene))
+                           reallocate=model.reallocate, progress=bar.update, check=run_check(scene, model, state))
     finally:
         bar.close()
     temperature = state.particles.temperature

@@ -160,8 +160,9 @@ _SCHEMA = {
         "skin": Key(float, _within(0.0, 10.0, low_open=True), False, "largest radii", default=0.1,
                     doc="Verlet skin of the contact list; it is rebuilt once a particle moved half of it"),
         "impact_velocity": Key(float, _within(0.0, 1e3, "m/s", low_open=True), False, "m/s", default=0.05,
-                               doc="largest approach speed of two particles (or a particle and a wall) the automatic "
-                                   "time step is sized for (Eq. 47 and MECHANICS.md erratum 8)"),
+                               doc="largest approach speed of two particles (or of a particle and a wall, beyond the "
+                                   "wall's own speed) the automatic time step is sized for (Eq. 47 and MECHANICS.md "
+                                   "erratum 8); a faster contact stops the run"),
     },
     "mechanics": {
         "young_modulus": Key(float, _parameter("E0"), True, "Pa",
@@ -637,7 +638,12 @@ def estimate_run(scene) -> RunEstimate:
     capacity = material["density"] * material["specific_heat"] * 4 / 3 * math.pi * r**3
     dt = 0.9 * capacity / (z * k_pair + g)
     if scene.get("physics", {}).get("mechanics"):
-        dt = min(dt, 0.9 * _mechanical_step_estimate(scene, r))
+        wall_speed = max((abs(w.get("velocity", (0.0, 0.0, 0.0))[w["axis"]]) for w in scene["walls"]), default=0.0)
+        dt = min(dt, 0.9 * _mechanical_step_estimate(scene, r, wall_speed))
+        if wall_speed > 0:
+            dt = min(dt, 0.9 * WALL_STEP_FRACTION * r / wall_speed)
+    if "beam" in scene and scene["beam"]["speed"] > 0:
+        dt = min(dt, 0.9 * BEAM_STEP_FRACTION * scene["beam"]["spot_radius"] / scene["beam"]["speed"])
     dt = dt if run["dt"] == "auto" else run["dt"]
     steps = max(1, math.ceil(run["duration"] / dt))
     frames = steps // run["output_every"] + 1
@@ -659,9 +665,16 @@ def estimate_run(scene) -> RunEstimate:
     return estimate
 
 
-def _mechanical_step_estimate(scene, r):
+WALL_STEP_FRACTION = 0.1
+"""A moving wall advances at most this fraction of the smallest radius per automatic step (no tunnelling)."""
+
+BEAM_STEP_FRACTION = 0.2
+"""A beam's spot advances at most this fraction of its radius per automatic step (the spot is resolved)."""
+
+
+def _mechanical_step_estimate(scene, r, wall_speed=0.0):
     """:func:`sintercond.forces.stable_time_step` of two of the smallest spheres meeting at
-    ``physics.impact_velocity`` (s): Eq. 47 and the symplectic-Euler bounds (erratum 8).
+    ``physics.impact_velocity`` plus ``wall_speed`` (s): Eq. 47 and the symplectic-Euler bounds (erratum 8).
 
     The estimate :func:`estimate_run` counts steps with; the run's own step
     (:func:`sintercond.mechanics.stable_time_step`) takes every listed pair
@@ -676,7 +689,7 @@ def _mechanical_step_estimate(scene, r):
     if "restitution" in m:
         xi_con = restitution_damping_ratio(m["restitution"])
     return float(_contact_step(physics.get("shear", "paper"))(
-        r, mass, e, nu, physics.get("impact_velocity", 0.05), xi_con,
+        r, mass, e, nu, physics.get("impact_velocity", 0.05) + wall_speed, xi_con,
         m.get("tangential_damping", 1.0) if friction else 0.0, m.get("rolling_damping", 0.0) if rolling else 0.0))
 
 
@@ -739,9 +752,14 @@ def scene_reference() -> str:
           "mass, Remark 1), rubs (`mechanics.wall_friction`) and, by its mode, conducts: `conducting` walls exchange "
           "heat through the contact they make, `held` walls hold the particles touching them at the start at "
           "their temperature (those particles still move), `insulated` walls only push. The time step "
-          '`run.dt = "auto"` is 0.9 x the smaller of the thermal limit and the mechanical one '
+          '`run.dt = "auto"` is 0.9 x the smallest of the thermal limit, the mechanical one '
           "(`sintercond.mechanics.stable_time_step`: Eq. 47 and the tangential and rotational bounds of "
-          "MECHANICS.md erratum 8 at `impact_velocity`); a larger `run.dt` is refused, naming the limit.")
+          "MECHANICS.md erratum 8 at the unsoftened modulus and the approach speed `impact_velocity` plus the "
+          "fastest wall's normal speed), the step in which a moving wall advances a tenth of the smallest radius, "
+          "and the step in which a beam's spot advances a fifth of its radius; a larger `run.dt` is refused, "
+          "naming the limit and its key. While it runs, a contact approaching faster than the step was sized for, "
+          "or kinetic energy growing beyond what gravity and the initial overlaps can supply, stops the run "
+          "naming `physics.impact_velocity`.")
     table("[mechanics]", _SCHEMA["mechanics"],
           "The contact material (Quintana-Ruiz & Campello 2020, Eqs. 2-20), with `physics.mechanics = true`. "
           "Walls are rigid (`E* = E/(1 - nu^2)`).")

@@ -22,7 +22,7 @@ LAYERS = {
              "dryden_zok", "tortuosity", "geometry"],
     "space": ["neighbors", "pair_list"],
     "lifts": ["network", "mechanics", "thermal"],
-    "drive": ["simulate", "steady", "rollout"],
+    "drive": ["simulate", "steady", "rollout", "guards"],
     "use": ["scene", "packing", "run", "io", "plots", "cli", "sweep", "examples"],
 }
 RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}
