@@ -151,11 +151,15 @@ def intersection_radius(r_i, r_j, h):
       Lens radius (length).
     """
     r_i, r_j, h = as_float_arrays(r_i, r_j, h)
-    d = r_i + r_j - h
     defined = _valid_radii(r_i, r_j) & jnp.isfinite(h) & (h < 2.0 * jnp.minimum(r_i, r_j))
+    # in units of the larger radius: the reverse mode of h^4 / d^2 in metres overflows float32 for
+    # micrometre spheres (its cotangent carries 1/d^4), in these units every factor is of order one
+    scale = jnp.where(defined, jnp.maximum(r_i, r_j), 1.0)
+    x_i, x_j, eta = r_i / scale, r_j / scale, jnp.where(defined, h, 0.0) / scale
+    d = x_i + x_j - eta
     d_safe = jnp.where(defined, d, jnp.ones_like(d))
-    a_squared = h * (2.0 * (r_i + r_j) - h) * (2.0 * r_i - h) * (2.0 * r_j - h) / (4.0 * d_safe**2)
-    return jnp.where(defined, safe_sqrt(jnp.where(h > 0, a_squared, 0.0)), jnp.nan)
+    a_squared = eta * (2.0 * (x_i + x_j) - eta) * (2.0 * x_i - eta) * (2.0 * x_j - eta) / (4.0 * d_safe**2)
+    return jnp.where(defined, scale * safe_sqrt(jnp.where(h > 0, a_squared, 0.0)), jnp.nan)
 
 
 def max_overlap(r_i, r_j):
