@@ -82,18 +82,19 @@ def test_the_automatic_step_covers_a_moving_wall():
     """A floor rising at 0.5 m/s: the mechanical step is sized for physics.impact_velocity plus the wall's normal
     speed, and the wall moves at most WALL_STEP_FRACTION of the smallest radius per step."""
     speed = 0.5
-    scene = _resting(walls=[{"axis": 2, "side": "min", "mode": "insulated", "penetration": 0.0,
-                             "velocity": [0.3, 0.0, speed]}])  # the sliding part sizes nothing
+    two = {"kind": "spheres", "centres": [[2e-3, 2e-3, 1e-3], [6e-3, 2e-3, 0.5e-3]], "radii": [1e-3, 0.5e-3]}
+    scene = _resting(packing=two, walls=[{"axis": 2, "side": "min", "mode": "insulated", "penetration": 0.0,
+                                          "velocity": [0.3, 0.0, speed]}])  # the sliding part sizes nothing
     model = runner.build_model(scene)
     assert model.sized_speed == pytest.approx(0.05 + speed, rel=1e-15)
-    alone = runner.build_model(_resting())
+    alone = runner.build_model(_resting(packing=two))
     particles, neighbors = alone.state.particles, alone.state.contacts.neighbors
     expected = float(mechanics.stable_time_step(model.physics, particles, neighbors, model.params.mechanics,
                                                 0.05 + speed))
     assert model.limits["mechanical"] == pytest.approx(expected, rel=1e-12)
     assert model.limits["mechanical"] < alone.limits["mechanical"]
-    assert model.limits["wall"] == pytest.approx(WALL_STEP_FRACTION * 1e-3 / speed, rel=1e-12)
-    assert model.dt * speed <= WALL_STEP_FRACTION * 1e-3 and model.dt <= model.limits["mechanical"]
+    assert model.limits["wall"] == pytest.approx(WALL_STEP_FRACTION * 0.5e-3 / speed, rel=1e-12)  # the smaller
+    assert model.dt * speed <= WALL_STEP_FRACTION * 0.5e-3 and model.dt <= model.limits["mechanical"]
 
 
 def test_a_fixed_step_a_wall_outruns_is_refused_naming_the_wall():
@@ -141,6 +142,28 @@ def test_a_sized_run_passes_the_guards(tmp_path):
     history = runner.read_history(tmp_path / "out")
     weight = 3000.0 * 4 / 3 * math.pi * 1e-9 * G
     assert history["max_overlap_m"][-1] == pytest.approx(examples.static_overlap(weight, 1e-3, 1e6, 0.3), rel=1e-3)
+
+
+def test_the_guard_counts_the_walls_own_speed():
+    """A floor rising at 0.2 m/s under a resting sphere: the sphere approaches the wall at 0.2 m/s although it
+    is at rest, above a sizing speed of 0.1 m/s."""
+    floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), velocity=(0.0, 0.0, 0.2))
+    sim, state, params = _scene([[0.0, 0.0, R + 1e-4 * R]], [[0.0, 0.0, 0.0]], 1e-6, _params(), walls=(floor,),
+                                gravity=(0.0, 0.0, 0.0))
+    with pytest.raises(guards.UnstableStep, match=r"particle 0 and wall 0 approach at 0\.19\d* m/s, above the 0\.1"):
+        rollout.advance(sim, state, params, 10, 10, check=guards.motion_guard(sim, state, params, 0.1, "v_rel"))
+
+
+def test_the_energy_balance_counts_gravitys_work():
+    """A sphere thrown up at 0.5 m/s trades its kinetic energy for height: with gravity's work in the balance no
+    guard fires, and at the top (t = v/g) the kinetic energy is gone while the energy is unchanged."""
+    v0 = 0.5
+    sim, state, params = _scene([[0.0, 0.0, 0.0]], [[0.0, 0.0, v0]], 1e-5, _params(), gravity=(0.0, 0.0, -G))
+    check = guards.motion_guard(sim, state, params, 1.0, "v_rel")
+    end, _ = rollout.advance(sim, state, params, round(v0 / G / 1e-5), 500, check=check)
+    start, top = guards.motion_figures(sim.physics, state, params), guards.motion_figures(sim.physics, end, params)
+    assert top.kinetic < 1e-6 * start.kinetic
+    assert top.gravity_potential - start.gravity_potential == pytest.approx(start.kinetic, rel=1e-3)  # O(g dt / v)
 
 
 def _two_spheres(velocity, dt, overlap=0.0):
