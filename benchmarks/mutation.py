@@ -363,6 +363,19 @@ MUTANTS = [
     ("history time from the previous step", "sintercond/run.py",
      "values = [float(state.time), float(t.mean())", "values = [float(state.time - state.dt), float(t.mean())",
      [T + "test_observable_times.py"]),
+    ("tangential damping key misspelt", "sintercond/run.py", 'xi_fric=m.get("tangential_damping", 1.0)',
+     'xi_fric=m.get("tangential", 1.0)', [T + "test_scene_keys.py"]),
+    ("softening rate key dropped", "sintercond/run.py", 'rate=f(soft.get("rate", 1.0))', "rate=f(1.0)", [T + "test_scene_keys.py"]),
+    ("rolling projection key dropped", "sintercond/run.py", 'rolling_projection=p.get("rolling_projection", False)',
+     "rolling_projection=False", [T + "test_scene_keys.py"]),
+    ("wall rolling friction from the pairs'", "sintercond/run.py", 'mu_r_wall=m.get("wall_rolling_friction", mu_r)',
+     "mu_r_wall=mu_r", [T + "test_scene_keys.py"]),
+    ("beam spot radius key ignored", "sintercond/run.py", 'spot_radius=f(beam["spot_radius"])',
+     'spot_radius=f(beam["spot_radius"] * 0 + 1e-3)', [T + "test_scene_keys.py"]),
+    ("covariance and polish unweighted", "fitting/core.py",
+     "            return weighted_residuals(forward_model, t, x, y, w)\n\n        jac, (residual, flag)",
+     "            return weighted_residuals(forward_model, t, x, y, jnp.ones_like(w))\n\n        jac, (residual, flag)",
+     [T + "test_fitting.py::test_weighted_nonlinear_standard_errors_have_their_monte_carlo_coverage"]),
 ]
 
 
