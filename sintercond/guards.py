@@ -11,7 +11,10 @@ for :func:`sintercond.rollout.advance` that, after every compiled chunk,
 
 1. measures the largest normal approach speed of every listed pair (touching
    or within the Verlet skin) and of every particle within one radius of a
-   wall, and refuses a state where it exceeds the sizing speed;
+   wall, and refuses a state where it exceeds the sizing speed, or where an
+   overlap is deeper than :data:`sintercond.simulate.MAX_INITIAL_OVERLAP` of
+   the smaller radius (Hertz's small-strain law has left its domain: a wall
+   driven through a soft particle);
 2. balances the mechanical energy when no wall moves: kinetic plus Hertz
    elastic energy (:func:`sintercond.forces.hertz_elastic_energy`, at the
    current, possibly softened, moduli) minus gravity's work since the start
@@ -53,6 +56,8 @@ class MotionFigures(NamedTuple):
     gravity_potential: float  # J, -sum_i m_i g . x_i
     approach: float  # m/s, the largest normal approach speed of a listed pair or a wall contact
     where: str  # which pair or wall contact approaches fastest
+    depth: float = 0.0  # the deepest overlap as a fraction of the smaller radius (of the particle, on a wall)
+    deepest: str = "no contact"  # which contact that is
 
 
 def motion_figures(physics: simulate.Physics, state: simulate.SimState, params: simulate.Params) -> MotionFigures:
@@ -79,6 +84,12 @@ def motion_figures(physics: simulate.Physics, state: simulate.SimState, params: 
                                                                     e_star))))
     closing = np.sum((v[i] - v[j]) * normal, axis=1)
     fastest, where = 0.0, "no contact"
+    depth, deepest = 0.0, "no contact"
+    if len(overlap):
+        relative = overlap / np.minimum(r[i], r[j])
+        k = int(np.argmax(relative))
+        if relative[k] > 0:
+            depth, deepest = float(relative[k]), f"particles {int(i[k])} and {int(j[k])}"
     if len(closing) and closing.max() > 0:
         k = int(np.argmax(closing))
         fastest, where = float(closing[k]), f"particles {int(i[k])} and {int(j[k])}"
@@ -89,12 +100,15 @@ def motion_figures(physics: simulate.Physics, state: simulate.SimState, params: 
         h = r - (x - (np.asarray(wall.point, np.float64) + t * wall_velocity)) @ wall_normal
         e_wall = modulus / (1.0 - nu**2)
         elastic += float(np.sum(np.asarray(forces.hertz_elastic_energy(h, r, e_wall))))
+        k = int(np.argmax(h / r))
+        if h[k] / r[k] > depth:
+            depth, deepest = float(h[k] / r[k]), f"particle {k} and wall {w}"
         near = h > -r
         closing = np.where(near, (wall_velocity - v) @ wall_normal, -np.inf)
         if closing.max() > fastest:
             k = int(np.argmax(closing))
             fastest, where = float(closing[k]), f"particle {k} and wall {w}"
-    return MotionFigures(kinetic, elastic, gravity, fastest, where)
+    return MotionFigures(kinetic, elastic, gravity, fastest, where, depth, deepest)
 
 
 def motion_guard(sim: simulate.Simulator, state: simulate.SimState, params: simulate.Params, sized_speed: float,
@@ -123,6 +137,12 @@ def motion_guard(sim: simulate.Simulator, state: simulate.SimState, params: simu
         if not (np.isfinite(now.kinetic) and np.isfinite(now.approach)):
             raise UnstableStep(f"non-finite velocities at step {step}; the time step is unstable: raise {speed_key} "
                                "or lower the time step")
+        if now.depth > simulate.MAX_INITIAL_OVERLAP:
+            raise UnstableStep(
+                f"at step {step} (t = {float(new.time):.6g} s) the overlap of {now.deepest} reached {now.depth:.3g} "
+                f"of the smaller radius, beyond the {simulate.MAX_INITIAL_OVERLAP:g} where Hertz's small-strain law "
+                f"holds: the contact is crushed; slow the walls or the particles (a scene's walls[k].velocity, "
+                f"{speed_key}) or stiffen the material")
         if now.approach > sized_speed:
             raise UnstableStep(
                 f"at step {step} (t = {float(new.time):.6g} s) {now.where} approach at {now.approach:.4g} m/s, above "

@@ -134,6 +134,17 @@ def test_an_approach_speed_the_step_was_not_sized_for_stops_the_run(tmp_path):
         runner.run_scene(scene, tmp_path / "out", progress=False)
 
 
+def test_a_wall_driven_through_a_soft_sphere_stops_the_run(tmp_path):
+    """Issue 28: a floor rising at 1,000 m/s (an allowed value) under a 1 MPa sphere. The step is sized for that
+    speed now, but no Hertz contact can stop the sphere within its radius: the run stops once an overlap passes
+    half the radius, naming the wall, instead of reporting a sphere the wall has gone through."""
+    scene = _resting(walls=[{"axis": 2, "side": "min", "mode": "insulated", "penetration": 0.0,
+                             "velocity": [0.0, 0.0, 1000.0]}], run={"duration": 2e-6, "checkpoint_every": 10})
+    with pytest.raises(guards.UnstableStep, match=r"the overlap of particle 0 and wall 0 reached .* the contact "
+                                                  r"is crushed; slow the walls .*walls\[k\]\.velocity"):
+        runner.run_scene(scene, tmp_path / "out", progress=False)
+
+
 def test_a_sized_run_passes_the_guards(tmp_path):
     """The same sphere with the default sizing speed settles on the floor: no guard fires, and it ends on
     Hertz's overlap of its weight."""
