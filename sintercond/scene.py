@@ -396,7 +396,7 @@ def _numbers(name, value, length, rule, integer=False):
 
 def _lateral_extent(packing):
     """``((x_lo, x_hi), (y_lo, y_hi))`` (m) of the packing, from the scene alone."""
-    if packing["kind"] == "powder_bed":
+    if packing["kind"] in ("powder_bed", "poured"):  # both fill the square [0, L]^2
         return (0.0, packing["lateral_size"]), (0.0, packing["lateral_size"])
     if packing["kind"] == "spheres":
         c, r = packing["centres"], packing["radii"]
