@@ -62,13 +62,33 @@ def beam_depth(centres, radii, spot_xy, spot_radius, surface_z):
 def beam_position(t, waypoints, speed):
     """Position (x, y) at time ``t`` of a beam moving at ``speed`` along a polyline of ``waypoints`` ``[k, 2]``.
 
-    The beam stops at the last waypoint.
+    The position stops at the last waypoint (whether the beam still heats there: :func:`beam_switch`).
     """
     waypoints = jnp.asarray(waypoints)
     segments = jnp.linalg.norm(jnp.diff(waypoints, axis=0), axis=1)
     arc = jnp.concatenate([jnp.zeros(1, segments.dtype), jnp.cumsum(segments)])
     s = jnp.clip(speed * t, 0.0, arc[-1])
     return jnp.stack([jnp.interp(s, arc, waypoints[:, 0]), jnp.interp(s, arc, waypoints[:, 1])])
+
+
+def beam_switch(t, waypoints, speed, segments_on=None, after_path=0.0):
+    """Whether a beam moving along ``waypoints`` ``[k, 2]`` at ``speed`` heats at time ``t``: 1 or 0.
+
+    On along the segments whose entry of ``segments_on`` ``[k - 1]`` is 1 (None: every segment; 0 marks a
+    jump between hatch lines), off before ``t = 0``; once the path is done, ``after_path`` (0: off, 1: the
+    beam stays on at the last waypoint). A path of one waypoint is a stationary spot, on from ``t = 0``.
+    """
+    waypoints = jnp.asarray(waypoints)
+    s = speed * t
+    if waypoints.shape[0] == 1:  # a stationary spot: on from t = 0
+        return jnp.where(s < 0, 0.0, 1.0).astype(waypoints.dtype)
+    segments = jnp.linalg.norm(jnp.diff(waypoints, axis=0), axis=1)
+    arc = jnp.concatenate([jnp.zeros(1, segments.dtype), jnp.cumsum(segments)])
+    on = jnp.ones((), segments.dtype)
+    if segments_on is not None:
+        index = jnp.clip(jnp.searchsorted(arc, s, side="right") - 1, 0, segments.shape[0] - 1)
+        on = jnp.asarray(segments_on, segments.dtype)[index]
+    return jnp.where(s < 0, 0.0, jnp.where(s > arc[-1], jnp.asarray(after_path, segments.dtype), on))
 
 
 def whitaker_nusselt(reynolds, prandtl, viscosity_ratio=1.0):

@@ -176,7 +176,9 @@ def scene_params(scene) -> simulate.Params:
         beam=None if beam is None else simulate.BeamParams(
             intensity=f(beam["intensity"]), reach=f(beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"]),
             spot_radius=f(beam["spot_radius"]), absorptance=f(beam["absorptance"]), speed=f(beam["speed"]),
-            path=f(beam["path"], dtype=float)),
+            path=f(beam["path"], dtype=float),
+            segments_on=None if "segments_on" not in beam else f(beam["segments_on"], dtype=float),
+            after_path=f(1.0 if beam.get("after_path", "off") == "stay" else 0.0)),
         convection=None if conv is None else simulate.ConvectionParams(
             f(conv["environment_temperature"]), f(conv["environment_conductivity"]), f(_nusselt(conv))),
         radiation=None if rad is None else simulate.RadiationParams(f(rad["environment_temperature"]),

@@ -114,7 +114,10 @@ _SCHEMA = {
     "beam": {
         "kind": Key(str, _choice("laser", "nozzle"), False, default="laser",
                     doc="laser: Lambert-Beer attenuation; nozzle: linear attenuation to max_depth"),
-        "intensity": Key(float, _within(0.0, 1e12, "W/m^2"), True, "W/m^2", doc="I0, power per unit spot area"),
+        "intensity": Key(float, _within(0.0, 1e12, "W/m^2"), False, "W/m^2",
+                         doc="I0, power per unit spot area (give it or beam.power)"),
+        "power": Key(float, _within(0.0, 1e6, "W"), False, "W",
+                     doc="the beam's power, I0 pi spot_radius^2 (give it or beam.intensity)"),
         "attenuation": Key(float, _within(0.0, 1e9, "1/m"), False, "1/m", doc="mu of a laser (required for it)"),
         "max_depth": Key(float, _within(1e-9, 1.0, "m"), False, "m", doc="reach d_max of a nozzle (required for it)"),
         "spot_radius": Key(float, _within(1e-9, 1.0, "m"), True, "m",
@@ -125,6 +128,12 @@ _SCHEMA = {
                     doc="[[x, y], ...] waypoints in absolute coordinates of the packing "
                         "(the container's corner or the lattice's first sphere side at 0), "
                         "each within the packing's lateral extent widened by spot_radius"),
+        "segments_on": Key(list, ("a list of booleans, one per segment of beam.path", lambda v: True), False,
+                           doc="whether the beam heats along each segment of the path (false: a jump between "
+                               "hatch lines); default: every segment"),
+        "after_path": Key(str, _choice("off", "stay"), False, default="off",
+                          doc="off: the beam stops heating once its path is done; stay: it heats on at the last "
+                              "waypoint"),
     },
     "convection": {
         "environment_temperature": Key(float, TEMPERATURE, True, "K", doc="T_E of the gas"),
@@ -545,6 +554,10 @@ def _check_details(scene):
         if needed not in beam:
             raise SceneError(f"beam.{needed} is required for a {beam['kind']} beam "
                              f"({_describe(_SCHEMA['beam'][needed])})")
+        if ("intensity" in beam) == ("power" in beam):
+            raise SceneError("give beam.intensity (W/m^2) or beam.power (W), one of them")
+        if "power" in beam:
+            beam["intensity"] = beam.pop("power") / (math.pi * beam["spot_radius"] ** 2)
         path = beam["path"]
         if not path or any(not isinstance(p, list) for p in path):
             raise SceneError(f"beam.path must be a non-empty list of [x, y] points (m); got {path!r}")
@@ -556,6 +569,11 @@ def _check_details(scene):
         for k, (x, y) in enumerate(beam["path"]):
             if not (x0 - reach <= x <= x1 + reach and y0 - reach <= y <= y1 + reach):
                 raise SceneError(f"beam.path[{k}] = {[x, y]} must be {rule[0]} (beam coordinates are absolute)")
+        on = beam.get("segments_on")
+        if on is not None and (not isinstance(on, list) or len(on) != len(path) - 1
+                               or any(not isinstance(v, bool) for v in on)):
+            raise SceneError(f"beam.segments_on must be a list of {len(path) - 1} booleans (true or false), one per "
+                             f"segment of beam.path; got {on!r}")
     convection = scene.get("convection", {})
     if ("reynolds" in convection) != ("prandtl" in convection):
         raise SceneError("convection.reynolds and convection.prandtl go together (Whitaker's correlation)")

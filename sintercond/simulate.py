@@ -259,6 +259,8 @@ class BeamParams:
       absorptance: ``a`` in [0, 1].
       speed: speed along the path (m/s).
       path: ``[k, 2]`` waypoints (x, y) (m), absolute coordinates.
+      segments_on: ``[k - 1]`` 1 where the beam heats along a segment, 0 where it jumps (None: always on).
+      after_path: 0 (the beam is off once its path is done) or 1 (it stays on at the last waypoint).
     """
 
     intensity: Any
@@ -267,6 +269,8 @@ class BeamParams:
     absorptance: Any
     speed: Any
     path: Any
+    segments_on: Any = None
+    after_path: Any = 0.0
 
 
 @pytree_dataclass

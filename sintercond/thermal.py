@@ -309,7 +309,8 @@ def source_power_parts(physics, state, params):
         surface = jnp.max(positions[:, 2] + radii)
         depth = heat_sources.beam_depth(positions, radii, spot, b.spot_radius, surface)
         law = heat_sources.laser_power if physics.beam == "laser" else heat_sources.nozzle_power
-        terms.append(law(radii, depth, b.intensity, b.reach, b.absorptance))
+        switch = heat_sources.beam_switch(t, b.path, b.speed, b.segments_on, b.after_path)
+        terms.append(switch * law(radii, depth, b.intensity, b.reach, b.absorptance))
     if physics.convection:
         c = params.convection
         terms.append(heat_sources.convection_power(radii, temperature, c.environment_temperature,

@@ -38,3 +38,45 @@ def test_pour_then_scan_runs_and_the_beam_heats_the_bed(tmp_path):
     temperature, summary = runner.run_scene(scene, tmp_path, progress=False)
     assert summary["steps"] > 0 and np.all(np.isfinite(np.asarray(temperature)))
     assert summary["T_max_K"] > scene["initial"]["temperature"] + 1.0  # heated under the spot
+
+
+def _lattice_with_beam(**beam):
+    scene = {"packing": {"kind": "simple_cubic", "counts": [4, 1, 1], "spacing": 1e-4, "radius": 0.52e-4},
+             "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 12.6},
+             "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
+             "beam": {"intensity": 2e8, "attenuation": 2e4, "spot_radius": 5e-5, "absorptance": 0.7, "speed": 0.1,
+                      # along the row and back: 3e-4 m out, 3e-4 m back, 6e-3 s in all
+                      "path": [[0.52e-4, 0.52e-4], [3.52e-4, 0.52e-4], [0.52e-4, 0.52e-4]]},
+             "run": {"duration": 1e-2, "dt": "auto", "output_every": 5, "checkpoint_every": 10, "formats": ["vtp"]}}
+    scene["beam"].update(beam)
+    scene["beam"] = {k: v for k, v in scene["beam"].items() if v is not None}
+    return runner.build_model(validate_scene(scene))
+
+
+def _beam_power_at(model, t):
+    import dataclasses
+
+    from sintercond import thermal
+
+    state = dataclasses.replace(model.state, step=np.asarray(round(t / model.dt), model.state.step.dtype))
+    return np.asarray(thermal.source_power(model.physics, state, model.params))
+
+
+def test_the_beam_is_off_once_its_path_is_done():
+    """The beam used to stay on at its last waypoint for the rest of the run."""
+    model = _lattice_with_beam()
+    assert _beam_power_at(model, 1e-3).sum() > 0  # on its way out
+    assert _beam_power_at(model, 8e-3).sum() == 0.0  # the path took 6e-3 s
+    stays = _lattice_with_beam(after_path="stay")
+    power = _beam_power_at(stays, 8e-3)
+    assert power[0] > 0 and power[2:].sum() == 0.0  # on at the last waypoint: over sphere 0 (and 1, within reach)
+
+
+def test_the_beam_jumps_between_hatch_lines_switched_off():
+    model = _lattice_with_beam(segments_on=[True, False])
+    assert _beam_power_at(model, 1e-3).sum() > 0 and _beam_power_at(model, 4.5e-3).sum() == 0.0
+
+
+def test_a_beam_given_by_its_power():
+    model = _lattice_with_beam(power=2.0, intensity=None)
+    assert float(model.params.beam.intensity) == pytest.approx(2.0 / (np.pi * 5e-5**2), rel=1e-15)

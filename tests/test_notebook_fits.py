@@ -31,11 +31,11 @@ def printed(name, pattern):
 
 
 def test_printed_slope_fit_is_current_and_the_closed_form():
-    s, ds, steps = printed("calibrate_slope.ipynb", r"s = ([\d.]+) \+- ([\d.]+) \(1 sigma, (\d+) optimiser steps\)")
+    s, ds = printed("calibrate_slope.ipynb", r"s = ([\d.]+) \+- ([\d.]+) \(1 sigma, converged\)")
     data = fe_neck_conductance()
     fit = fit_slope(data["a_over_r"], data["K_over_Kcyl"], max_a_over_r=0.7)
     assert float(s) == round(fit.params["slope"], 4) and float(ds) == round(fit.stderr["slope"], 4)
-    assert int(steps) == fit.steps
+    assert fit.converged  # not the step count: Adam's count at its tolerance moves with the round-off
     # independent: least squares through the origin, s = sum(x y) / sum(x^2), stderr from the residual variance
     keep = data["a_over_r"] <= 0.7
     x, y = data["a_over_r"][keep], data["K_over_Kcyl"][keep]
@@ -45,7 +45,9 @@ def test_printed_slope_fit_is_current_and_the_closed_form():
 
 
 def test_printed_phi_fit_is_current():
-    phi, dphi, steps = printed("calibrate_phi.ipynb", r"phi = ([\d.]+) \+- ([\d.]+) \(1 sigma;.*?, (\d+) steps\)")
+    # the printed line gives no step count: Adam's count at the stopping tolerance moves with the machine's
+    # round-off (310 -> 291 under reassociated sums) while the estimate and its interval do not
+    phi, dphi = printed("calibrate_phi.ipynb", r"phi = ([\d.]+) \+- ([\d.]+) \(1 sigma;.*?, converged\)")
     fit = phi_fit.fit_phi(phi_fit.bcc_inputs())
     assert float(phi) == round(fit.params["phi"], 3) and float(dphi) == round(fit.stderr["phi"], 3)
-    assert int(steps) == fit.steps
+    assert fit.converged

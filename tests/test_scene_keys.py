@@ -65,6 +65,8 @@ ROWS = [
     ("beam.absorptance", 0.8, lambda m: f(m.params.beam.absorptance)),
     ("beam.speed", 0.02, lambda m: f(m.params.beam.speed)),
     ("beam.path", [[2.5e-3, 2e-3], [3e-3, 2.5e-3]], lambda m: np.asarray(m.params.beam.path).tolist()),
+    ("beam.segments_on", [False], lambda m: np.asarray(m.params.beam.segments_on).tolist()),
+    ("beam.after_path", "stay", lambda m: f(m.params.beam.after_path)),
     ("convection.environment_temperature", 280.0, lambda m: f(m.params.convection.environment_temperature)),
     ("convection.environment_conductivity", 0.05, lambda m: f(m.params.convection.environment_conductivity)),
     ("convection.nusselt", 3.0, lambda m: f(m.params.convection.nusselt)),
@@ -92,6 +94,7 @@ ROWS = [
     ("run.duration", 2e-3, lambda m: m.n_steps * m.dt),
 ]
 EXPECTED = {
+    "beam.segments_on": [0.0], "beam.after_path": 1.0,
     "mechanics.friction": (0.4, True), "mechanics.rolling_friction": (0.1, True),
     "mechanics.wall_friction": (0.2, True), "mechanics.wall_rolling_friction": (0.05, True),
 }
@@ -105,6 +108,7 @@ ELSEWHERE = {
     "convection.prandtl": "test_reynolds_and_prandtl_give_whitakers_nusselt (below)",
     "beam.kind": "test_nozzle_reach (below): a nozzle needs its max_depth",
     "beam.max_depth": "test_nozzle_reach (below)",
+    "beam.power": "test_first_day.py: test_a_beam_given_by_its_power (it sets beam.intensity)",
     "run.output_every": "test_observable_times.py: history rows at every output_every steps",
     "run.checkpoint_every": "test_scene_mechanics.py: the resume test cuts at a checkpoint",
     "run.formats": "test_scene_run.py: the formats written",
