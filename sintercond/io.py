@@ -5,11 +5,14 @@ Both formats are checked by the readers people open them with, VTK's
 with the ``readers`` extra):
 
 * ``write_vtp``: one vertex per particle, point data ``temperature`` (K),
-  ``radius`` (m) and ``id`` (and, from a run with mechanics, ``velocity``
+  ``radius`` (m) and ``id`` (and more fields: from a run with mechanics ``velocity``
   (m/s), ``force`` (N, contact force) and ``coordination``); field data ``TIME`` (s) and ``STEP`` with
-  ``NumberOfTuples="1"`` (without it VTK reads them back empty). Numbers are
-  written with Python's shortest round-trip ``repr`` of a built-in float, so
-  the file holds the exact float64 values.
+  ``NumberOfTuples="1"`` (without it VTK reads them back empty), and ``TIME`` again as
+  ``TimeValue``, the field VTK's and ParaView's readers take as the frame's time. Binary
+  (appended, zlib-compressed) by default, or ASCII with Python's shortest
+  round-trip ``repr`` of each float; both hold the exact float64 values.
+  ``read_vtp`` reads either back; ``write_pvd`` lists the frames with their
+  physical times for ParaView.
 * ``append_lammps``: one ``ITEM: TIMESTEP`` frame per call, box bounds the
   particles' bounding box widened by the largest radius, columns
   ``id radius x y z temperature`` (OVITO maps ``radius`` and ``x y z`` to its
@@ -19,7 +22,9 @@ with the ``readers`` extra):
 from __future__ import annotations
 
 import os
+import zlib
 from pathlib import Path
+from xml.etree import ElementTree
 
 import jax
 import jax.numpy as jnp
@@ -42,25 +47,45 @@ def _extra_fields(fields, n):
     return out
 
 
-def write_vtp(path, centres, radii, temperature, step, t, fields=None):
-    """VTK XML PolyData (ASCII) with one vertex per particle: temperature, radius, id; TIME and STEP field data.
+VTP_ENCODINGS = ("binary", "ascii")
+
+
+def write_vtp(path, centres, radii, temperature, step, t, fields=None, encoding="binary"):
+    """VTK XML PolyData with one vertex per particle: temperature, radius, id; TIME and STEP field data.
 
     ``fields``: more point data, ``{name: [n] or [n, k]}`` (e.g. ``velocity``
     ``[n, 3]`` m/s, ``force`` ``[n, 3]`` N, ``coordination`` ``[n]`` ints),
-    written as Float64 or, for integer arrays, Int64.
+    written as Float64 or, for integer arrays, Int64. ``encoding``:
+    ``"binary"`` (the point data appended raw after the XML, each array one
+    zlib-compressed block behind a UInt64 header, as VTK writes it) or
+    ``"ascii"`` (shortest round-trip text). Both hold the exact float64 values.
     """
+    if encoding not in VTP_ENCODINGS:
+        raise ValueError(f"encoding must be one of {list(VTP_ENCODINGS)}; got {encoding!r}")
     n = len(radii)
     fields = _extra_fields(fields, n)
+    blocks, offset = [], 0
 
-    def array(name, values, kind="Float64", components=1, tuples=None):
-        body = " ".join(_number(v) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
+    def array(name, values, kind="Float64", components=1, tuples=None, inline=False):
+        nonlocal offset
         count = "" if tuples is None else f' NumberOfTuples="{tuples}"'
-        return (f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}"{count} format="ascii">'
-                f"{body}</DataArray>")
+        head = f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}"{count}'
+        if encoding == "ascii" or inline:
+            body = " ".join(_number(v) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
+            return f'{head} format="ascii">{body}</DataArray>'
+        raw = np.ascontiguousarray(np.ravel(values), "<f8" if kind == "Float64" else "<i8").tobytes()
+        packed = zlib.compress(raw, 6)
+        block = np.asarray([1, len(raw), len(raw), len(packed)], "<u8").tobytes() + packed
+        blocks.append(block)
+        offset, at = offset + len(block), offset
+        return f'{head} format="appended" offset="{at}"/>'
 
+    binary = encoding == "binary"
     xml = (
-        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">\n<PolyData>\n'
-        f'<FieldData>{array("TIME", [t], tuples=1)}{array("STEP", [step], "Int64", tuples=1)}</FieldData>\n'
+        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian"'
+        + (' header_type="UInt64" compressor="vtkZLibDataCompressor"' if binary else "") + '>\n<PolyData>\n'
+        f'<FieldData>{array("TIME", [t], tuples=1, inline=True)}{array("TimeValue", [t], tuples=1, inline=True)}'
+        f'{array("STEP", [step], "Int64", tuples=1, inline=True)}</FieldData>\n'
         f'<Piece NumberOfPoints="{n}" NumberOfVerts="{n}" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">\n'
         f'<Points>{array("position", centres, components=3)}</Points>\n'
         f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
@@ -68,9 +93,47 @@ def write_vtp(path, centres, radii, temperature, step, t, fields=None):
         f'{array("id", np.arange(n), "Int64")}'
         + "".join(array(name, v, "Int64" if np.issubdtype(v.dtype, np.integer) else "Float64",
                         1 if v.ndim == 1 else v.shape[1]) for name, v in fields.items())
-        + '</PointData>\n</Piece>\n</PolyData>\n</VTKFile>\n'
+        + '</PointData>\n</Piece>\n</PolyData>\n'
     )
-    atomic_write_text(path, xml)
+    if binary:
+        atomic_write_bytes(path, xml.encode() + b'<AppendedData encoding="raw">\n_' + b"".join(blocks)
+                           + b"\n</AppendedData>\n</VTKFile>\n")
+    else:
+        atomic_write_text(path, xml + "</VTKFile>\n")
+
+
+def read_vtp(path) -> dict:
+    """The arrays of a :func:`write_vtp` file (either encoding): ``position`` ``[n, 3]``, every point array by name
+    (``[n]`` or ``[n, k]``), and the field data ``TIME`` and ``STEP`` (scalars)."""
+    data = Path(path).read_bytes()
+    marker = data.find(b"<AppendedData")
+    xml = data if marker < 0 else data[:marker] + b"</VTKFile>"
+    appended = b"" if marker < 0 else data[data.index(b"_", marker) + 1:]
+    root = ElementTree.fromstring(xml)
+    out = {}
+    for node in root.iter("DataArray"):
+        dtype = "<f8" if node.get("type") == "Float64" else "<i8"
+        if node.get("format") == "appended":
+            at = int(node.get("offset"))
+            blocks, _, _, size = np.frombuffer(appended[at:at + 32], "<u8")
+            if blocks != 1:
+                raise ValueError(f"{path}: only single-block arrays are read")
+            values = np.frombuffer(zlib.decompress(appended[at + 32:at + 32 + int(size)]), dtype)
+        else:
+            values = np.array((node.text or "").split(), float).astype(dtype)
+        components = int(node.get("NumberOfComponents", "1"))
+        out[node.get("Name")] = values.reshape(-1, components) if components > 1 else values
+    for name in ("TIME", "TimeValue", "STEP"):
+        out[name] = out[name][0]
+    return out
+
+
+def write_pvd(path, frames):
+    """A ParaView collection ``path`` (``.pvd``) of ``frames`` ``[(time s, file relative to path's folder)]``:
+    ParaView plays the frames as a time series at their physical times."""
+    rows = "".join(f'<DataSet timestep="{_number(t)}" group="" part="0" file="{name}"/>\n' for t, name in frames)
+    atomic_write_text(path, '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1" '
+                            f'byte_order="LittleEndian">\n<Collection>\n{rows}</Collection>\n</VTKFile>\n')
 
 
 def _lammps_columns(fields):
@@ -120,8 +183,13 @@ def truncate_lammps(path, last_step):
 
 def atomic_write_text(path, text):
     """Write to ``path.tmp`` and rename: a killed writer leaves the old file or the new one, never half of one."""
+    atomic_write_bytes(path, text.encode())
+
+
+def atomic_write_bytes(path, data: bytes):
+    """:func:`atomic_write_text` for bytes."""
     tmp = Path(str(path) + ".tmp")
-    tmp.write_text(text)
+    tmp.write_bytes(data)
     os.replace(tmp, path)
 
 

@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from sintercond import forces, guards, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
 from sintercond.rollout import advance
-from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_vtp
+from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, restitution_damping_ratio,
                               validate_scene)
 from sintercond.state import particle_state
@@ -446,6 +446,7 @@ class Observation(NamedTuple):
     wall_overlap: Any = None  # [n_walls, n] (m), > 0 touching
     velocity: Any = None  # [n, 3] (m/s)
     force: Any = None  # [n, 3] contact force (N), gravity excluded
+    power: Any = None  # [n] net heat power into each particle from its contacts, walls and sources (W)
 
 
 def _probe_fn(model):
@@ -483,7 +484,8 @@ def observe(scene, model, state, probe) -> Observation:
     p = state.particles
     positions, radii, temperature = (np.asarray(x) for x in (p.positions, p.radii, p.temperature))
     kappa = np.asarray(model.params.conductivity)[np.asarray(p.material)]
-    needs_power = any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics
+    needs_power = (any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics
+                   or "vtp" in scene["run"]["formats"])
     power, after = probe(state, model.params) if needs_power else (None, None)
     planes = scene_walls(scene, np.asarray(model.state.particles.positions), radii)
     if model.physics.mechanics:
@@ -504,8 +506,9 @@ def observe(scene, model, state, probe) -> Observation:
         if mode == "held":
             flows[k] = -float(np.sum((np.asarray(power) + conducting_power)[mask]))
     heat = tuple(flows[spec[1]] for spec in model.wall_heat)
+    total = None if power is None else np.asarray(power) + conducting_power
     if not model.physics.mechanics:
-        return Observation(heat)
+        return Observation(heat, power=total)
     m = np.asarray(p.mass)
     v, omega = np.asarray(state.mechanics.velocity), np.asarray(state.mechanics.spin)
     inertia = forces.SOLID_SPHERE_INERTIA * m * radii**2
@@ -513,7 +516,7 @@ def observe(scene, model, state, probe) -> Observation:
     force = m[:, None] * ((np.asarray(after) - v) / float(state.dt) - np.asarray(model.physics.gravity))
     pairs, overlap = _touching_pairs(positions, radii, np.asarray(state.contacts.neighbors))
     return Observation(heat, kinetic, pairs, overlap, np.stack(wall_h) if wall_h else np.zeros((0, len(radii))),
-                       v, force)
+                       v, force, total)
 
 
 def _touching_pairs(positions, radii, neighbors):
@@ -558,7 +561,7 @@ def _clear_outputs(out):
     """A new run into ``out`` first removes the outputs an earlier run left there."""
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         f.unlink()
-    for name in ("dump.lammpstrj", "checkpoint.npz", "history.csv", "summary.json"):
+    for name in ("dump.lammpstrj", "checkpoint.npz", "history.csv", "summary.json", "frames.pvd"):
         if (out / name).exists():
             (out / name).unlink()
 
@@ -646,11 +649,25 @@ def _write_outputs(scene, out, model, state, obs: Observation):
     if model.physics.mechanics:
         fields = {"velocity": obs.velocity, "force": obs.force,
                   "coordination": coordination(len(model.radii), obs.pairs)}
-    if "vtp" in formats:
-        (out / "vtp").mkdir(exist_ok=True)
-        write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields)
     if "lammps" in formats:
         append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields)
+    if "vtp" in formats:
+        p = state.particles
+        fields = {**fields, "held": np.asarray(p.fixed, np.int64) if p.fixed is not None else
+                  np.zeros(len(model.radii), np.int64), "material": np.asarray(p.material, np.int64)}
+        if obs.power is not None:
+            fields["heat_power"] = np.asarray(obs.power)
+        (out / "vtp").mkdir(exist_ok=True)
+        write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields,
+                  encoding=scene["run"].get("vtp_encoding", "binary"))
+        write_frames_pvd(out, model.dt)
+
+
+def write_frames_pvd(out, dt):
+    """``out/frames.pvd``: every frame in ``out/vtp`` at its physical time ``step * dt`` (ParaView's time series)."""
+    frames = sorted((out / "vtp").glob("step_*.vtp"))
+    write_pvd(out / "frames.pvd", [(float(np.float64(int(f.stem.split("_")[1])) * dt), f"vtp/{f.name}")
+                                   for f in frames])
 
 
 def resume(out_dir, progress=True, stop_after_chunks=None):
@@ -679,6 +696,8 @@ def resume(out_dir, progress=True, stop_after_chunks=None):
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         if int(f.stem.split("_")[1]) > step:
             f.unlink()
+    if (out / "vtp").exists():
+        write_frames_pvd(out, model.dt)
     if (out / "dump.lammpstrj").exists():
         truncate_lammps(out / "dump.lammpstrj", step)
     if (out / "history.csv").exists():

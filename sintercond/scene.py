@@ -215,6 +215,8 @@ _SCHEMA = {
         "formats": Key(list, ("a non-empty list of distinct names from ['lammps', 'vtp']", lambda v: True), False,
                        default=["vtp"],
                        doc='non-empty list of distinct "vtp" (ParaView) and "lammps" (OVITO)'),
+        "vtp_encoding": Key(str, _choice("binary", "ascii"), False, default="binary",
+                            doc="binary: point data appended and zlib-compressed (VTK's own layout); ascii: text"),
         "override_limits": Key(bool, None, False, default=False,
                                doc="true lifts the limits on steps, frames and output bytes (MAX_STEPS, "
                                    "MAX_FRAMES, MAX_OUTPUT_BYTES)"),

@@ -4,6 +4,7 @@ Both readers come with the ``readers`` extra, which CI installs (``.ci/run``).
 """
 
 import copy
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -37,9 +38,10 @@ def read_vtp(path):
     return data, points, point_data, field
 
 
-def test_vtp_read_by_vtk_with_time_and_step(tmp_path):
+@pytest.mark.parametrize("encoding", io.VTP_ENCODINGS)
+def test_vtp_read_by_vtk_with_time_and_step(tmp_path, encoding):
     centres, radii, temperature = _particles()
-    io.write_vtp(tmp_path / "a.vtp", centres, radii, temperature, np.int64(70), np.float64(1.25e-3))
+    io.write_vtp(tmp_path / "a.vtp", centres, radii, temperature, np.int64(70), np.float64(1.25e-3), encoding=encoding)
     data, points, point_data, field = read_vtp(tmp_path / "a.vtp")
     assert data.GetNumberOfPoints() == 5 and data.GetNumberOfVerts() == 5
     np.testing.assert_array_equal(points, centres)
@@ -49,6 +51,22 @@ def test_vtp_read_by_vtk_with_time_and_step(tmp_path):
     # before the fix, TIME and STEP had no NumberOfTuples and came back as empty arrays
     assert field["TIME"].shape == (1,) and field["TIME"][0] == 1.25e-3
     assert field["STEP"].shape == (1,) and field["STEP"][0] == 70
+    mine = io.read_vtp(tmp_path / "a.vtp")  # our own reader, used by the tests, agrees with VTK's
+    np.testing.assert_array_equal(mine["position"], centres)
+    np.testing.assert_array_equal(mine["temperature"], temperature)
+    assert mine["TIME"] == 1.25e-3 and mine["STEP"] == 70
+
+
+def test_binary_frames_are_smaller_and_exact(tmp_path):
+    """Issue 27: frames were ASCII (80 MB each at 1e6 particles). Binary frames hold the same float64 bits."""
+    rng = np.random.default_rng(1)
+    centres, radii, temperature = rng.uniform(size=(2000, 3)), rng.uniform(1e-5, 2e-5, 2000), rng.uniform(300, 900, 2000)
+    for encoding in io.VTP_ENCODINGS:
+        io.write_vtp(tmp_path / f"{encoding}.vtp", centres, radii, temperature, 3, 1e-3, encoding=encoding)
+    assert (tmp_path / "binary.vtp").stat().st_size < 0.5 * (tmp_path / "ascii.vtp").stat().st_size
+    _, points, point_data, _ = read_vtp(tmp_path / "binary.vtp")
+    np.testing.assert_array_equal(points, centres)
+    np.testing.assert_array_equal(point_data["temperature"], temperature)
 
 
 def test_lammps_dump_read_by_ovito(tmp_path):
@@ -86,6 +104,21 @@ def test_a_run_opens_in_both_readers_with_its_time(tmp_path):
     assert field["STEP"][0] == summary["steps"]
     assert field["TIME"][0] == pytest.approx(summary["simulated_s"], rel=1e-12)
     np.testing.assert_array_equal(point_data["temperature"], np.asarray(final))
+    # ParaView's time series: frames.pvd lists every frame at step * dt, and VTK's reader gives each frame that time
+    collection = ElementTree.parse(tmp_path / "frames.pvd").getroot()
+    listed = [(float(d.get("timestep")), d.get("file")) for d in collection.iter("DataSet")]
+    frames = sorted((tmp_path / "vtp").glob("step_*.vtp"))
+    assert [name for _, name in listed] == [f"vtp/{f.name}" for f in frames]
+    key = vtk.vtkStreamingDemandDrivenPipeline.TIME_STEPS()
+    for t, name in listed:
+        reader = vtk.vtkXMLPolyDataReader()
+        reader.SetFileName(str(tmp_path / name))
+        reader.UpdateInformation()  # VTK takes the frame's time from its TimeValue field, as ParaView does
+        info = reader.GetOutputInformation(0)
+        assert info.Length(key) == 1 and info.Get(key, 0) == t
+    assert listed[-1][0] == pytest.approx(summary["simulated_s"], rel=1e-12) and listed[0][0] == 0.0
+    _, _, point_data, _ = read_vtp(last)
+    assert {"held", "material", "heat_power"} <= set(point_data)
     pipeline = ovito_io.import_file(str(tmp_path / "dump.lammpstrj"))
     assert pipeline.num_frames == -(-summary["steps"] // 5) + 1  # every 5 steps and the (shorter) last chunk
     data = pipeline.compute(pipeline.num_frames - 1)

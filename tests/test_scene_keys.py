@@ -112,6 +112,7 @@ ELSEWHERE = {
     "run.output_every": "test_observable_times.py: history rows at every output_every steps",
     "run.checkpoint_every": "test_scene_mechanics.py: the resume test cuts at a checkpoint",
     "run.formats": "test_scene_run.py: the formats written",
+    "run.vtp_encoding": "test_io.py: both encodings read back by VTK (binary is the default a run writes)",
     "run.override_limits": "test_bad_input.py: the limits refused and overridden",
 }
 WALL_ROWS = [  # walls[0] with mechanics is physics.walls[0]

@@ -81,13 +81,13 @@ def test_run_writes_outputs_and_resume_is_exact(tmp_path):
     full_files = sorted(p.name for p in (tmp_path / "full" / "vtp").iterdir())
     assert full_files == sorted(p.name for p in (tmp_path / "cut" / "vtp").iterdir())
     for name in full_files:
-        assert (tmp_path / "full" / "vtp" / name).read_text() == (tmp_path / "cut" / "vtp" / name).read_text()
+        assert (tmp_path / "full" / "vtp" / name).read_bytes() == (tmp_path / "cut" / "vtp" / name).read_bytes()
     assert (tmp_path / "full" / "dump.lammpstrj").read_text() == (tmp_path / "cut" / "dump.lammpstrj").read_text()
 
 
 def test_vtp_is_valid_polydata(tmp_path):
     centres = np.random.default_rng(0).uniform(size=(4, 3))
-    runner.write_vtp(tmp_path / "x.vtp", centres, np.full(4, 0.1), np.arange(4.0) + 300, 7, 1e-3)
+    runner.write_vtp(tmp_path / "x.vtp", centres, np.full(4, 0.1), np.arange(4.0) + 300, 7, 1e-3, encoding="ascii")
     root = ET.parse(tmp_path / "x.vtp").getroot()
     piece = root.find("PolyData/Piece")
     assert root.get("type") == "PolyData" and piece.get("NumberOfPoints") == "4"
