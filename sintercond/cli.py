@@ -94,6 +94,7 @@ def main(argv=None) -> int:
                      help="simulated time in s, replacing the scene's run.duration (e.g. a short look at a scene)")
     run.add_argument("--resume", metavar="DIR", default=None, help="continue the run in DIR from its checkpoint")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--no-pictures", action="store_true", help="skip final_state.png and history.png")
     sub.add_parser("scenes", help="list the built-in example scenes (run one with `sintercond run NAME`)")
     effective = sub.add_parser("effective", help="steady-state effective conductivity of a scene's packing")
     effective.add_argument("scene", nargs="?", default=None, help="scene TOML file (default: built-in default scene)")
@@ -151,15 +152,14 @@ def _run(args) -> int:
     if args.resume is not None:
         if args.duration is not None:
             raise SceneError("--duration applies to a new run, not to --resume (which continues the saved scene)")
-        _, summary = runner.resume(args.resume, progress=not args.no_progress)
+        _, summary = runner.resume(args.resume, progress=not args.no_progress, pictures=not args.no_pictures)
         out = args.resume
     else:
         scene = load_scene(args.scene, duration=args.duration)
-        _, summary = runner.run_scene(scene, args.out, progress=not args.no_progress)
+        _, summary = runner.run_scene(scene, args.out, progress=not args.no_progress, pictures=not args.no_pictures)
         out = args.out
     print(runner.summary_table(summary))
-    print(f"outputs in {out}/ (final_state.png: a picture of the last state; vtp/*.vtp for ParaView, "
-          "dump.lammpstrj for OVITO, checkpoint.npz)")
+    print(f"outputs in {out}/ ({runner.written_outputs(out)})")
     return 0
 
 

@@ -566,7 +566,7 @@ def _clear_outputs(out):
             (out / name).unlink()
 
 
-def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None):
+def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None, pictures=True):
     """Run a validated scene into ``out_dir``; returns ``(final temperatures, summary dict)``.
 
     Prints each phase (packing, network, compile) and, before stepping, the
@@ -632,9 +632,20 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
                         "final_contacts": int(history["contacts"][-1]),
                         "max_overlap_m": float(history["max_overlap_m"][-1])})
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    plots.write_run_pictures(out, np.asarray(state.particles.positions), model.radii, temperature, summary,
-                             history=read_history(out))
+    if pictures:
+        plots.write_run_pictures(out, np.asarray(state.particles.positions), model.radii, temperature, summary,
+                                 history=read_history(out))
     return temperature, summary
+
+
+def written_outputs(out) -> str:
+    """What a finished run left in ``out``, for the closing line of ``sintercond run``."""
+    out = Path(out)
+    listed = [(plots.STATE_PICTURE, "a picture of the last state"), (plots.HISTORY_PLOT, "the history plotted"),
+              ("frames.pvd", "the frames as a time series for ParaView"), ("vtp", "one VTP frame per output"),
+              ("dump.lammpstrj", "for OVITO"), ("history.csv", "one row per output"),
+              ("summary.json", "the summary"), ("checkpoint.npz", "for --resume")]
+    return "; ".join(f"{name}{'/' if name == 'vtp' else ''}: {what}" for name, what in listed if (out / name).exists())
 
 
 def _write_outputs(scene, out, model, state, obs: Observation):
@@ -670,7 +681,7 @@ def write_frames_pvd(out, dt):
                                    for f in frames])
 
 
-def resume(out_dir, progress=True, stop_after_chunks=None):
+def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True):
     """Continue the run in ``out_dir`` from its last checkpoint (the whole state).
 
     A finished run (its ``summary.json`` at the checkpoint's step) is not
@@ -703,7 +714,7 @@ def resume(out_dir, progress=True, stop_after_chunks=None):
     if (out / "history.csv").exists():
         lines = (out / "history.csv").read_text().splitlines(keepends=True)
         (out / "history.csv").write_text("".join([lines[0]] + [r for r in lines[1:] if int(r.split(",")[0]) <= step]))
-    return run_scene(scene, out, progress, stop_after_chunks, _start=(model, state))
+    return run_scene(scene, out, progress, stop_after_chunks, _start=(model, state), pictures=pictures)
 
 
 def summary_table(summary) -> str:

@@ -80,3 +80,14 @@ def test_the_beam_jumps_between_hatch_lines_switched_off():
 def test_a_beam_given_by_its_power():
     model = _lattice_with_beam(power=2.0, intensity=None)
     assert float(model.params.beam.intensity) == pytest.approx(2.0 / (np.pi * 5e-5**2), rel=1e-15)
+
+
+def test_pictures_can_be_skipped_and_the_closing_line_lists_what_was_written(tmp_path, capsys):
+    from sintercond import cli
+
+    out = tmp_path / "out"
+    assert cli.main(["run", "--out", str(out), "--no-progress", "--no-pictures", "--duration", "2e-4"]) == 0
+    closing = capsys.readouterr().out.strip().splitlines()[-1]
+    assert not (out / "final_state.png").exists() and not (out / "history.png").exists()
+    assert "final_state.png" not in closing and "history.png" not in closing  # it listed them, written or not
+    assert "frames.pvd" in closing and "history.csv" in closing and "checkpoint.npz" in closing

@@ -95,3 +95,31 @@ def test_every_figure_linked_from_the_docs_exists_and_decodes():
     assert root / "docs" / "default_scene.png" in links
     for path in links:
         _image(path)
+
+
+def test_large_views_are_drawn_as_an_image_nearest_disc_in_front():
+    """Issue 27: a million patches took minutes. Above RASTER_ABOVE discs a view is one image; each pixel shows
+    the disc nearest the viewer that covers it, and pixels no disc covers stay empty (NaN)."""
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    ax = Figure().subplots()
+    centres = np.array([[0.0, 0.0], [0.5, 0.0], [3.0, 3.0]])
+    radii = np.array([1.0, 1.0, 0.01])  # the third is smaller than a pixel: it still shows, at its centre
+    depth = np.array([0.0, 1.0, 0.0])  # the second lies in front of the first
+    temperature = np.array([300.0, 900.0, 600.0])
+    image = plots._raster_discs(ax, centres, radii, depth, temperature, Normalize(300, 900), "inferno",
+                                np.array([[-1.0, 3.0], [-1.0, 3.0]]), 1.0, pixels=400).get_array()
+    pixel = lambda x, y: image[int((y + 1.0) / 0.01), int((x + 1.0) / 0.01)]  # noqa: E731
+    assert pixel(0.25, 0.0) == 900.0  # where both cover it: the one in front
+    assert pixel(-0.75, 0.0) == 300.0  # only the first reaches here
+    assert pixel(3.0, 3.0) == 600.0
+    assert np.ma.is_masked(pixel(2.0, -0.5))  # matplotlib masks the NaN of an empty pixel
+
+
+def test_a_big_state_picture_is_written(tmp_path):
+    rng = np.random.default_rng(0)
+    n = plots.RASTER_ABOVE + 1000
+    positions = rng.uniform(0, 1e-3, (n, 3))
+    path = plots.state_picture(tmp_path / "big.png", positions, np.full(n, 1e-5), rng.uniform(300, 400, n), 1e-3)
+    assert imread(path).shape[0] > 100
