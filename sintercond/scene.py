@@ -284,7 +284,8 @@ _WALL = {
     "penetration": Key(float, _within(0.0, 0.2), False, "mean radii", default=0.02,
                        doc="the wall plane lies at the packing's extreme along the axis moved this many mean "
                            "radii into the packing: the particles it cuts touch the wall (with mechanics, 0 places "
-                           "it touching without pushing)"),
+                           "it touching without pushing); 0.1 on a powder bed, whose face layer spreads over about "
+                           "a tenth of a radius; the run reports how many particles each wall touches"),
     "velocity": Key(list, ("a list of 3 numbers in [-1000, 1000] m/s", lambda v: True), False, "m/s",
                     default=[0.0, 0.0, 0.0],
                     doc="with mechanics: the wall moves at this velocity (its plane along its normal component, "

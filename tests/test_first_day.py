@@ -91,3 +91,24 @@ def test_pictures_can_be_skipped_and_the_closing_line_lists_what_was_written(tmp
     assert not (out / "final_state.png").exists() and not (out / "history.png").exists()
     assert "final_state.png" not in closing and "history.png" not in closing  # it listed them, written or not
     assert "frames.pvd" in closing and "history.csv" in closing and "checkpoint.npz" in closing
+
+
+def test_walls_say_how_many_particles_they_hold_and_warn_on_a_handful():
+    """Issue 27: held walls on a rough packing held about 3 particles with the default penetration, silently."""
+    import warnings
+
+    scene = load_scene(None)  # the built-in powder bed on a held floor
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", runner.WallContactWarning)  # the default reaches its face layer
+        model = runner.build_model(validate_scene(copy.deepcopy(scene)))
+    centres, radii = model.centres, model.radii
+    bottom = centres[:, 2] - radii
+    face = np.count_nonzero(bottom < bottom.min() + 0.5 * radii.mean())
+    assert model.bed["wall0_particles"] == int(np.count_nonzero(np.asarray(model.state.particles.fixed)))
+    assert model.bed["wall0_particles"] >= 0.9 * face
+    shallow = copy.deepcopy(scene)
+    shallow.pop("boundary")
+    shallow["walls"] = [{"axis": 2, "side": "min", "mode": "held", "temperature": 300.0, "penetration": 0.0}]
+    with pytest.warns(runner.WallContactWarning, match=r"walls\[0\] \(held, axis 2 min\) touches 1 of the \d+ "
+                                                       r"particles facing it; only a handful: raise walls\[0\]"):
+        runner.build_model(validate_scene(shallow))
