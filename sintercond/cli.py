@@ -99,6 +99,7 @@ def main(argv=None) -> int:
     effective = sub.add_parser("effective", help="steady-state effective conductivity of a scene's packing")
     effective.add_argument("scene", nargs="?", default=None, help="scene TOML file (default: built-in default scene)")
     effective.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="heat-flow axis (default 2, z)")
+    effective.add_argument("--out", default=None, metavar="DIR", help="also write the steady field to DIR/steady.vtp")
     args = parser.parse_args(argv)
     if cache_by_default():
         enable_compilation_cache()  # a second run of the same scene compiles nothing
@@ -163,44 +164,78 @@ def _run(args) -> int:
     return 0
 
 
-def effective_box(scene, bed):
-    """The box ``k*`` is measured in, chosen from the scene; ``None`` for a lattice (its cell, see thermal).
+def effective_box(scene, bed, centres=None, radii=None, axis=2):
+    """The box ``k*`` is measured in, chosen from the scene; ``None`` for a lattice (its cell, see steady).
 
     A powder bed's box is its container: the side walls laterally, and from the
     floor to the bed's mean surface height vertically (the rough top above it
-    is cut off). The particles reaching a face of the box along the axis are
-    held (hot at ``lo``, cold at ``hi``).
+    is cut off). Any other packing (listed, poured, read from a file): the
+    bounding box of its particles' surfaces (for a packing pressed against
+    container walls, the container, whose cross-section is ``A``), its two
+    faces along ``axis`` moved half a mean radius inward, so that each face
+    layer (every particle whose surface comes within half a mean radius of the
+    outermost) is held. The particles
+    reaching a face of the box along the axis are held (hot at ``lo``, cold at
+    ``hi``).
     """
-    if scene["packing"]["kind"] != "powder_bed":
+    kind = scene["packing"]["kind"]
+    if kind == "simple_cubic":
         return None
-    lo, hi = bed.container
-    return lo, np.array([hi[0], hi[1], bed.height])
+    if kind == "powder_bed":
+        lo, hi = bed.container
+        return lo, np.array([hi[0], hi[1], bed.height])
+    lo, hi = (centres - radii[:, None]).min(axis=0), (centres + radii[:, None]).max(axis=0)
+    lo[axis] += 0.5 * float(np.mean(radii))
+    hi[axis] -= 0.5 * float(np.mean(radii))
+    return lo, hi
 
 
 def _effective(args) -> int:
-    from sintercond import packing
-    from sintercond import steady
+    from sintercond import packing, steady
+    from sintercond import run as runner
     from sintercond.scene import load_scene
 
-    from sintercond.scene import SceneError
-
     scene = load_scene(args.scene)
-    if scene["packing"]["kind"] == "spheres":
-        raise SceneError('sintercond effective needs a packing.kind = "powder_bed" or "simple_cubic" (a box to '
-                         'measure k* in); listed spheres have none')
-    bed = packing.from_scene(scene["packing"])
-    box = effective_box(scene, bed)
+    bed = None
+    if scene["packing"]["kind"] in ("powder_bed", "simple_cubic"):
+        bed = packing.from_scene(scene["packing"])
+        centres, radii = bed.centres, bed.radii
+    else:
+        centres, radii, _ = runner.build_packing(scene)
+    box = effective_box(scene, bed, centres, radii, args.axis)
     c = scene["conduction"]
     kappa = scene["material"]["conductivity"]
-    k_star = steady.steady_state_conductivity(bed.centres, bed.radii, kappa, axis=args.axis, law=c["law"],
-                                               params=c.get("params"), neck_model=c.get("neck_model"), box=box)
-    where = ("the lattice cell" if box is None else
-             f"the container cut at the mean surface height, {box[1][0]:.4g} x {box[1][1]:.4g} x {box[1][2]:.4g} m")
+    k_star, temperature = steady.steady_state_conductivity(
+        centres, radii, kappa, axis=args.axis, law=c["law"], params=c.get("params"), neck_model=c.get("neck_model"),
+        box=box, field=True)
+    if box is None:
+        where = "the lattice cell"
+    elif bed is not None:
+        where = f"the container cut at the mean surface height, {box[1][0]:.4g} x {box[1][1]:.4g} x {box[1][2]:.4g} m"
+    else:
+        size = (centres + radii[:, None]).max(axis=0) - (centres - radii[:, None]).min(axis=0)
+        where = (f"the packing's bounding box ({size[0]:.4g} x {size[1]:.4g} x {size[2]:.4g} m), each face layer "
+                 "(within half a mean radius of the outermost particle) held")
+    isolated = int(np.count_nonzero(np.isnan(np.asarray(temperature))))
     print(f"effective conductivity along axis {args.axis}: {k_star:.6g} W/(m K) "
-          f"({len(bed.radii)} particles, solid conductivity {kappa:g} W/(m K), k*/k = {k_star / kappa:.4g})")
+          f"({len(radii)} particles, solid conductivity {kappa:g} W/(m K), k*/k = {k_star / kappa:.4g})")
     print(f"k* = Q L / (A dT): particles reaching the two faces of {where} along axis {args.axis} held at "
           "dT apart, Q the steady heat flow, L the distance of the mean centre planes of the two held sets, "
           "A the box cross-section")
+    if isolated:
+        print(f"{isolated} particles touch no other and no held face: they carry no heat (no temperature in the "
+              "field: NaN, and isolated = 1)")
+    if args.out is not None:
+        from pathlib import Path
+
+        from sintercond.io import write_pvd, write_vtp
+
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        t = np.asarray(temperature)
+        write_vtp(out / "steady.vtp", centres, radii, t, 0, 0.0, {"isolated": np.isnan(t).astype(np.int64)})
+        write_pvd(out / "steady.pvd", [(0.0, "steady.vtp")])
+        print(f"the steady field (T = 1 on the hot face, 0 on the cold one) in {out}/steady.vtp (steady.pvd)")
     return 0
 
 

@@ -28,8 +28,8 @@ from tqdm import tqdm
 from sintercond import forces, guards, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
 from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
-from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, restitution_damping_ratio,
-                              validate_scene)
+from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, file_packing,
+                              restitution_damping_ratio, validate_scene)
 from sintercond.state import particle_state
 
 
@@ -75,6 +75,9 @@ def build_packing(scene):
     p = scene["packing"]
     if p["kind"] == "spheres":
         return np.asarray(p["centres"], np.float64), np.asarray(p["radii"], np.float64), {}
+    if p["kind"] == "file":
+        centres, radii = file_packing(p)
+        return np.array(centres), np.array(radii), {}
     if p["kind"] == "poured":
         rng = np.random.default_rng(p.get("seed", 0))
         radii = packing.truncated_normal_radii(p["particles"], p["radius_mean"], p.get("radius_std", 0.0),

@@ -30,6 +30,8 @@ import tomllib
 from pathlib import Path
 from typing import NamedTuple
 
+import numpy as np
+
 from sintercond.conductance import CONDUCTANCE_LAWS
 from sintercond.mechanics import PARAMETER_RANGES, validate_mechanical_params
 from sintercond.neck import NECK_MODELS
@@ -75,7 +77,7 @@ MECHANICAL_FIELDS = {
 }
 
 TEMPERATURE = _within(1.0, 1e4, "K")
-PACKING_KINDS = ("powder_bed", "simple_cubic", "spheres", "poured")
+PACKING_KINDS = ("powder_bed", "simple_cubic", "spheres", "poured", "file")
 PACKING_METHODS = ("relax", "dem")
 """How a ``powder_bed`` is made (``packing.method``): harmonic relaxation, or poured with the DEM of [mechanics]."""
 MAX_POURED_PARTICLES = 20_000
@@ -265,6 +267,18 @@ _PACKING = {
                      doc="deposit: the DEM collapses the loose pile itself (a real pour); relaxed: the pile is "
                          "first collapsed without friction, then the DEM settles it (cheaper, denser)"),
     },
+    "file": {
+        "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
+        "path": Key(str, ("a file name", lambda v: bool(v)), True,
+                    doc="the packing's file, relative to the scene file's folder (or absolute); no particle cap"),
+        "format": Key(str, _choice("auto", "table", "lammps_data", "lammps_dump"), False, default="auto",
+                      doc="table: CSV or whitespace rows x y z r (an optional header naming x, y, z and r, radius, "
+                          "d or diameter); lammps_data: atom_style sphere (id type diameter density x y z); "
+                          "lammps_dump: a LAMMPS or LIGGGHTS dump's last frame (radius or diameter, x y z); "
+                          "auto: from the name (*.data, *.dump, *.lammpstrj, else a table)"),
+        "length_unit": Key(str, _choice("m", "mm", "um", "nm"), False, default="m",
+                           doc="unit of the file's lengths"),
+    },
     "spheres": {
         "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
         "centres": Key(list, (f"a list of at most {MAX_LISTED_SPHERES} [x, y, z] points (m)", lambda v: True), True,
@@ -413,9 +427,23 @@ def _lateral_extent(packing):
     if packing["kind"] == "spheres":
         c, r = packing["centres"], packing["radii"]
         return tuple((min(p[k] - q for p, q in zip(c, r)), max(p[k] + q for p, q in zip(c, r))) for k in (0, 1))
+    if packing["kind"] == "file":
+        c, r = file_packing(packing)
+        return tuple((float(np.min(c[:, k] - r)), float(np.max(c[:, k] + r))) for k in (0, 1))
     nx, ny, _ = packing["counts"]
     return ((0.0, (nx - 1) * packing["spacing"] + 2 * packing["radius"]),
             (0.0, (ny - 1) * packing["spacing"] + 2 * packing["radius"]))
+
+
+def file_packing(packing):
+    """``(centres, radii)`` (m) of a ``kind = "file"`` packing (:func:`sintercond.packing_files.read_packing`, read
+    once per file version); a file that cannot be read raises :class:`SceneError` naming ``packing.path``."""
+    from sintercond.packing_files import PackingFileError, read_packing
+
+    try:
+        return read_packing(packing["path"], packing.get("format", "auto"), packing.get("length_unit", "m"))
+    except PackingFileError as err:
+        raise SceneError(f"packing.path: {err}") from None
 
 
 def restitution_damping_ratio(e):
@@ -482,6 +510,9 @@ def _check_packing(packing, conduction):
     from sintercond import neck
     from sintercond.packing import PackingError, check_bed
 
+    if packing["kind"] == "file":
+        file_packing(packing)  # read (once) and checked now: a bad file is named before anything is built
+        return
     if packing["kind"] == "spheres":
         centres, radii = packing["centres"], packing["radii"]
         rule = ("a list of 3 numbers in [-1, 1] m", lambda v: -1.0 <= v <= 1.0)
@@ -627,6 +658,10 @@ def estimate_run(scene) -> RunEstimate:
     if packing["kind"] == "spheres":
         n, r = len(packing["radii"]), min(packing["radii"])
         h, z = 2 * r * 1e-3, 13
+    elif packing["kind"] == "file":
+        radii = file_packing(packing)[1]
+        n, r = len(radii), float(np.min(radii))
+        h, z = 2 * r * 1e-3, 13
     elif packing["kind"] == "poured":
         n = packing["particles"]
         r = max(packing["radius_mean"] - packing.get("truncation", 3.0) * packing.get("radius_std", 0.0),
@@ -755,6 +790,10 @@ def scene_reference() -> str:
           "(`sintercond.packing.pour`: Hertz, Mindlin, rolling resistance, gravity, the box walls) with the contact "
           "material of `[mechanics]` and `material.density`; settled means kinetic energy and force balance below "
           "the thresholds the summary reports. Example 5.3's bed (`quintana2020_5_3`).")
+    table("[packing] kind = \"file\"", _PACKING["file"],
+          "A packing read from a file (a CT scan, a LIGGGHTS or LAMMPS pour, another code): "
+          "`sintercond.packing_files`. The particles are used as they are; `sintercond effective` measures k* "
+          "between the face layers of its bounding box.")
     table("[packing] kind = \"spheres\"", _PACKING["spheres"],
           f"Spheres listed one by one (at most {MAX_LISTED_SPHERES}), e.g. one sphere on a floor.")
     for section in ("material", "conduction"):
@@ -844,6 +883,10 @@ def load_scene(path=None, duration=None) -> dict:
     if duration is not None:
         if isinstance(raw.get("run"), dict):
             raw["run"]["duration"] = duration
+    packing = raw.get("packing")
+    if (isinstance(packing, dict) and packing.get("kind") == "file" and isinstance(packing.get("path"), str)
+            and isinstance(path, Path) and not Path(packing["path"]).is_absolute()):
+        packing["path"] = str((path.parent / packing["path"]).resolve())  # relative to the scene file
     return validate_scene(raw)
 
 

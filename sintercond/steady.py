@@ -46,7 +46,7 @@ def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
 
 
 def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params=None, neck_model=None,
-                              box=None, tol=1e-13):
+                              box=None, tol=1e-13, field=False):
     """Effective conductivity ``k*`` (W/(m K)) of a packing along ``axis``, from one steady solve.
 
     Definition: the box (default: the bounding box of the centres, widened on
@@ -58,6 +58,9 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
     planes of the hot and cold sets, and ``A`` the box cross-section normal
     to ``axis``: ``k* = Q L / (A (T_hot - T_cold))``. For a simple-cubic
     lattice of spacing ``a`` this is ``K_pair / a`` exactly.
+
+    ``field=True`` returns ``(k*, temperature [n])``: the steady field between ``T = 1`` (hot) and ``0`` (cold),
+    NaN on particles that touch no other and are not held (their temperature is undefined, not 0).
 
     Differentiable in ``kappa`` (scalar or ``[n]``) and the law's ``params``:
     the geometry (contacts, necks, hot and cold sets, ``L``, ``A``) is
@@ -85,7 +88,12 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
     temperature = steady_state(table, jnp.asarray(setup.hot | setup.cold), jnp.where(hot, 1.0, 0.0), tol=tol)
     q = -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0))
     k_star = q * setup.length / setup.area
-    return float(k_star) if concrete else k_star
+    k_star = float(k_star) if concrete else k_star
+    if not field:
+        return k_star
+    touching = np.zeros(n, bool)
+    touching[setup.pairs.i] = touching[setup.pairs.j] = True
+    return k_star, jnp.where(jnp.asarray(touching | setup.hot | setup.cold), temperature, jnp.nan)
 
 
 class _ConductivitySetup(typing.NamedTuple):

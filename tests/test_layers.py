@@ -23,7 +23,7 @@ LAYERS = {
     "space": ["neighbors", "pair_list"],
     "lifts": ["network", "mechanics", "thermal"],
     "drive": ["simulate", "steady", "rollout", "guards"],
-    "use": ["scene", "packing", "run", "io", "plots", "cli", "sweep", "examples"],
+    "use": ["scene", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
 }
 RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}
 

@@ -1,0 +1,187 @@
+"""Packings from files: an x, y, z, r table, a LAMMPS data file, a LAMMPS or LIGGGHTS dump.
+
+What a user brings from a CT scan, a LIGGGHTS pour or another DEM code, read into ``(centres [n, 3], radii [n])``
+in metres (``length_unit`` scales the file's numbers). The formats:
+
+``table``
+    CSV or whitespace-separated rows ``x y z r``, ``#`` comments; an optional header row naming the columns
+    (``x, y, z`` and ``r``/``radius`` or ``d``/``diameter``, in any order, other columns ignored).
+``lammps_data``
+    A LAMMPS data file of ``atom_style sphere``: its ``Atoms`` section rows ``id type diameter density x y z``
+    (image flags after them ignored), the order LAMMPS writes them.
+``lammps_dump``
+    A LAMMPS or LIGGGHTS text dump (``ITEM: ATOMS`` with column names): ``radius`` or ``diameter``, and ``x y z``,
+    unwrapped ``xu yu zu``, or scaled ``xs ys zs`` (with the frame's box); the last frame, rows sorted by ``id``.
+"""
+
+from __future__ import annotations
+
+import functools
+import io as _io
+from pathlib import Path
+
+import numpy as np
+
+FORMATS = ("table", "lammps_data", "lammps_dump")
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
+
+
+class PackingFileError(ValueError):
+    """A packing file that cannot be read; the message names the file, the line or column, and what was expected."""
+
+
+def guess_format(path) -> str:
+    """The format of ``path`` from its name: ``*.data``/``data.*`` a LAMMPS data file, ``*.dump``,
+    ``*.lammpstrj``/``dump.*`` a dump, anything else a table."""
+    name = Path(path).name.lower()
+    if name.endswith(".data") or name.startswith("data."):
+        return "lammps_data"
+    if name.endswith((".dump", ".lammpstrj", ".liggghts")) or name.startswith("dump."):
+        return "lammps_dump"
+    return "table"
+
+
+def read_packing(path, format="auto", length_unit="m") -> tuple[np.ndarray, np.ndarray]:
+    """``(centres [n, 3], radii [n])`` (m) of the packing in ``path`` (see the module docstring)."""
+    path = Path(path)
+    if format == "auto":
+        format = guess_format(path)
+    if format not in FORMATS:
+        raise PackingFileError(f"format must be one of {list(FORMATS)} or 'auto'; got {format!r}")
+    if length_unit not in LENGTH_UNITS:
+        raise PackingFileError(f"length_unit must be one of {list(LENGTH_UNITS)}; got {length_unit!r}")
+    if not path.is_file():
+        raise PackingFileError(f"{str(path)!r} does not exist")
+    stat = path.stat()
+    centres, radii = _read_cached(str(path.resolve()), stat.st_mtime_ns, stat.st_size, format)
+    scale = LENGTH_UNITS[length_unit]
+    centres, radii = centres * scale, radii * scale
+    bad = ~(np.all(np.isfinite(centres), axis=1) & np.isfinite(radii) & (radii > 0))
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise PackingFileError(f"{path}: particle {k} (row {k + 1}) has centre {centres[k].tolist()} and radius "
+                               f"{radii[k]!r}: centres must be finite and radii > 0")
+    return centres, radii
+
+
+@functools.lru_cache(maxsize=8)
+def _read_cached(path, mtime, size, format):
+    """The file read once per version (validation and the build both ask), in the file's units."""
+    text = Path(path).read_text(errors="replace")
+    reader = {"table": _read_table, "lammps_data": _read_lammps_data, "lammps_dump": _read_lammps_dump}[format]
+    centres, radii = reader(text, path)
+    if len(radii) == 0:
+        raise PackingFileError(f"{path}: no particles found (read as {format!r})")
+    centres.setflags(write=False)
+    radii.setflags(write=False)
+    return centres, radii
+
+
+def _read_table(text, path):
+    lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
+    rows = [(k + 1, line.replace(",", " ").replace(";", " ").split()) for k, line in enumerate(lines) if line]
+    if not rows:
+        return np.zeros((0, 3)), np.zeros(0)
+    columns = {"x": 0, "y": 1, "z": 2, "r": 3}
+    diameter = False
+    first = rows[0][1]
+    try:
+        [float(v) for v in first]
+    except ValueError:
+        names = [v.lower() for v in first]
+        try:
+            columns = {axis: names.index(axis) for axis in "xyz"}
+        except ValueError:
+            raise PackingFileError(f"{path}: the header {first} must name columns x, y, z and r (or radius, d, "
+                                   "diameter)") from None
+        for key, is_diameter in (("r", False), ("radius", False), ("d", True), ("diameter", True)):
+            if key in names:
+                columns["r"], diameter = names.index(key), is_diameter
+                break
+        else:
+            raise PackingFileError(f"{path}: the header {first} names no radius column (r, radius, d or diameter)")
+        rows = rows[1:]
+    width = max(columns.values()) + 1
+    values = np.empty((len(rows), 4))
+    for k, (line, fields) in enumerate(rows):
+        if len(fields) < width:
+            raise PackingFileError(f"{path}, line {line}: {len(fields)} columns, expected at least {width} "
+                                   "(x y z r)")
+        try:
+            values[k] = [float(fields[columns[c]]) for c in "xyzr"]
+        except ValueError:
+            raise PackingFileError(f"{path}, line {line}: {fields} are not all numbers") from None
+    radii = values[:, 3] / 2 if diameter else values[:, 3]
+    return values[:, :3].copy(), radii.copy()
+
+
+def _read_lammps_data(text, path):
+    lines = text.splitlines()
+    start = next((k for k, line in enumerate(lines) if line.split("#", 1)[0].strip() == "Atoms"), None)
+    if start is None:
+        raise PackingFileError(f"{path}: no 'Atoms' section (a LAMMPS data file of atom_style sphere)")
+    style = lines[start].split("#", 1)[1].strip() if "#" in lines[start] else "sphere"
+    if style != "sphere":
+        raise PackingFileError(f"{path}: the Atoms section is atom_style {style!r}; sphere (id type diameter "
+                               "density x y z) is read")
+    rows = []
+    for k in range(start + 1, len(lines)):
+        line = lines[k].split("#", 1)[0].strip()
+        if not line:
+            if rows:
+                break
+            continue
+        if line[0].isalpha():  # the next section
+            break
+        fields = line.split()
+        if len(fields) < 7:
+            raise PackingFileError(f"{path}, line {k + 1}: {len(fields)} columns in Atoms, expected id type "
+                                   "diameter density x y z")
+        rows.append([float(v) for v in fields[:7]])
+    data = np.asarray(rows).reshape(-1, 7)
+    data = data[np.argsort(data[:, 0], kind="stable")]
+    return data[:, 4:7].copy(), data[:, 2] / 2
+
+
+def _read_lammps_dump(text, path):
+    frames = text.split("ITEM: TIMESTEP")
+    if len(frames) < 2:
+        raise PackingFileError(f"{path}: no 'ITEM: TIMESTEP' (a LAMMPS or LIGGGHTS text dump)")
+    frame = frames[-1]
+    box_at = frame.find("ITEM: BOX BOUNDS")
+    atoms_at = frame.find("ITEM: ATOMS")
+    if atoms_at < 0:
+        raise PackingFileError(f"{path}: the last frame has no 'ITEM: ATOMS' section")
+    header, _, body = frame[atoms_at:].partition("\n")
+    names = header.split()[2:]
+    data = np.loadtxt(_io.StringIO(body), ndmin=2) if body.strip() else np.zeros((0, len(names)))
+    if data.shape[1] != len(names):
+        raise PackingFileError(f"{path}: {data.shape[1]} columns for the {len(names)} names {names}")
+    column = {name: data[:, k] for k, name in enumerate(names)}
+    if "radius" in column:
+        radii = column["radius"]
+    elif "diameter" in column:
+        radii = column["diameter"] / 2
+    else:
+        raise PackingFileError(f"{path}: the dump has no radius or diameter column (columns: {names})")
+    for axes in (("x", "y", "z"), ("xu", "yu", "zu"), ("xs", "ys", "zs")):
+        if all(a in column for a in axes):
+            centres = np.stack([column[a] for a in axes], axis=1)
+            if axes[0] == "xs":
+                if box_at < 0:
+                    raise PackingFileError(f"{path}: scaled coordinates without an 'ITEM: BOX BOUNDS'")
+                bounds = np.array([[float(v) for v in line.split()[:2]]
+                                   for line in frame[box_at:atoms_at].splitlines()[1:4]])
+                centres = bounds[:, 0] + centres * (bounds[:, 1] - bounds[:, 0])
+            break
+    else:
+        raise PackingFileError(f"{path}: the dump has no x y z (or xu yu zu, xs ys zs) columns (columns: {names})")
+    order = np.argsort(column["id"], kind="stable") if "id" in column else np.arange(len(radii))
+    return centres[order].copy(), radii[order].copy()
+
+
+def write_table(path, centres, radii, length_unit="m"):
+    """Write ``centres``, ``radii`` (m) as a CSV table with a header, in ``length_unit``."""
+    scale = LENGTH_UNITS[length_unit]
+    data = np.column_stack([np.asarray(centres) / scale, np.asarray(radii) / scale])
+    np.savetxt(path, data, delimiter=",", header="x,y,z,r", comments="", fmt="%.17g")
