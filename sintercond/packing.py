@@ -773,7 +773,9 @@ def from_scene(p) -> Packing:
     ``powder_bed``: :func:`powder_bed` with ``method`` (``"relax"`` by default,
     or ``"dem"`` with the :class:`DemMaterial` keys of an optional ``dem``
     table), radii then grown by ``sinter_swelling`` (settled contacts become necks). ``simple_cubic``: centres
-    ``radius + spacing * (i, j, k)``, container ``[0, (counts - 1) spacing + 2 radius]``.
+    ``radius + spacing * (i, j, k)``, container ``[0, (counts - 1) spacing + 2 radius]``; its packing fraction
+    the infinite lattice's (a sphere less the 6 caps its neighbours cut, over the cell ``spacing^3``), its
+    coordination this lattice's (bonds between neighbours, the faces' missing ones excluded).
     """
     if p["kind"] == "simple_cubic":
         counts = np.asarray(p["counts"])
@@ -781,8 +783,13 @@ def from_scene(p) -> Packing:
         centres = grid * p["spacing"] + p["radius"]
         radii = np.full(len(centres), float(p["radius"]))
         hi = (counts - 1) * p["spacing"] + 2 * p["radius"]
-        overlap = max(2 * p["radius"] - p["spacing"], 0.0) / (2 * p["radius"])
-        return Packing(centres, radii, (np.zeros(3), hi), overlap, float(hi[2]))
+        r, a = float(p["radius"]), float(p["spacing"])
+        overlap = max(2 * r - a, 0.0) / (2 * r)
+        cap = max(r - a / 2, 0.0)  # each of the 6 neighbours cuts a cap of this height off the sphere
+        fraction = (4 / 3 * math.pi * r**3 - 6 * math.pi * cap**2 * (3 * r - cap) / 3) / a**3
+        bonds = 3 * counts.prod() - (counts[1] * counts[2] + counts[0] * counts[2] + counts[0] * counts[1])
+        coordination = 2 * bonds / counts.prod() if 2 * r > a else 0.0
+        return Packing(centres, radii, (np.zeros(3), hi), overlap, float(hi[2]), fraction, float(coordination))
     method = p.get("method", "relax")
     material = DemMaterial(**p["dem"]) if method == "dem" and "dem" in p else None
     bed = powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0), method=method,

@@ -112,3 +112,20 @@ def test_walls_say_how_many_particles_they_hold_and_warn_on_a_handful():
     with pytest.warns(runner.WallContactWarning, match=r"walls\[0\] \(held, axis 2 min\) touches 1 of the \d+ "
                                                        r"particles facing it; only a handful: raise walls\[0\]"):
         runner.build_model(validate_scene(shallow))
+
+
+def test_a_lattice_summary_has_its_packing_fraction_and_coordination():
+    """Issue 27: `nan` coordination and packing fraction on lattices."""
+    import math
+
+    from sintercond import packing
+
+    bed = packing.from_scene({"kind": "simple_cubic", "counts": [4, 3, 3], "spacing": 1e-4, "radius": 0.52e-4})
+    r, a = 0.52e-4, 1e-4
+    h = r - a / 2  # the cap each of the six neighbours cuts
+    assert bed.packing_fraction == pytest.approx((4 / 3 * math.pi * r**3 - 6 * math.pi * h**2 * (3 * r - h) / 3)
+                                                 / a**3, rel=1e-14)
+    bonds = 3 * 36 - (3 * 3 + 4 * 3 + 4 * 3)  # the bonds across the missing faces excluded
+    assert bed.coordination == pytest.approx(2 * bonds / 36, rel=1e-15)
+    touching = packing.from_scene({"kind": "simple_cubic", "counts": [2, 2, 2], "spacing": 1e-4, "radius": 0.5e-4})
+    assert touching.packing_fraction == pytest.approx(math.pi / 6, rel=1e-14) and touching.coordination == 0.0
