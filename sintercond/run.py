@@ -449,6 +449,9 @@ def physical_range_check(scene):
     causes = [key for key, section in (("beam.intensity", "beam"), ("convection.nusselt", "convection"),
                                        ("radiation.emissivity", "radiation")) if section in scene] + ["run.dt"]
 
+    melting = scene["material"].get("melting_point")
+    warned = []
+
     def check(state):
         t = state.particles.temperature
         bad = ~jnp.isfinite(t) | (t <= 0) | (t > MAX_TEMPERATURE)
@@ -457,7 +460,27 @@ def physical_range_check(scene):
             raise FloatingPointError(
                 f"temperature left the physical range (0, {MAX_TEMPERATURE:g}] K at step {int(state.step)} "
                 f"(|T| up to {worst:.3g} K); likely cause: {', '.join(causes)} too large for the time step")
+        if melting is not None and not warned:
+            hottest = float(jnp.max(t))
+            if hottest > melting:
+                message = (f"T = {hottest:.6g} K at step {int(state.step)} (t = {float(state.time):.6g} s) is above "
+                           f"material.melting_point = {melting:g} K: the model has no melting (no latent heat, no "
+                           "liquid), so what follows is not physical")
+                if scene["material"].get("on_melting", "stop") == "stop":
+                    raise MeltingPointCrossed(message + "; lower the heat input (beam.intensity or beam.power), or "
+                                              'set material.on_melting = "warn" to go on')
+                warned.append(int(state.step))
+                warnings.warn(message, MeltingPointWarning, stacklevel=2)
+                _log(f"warning: {message} (said once)")
     return check
+
+
+class MeltingPointCrossed(FloatingPointError):
+    """A run crossed ``material.melting_point`` with ``material.on_melting = "stop"`` (the default)."""
+
+
+class MeltingPointWarning(UserWarning):
+    """A run crossed ``material.melting_point`` with ``material.on_melting = "warn"``."""
 
 
 def run_check(scene, model, state):

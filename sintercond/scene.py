@@ -103,6 +103,11 @@ _SCHEMA = {
         "density": Key(float, _within(1.0, 1e5, "kg/m^3"), True, "kg/m^3", doc="solid density"),
         "specific_heat": Key(float, _within(1.0, 1e5, "J/(kg K)"), True, "J/(kg K)", doc="specific heat capacity"),
         "conductivity": Key(float, _within(1e-6, 1e4, "W/(m K)"), True, "W/(m K)", doc="solid conductivity kappa"),
+        "melting_point": Key(float, TEMPERATURE, False, "K",
+                             doc="melting point (or solidus): the model has no melting, so a run whose hottest "
+                                 "particle crosses it stops (or warns, material.on_melting), naming it"),
+        "on_melting": Key(str, _choice("stop", "warn"), False, default="stop",
+                          doc="what a run crossing material.melting_point does"),
     },
     "conduction": {
         "law": Key(str, _choice(*sorted(CONDUCTANCE_LAWS)), True, doc="pair conductance law"),

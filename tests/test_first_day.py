@@ -129,3 +129,19 @@ def test_a_lattice_summary_has_its_packing_fraction_and_coordination():
     assert bed.coordination == pytest.approx(2 * bonds / 36, rel=1e-15)
     touching = packing.from_scene({"kind": "simple_cubic", "counts": [2, 2, 2], "spacing": 1e-4, "radius": 0.5e-4})
     assert touching.packing_fraction == pytest.approx(math.pi / 6, rel=1e-14) and touching.coordination == 0.0
+
+
+@pytest.mark.parametrize("mode", ["stop", "warn"])
+def test_a_run_crossing_the_melting_point_stops_or_warns_naming_it(tmp_path, mode):
+    """Issue 27: an L-PBF spot took the bed to 17,530 K without a word; the model has no melting."""
+    scene = copy.deepcopy(load_scene(None, duration=2e-3))  # the default beam heats the bed past 1000 K
+    scene["material"].update(melting_point=800.0, on_melting=mode)
+    scene = validate_scene(scene)
+    if mode == "stop":
+        with pytest.raises(runner.MeltingPointCrossed, match=r"above material\.melting_point = 800 K: the model "
+                                                             r"has no melting"):
+            runner.run_scene(scene, tmp_path, progress=False, pictures=False)
+    else:
+        with pytest.warns(runner.MeltingPointWarning, match=r"material\.melting_point = 800 K"):
+            _, summary = runner.run_scene(scene, tmp_path, progress=False, pictures=False)
+        assert summary["T_max_K"] > 800.0

@@ -109,6 +109,8 @@ ELSEWHERE = {
     "beam.kind": "test_nozzle_reach (below): a nozzle needs its max_depth",
     "beam.max_depth": "test_nozzle_reach (below)",
     "beam.power": "test_first_day.py: test_a_beam_given_by_its_power (it sets beam.intensity)",
+    "material.melting_point": "test_first_day.py: a run crossing it stops or warns, naming it",
+    "material.on_melting": "test_first_day.py: a run crossing it stops or warns, naming it",
     "run.output_every": "test_observable_times.py: history rows at every output_every steps",
     "run.checkpoint_every": "test_scene_mechanics.py: the resume test cuts at a checkpoint",
     "run.formats": "test_scene_run.py: the formats written",
