@@ -91,7 +91,7 @@ def main(argv=None) -> int:
                           "default: the built-in default scene)")
     run.add_argument("--out", default="sintercond-out", help="output directory (default: sintercond-out)")
     run.add_argument("--duration", type=float, default=None, metavar="S",
-                     help="simulated time in s, replacing the scene's run.duration (e.g. a short look at a scene)")
+                     help="simulated time in s, replacing the scene's run.duration (with --resume: extend the run to it)")
     run.add_argument("--resume", metavar="DIR", default=None, help="continue the run in DIR from its checkpoint")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument("--no-pictures", action="store_true", help="skip final_state.png and history.png")
@@ -148,12 +148,11 @@ def _list_scenes() -> int:
 
 def _run(args) -> int:
     from sintercond import run as runner
-    from sintercond.scene import SceneError, load_scene
+    from sintercond.scene import load_scene
 
     if args.resume is not None:
-        if args.duration is not None:
-            raise SceneError("--duration applies to a new run, not to --resume (which continues the saved scene)")
-        _, summary = runner.resume(args.resume, progress=not args.no_progress, pictures=not args.no_pictures)
+        _, summary = runner.resume(args.resume, progress=not args.no_progress, pictures=not args.no_pictures,
+                                   duration=args.duration)
         out = args.resume
     else:
         scene = load_scene(args.scene, duration=args.duration)

@@ -758,28 +758,44 @@ def write_frames_pvd(out, dt):
                                    for f in frames])
 
 
-def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True):
+def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, duration=None):
     """Continue the run in ``out_dir`` from its last checkpoint (the whole state).
 
     A finished run (its ``summary.json`` at the checkpoint's step) is not
-    rebuilt: its final temperatures and summary are returned as they are.
+    rebuilt: its final temperatures and summary are returned as they are,
+    unless ``duration`` (s) extends it: the run then goes on with its own time
+    step to the first step at or after ``duration`` (``scene.json`` records the
+    new duration), its outputs appended to the ones it has.
     """
     out = Path(out_dir)
     if not (out / "checkpoint.npz").exists():
         raise SceneError(f"{str(out)!r} has no checkpoint.npz to resume from")
     saved = np.load(out / "checkpoint.npz")
     step = int(saved["step"])
-    if (out / "summary.json").exists():
+    raw = json.loads((out / "scene.json").read_text())
+    if duration is not None:
+        done = step * float(saved[".dt"])
+        if not duration > done:
+            raise SceneError(f"--duration {duration:g} s must exceed the {done:.6g} s the run in {out} has simulated")
+        raw["run"]["duration"] = float(duration)
+    elif (out / "summary.json").exists():
         summary = json.loads((out / "summary.json").read_text())
         if summary.get("steps") == step:
-            _log(f"the run in {out} is finished (step {step}); nothing to resume")
+            _log(f"the run in {out} is finished (step {step}); nothing to resume (--duration S extends it)")
             return jnp.asarray(saved["temperature"]), summary
-    scene = validate_scene(json.loads((out / "scene.json").read_text()))
+    scene = validate_scene(raw)
     packed = np.load(out / "packing.npz")
     model = build_model(scene, packed["centres"], packed["radii"], log=_log)
     if (out / "bed.json").exists():
         model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
     state = load_checkpoint(out / "checkpoint.npz", model.state)
+    if duration is not None:  # the run keeps its own step: the steps taken stay valid
+        dt = float(state.dt)
+        model = dataclasses.replace(model, n_steps=max(step, int(np.ceil(duration / dt * (1 - 1e-12)))),
+                                    state=dataclasses.replace(model.state, dt=state.dt))
+        (out / "scene.json").write_text(json.dumps(scene, indent=1))
+        if (out / "summary.json").exists():
+            (out / "summary.json").unlink()
     # outputs written after the checkpoint by the interrupted run are redone
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         if int(f.stem.split("_")[1]) > step:

@@ -145,3 +145,29 @@ def test_a_run_crossing_the_melting_point_stops_or_warns_naming_it(tmp_path, mod
         with pytest.warns(runner.MeltingPointWarning, match=r"material\.melting_point = 800 K"):
             _, summary = runner.run_scene(scene, tmp_path, progress=False, pictures=False)
         assert summary["T_max_K"] > 800.0
+
+
+@pytest.mark.slow
+def test_a_finished_run_is_extended_with_its_own_step(tmp_path, capsys):
+    """Issue 27: runs could not be extended from their last state (`--duration` was refused with `--resume`).
+    Extended from 1 ms to 2 ms, the run goes on with its own step; the reference is a run that took that step
+    from the start (run.dt fixed) to the same step count."""
+    from sintercond import cli
+
+    out = tmp_path / "out"
+    assert cli.main(["run", "--out", str(out), "--no-progress", "--no-pictures", "--duration", "1e-3"]) == 0
+    first = np.genfromtxt(out / "history.csv", delimiter=",", names=True)
+    assert cli.main(["run", "--resume", str(out), "--no-progress", "--no-pictures", "--duration", "2e-3"]) == 0
+    extended = np.genfromtxt(out / "history.csv", delimiter=",", names=True)
+    dt = first["time_s"][-1] / first["step"][-1]
+    assert 2e-3 <= extended["time_s"][-1] < 2e-3 + dt and np.all(np.diff(extended["step"]) > 0)
+    np.testing.assert_array_equal(extended[: len(first)], first)  # the first millisecond untouched
+    scene = copy.deepcopy(load_scene(None))
+    scene["run"].update(dt=dt, duration=float(extended["step"][-1]) * dt)
+    runner.run_scene(validate_scene(scene), tmp_path / "ref", progress=False, pictures=False)
+    reference = np.genfromtxt(tmp_path / "ref" / "history.csv", delimiter=",", names=True)
+    assert reference["step"][-1] == extended["step"][-1]  # their outputs fall at other steps, their ends together
+    for name in ("T_mean_K", "T_min_K", "T_max_K"):
+        assert extended[name][-1] == pytest.approx(reference[name][-1], rel=1e-12)
+    ended = np.load(out / "checkpoint.npz")["temperature"]
+    np.testing.assert_allclose(ended, np.load(tmp_path / "ref" / "checkpoint.npz")["temperature"], rtol=1e-12)
