@@ -97,3 +97,27 @@ def test_every_relative_link_of_the_readme_and_the_docs_resolves():
 def test_readme_is_short():
     length = len(README.read_text())
     assert length <= README_LIMIT, f"README.md has {length} characters; the limit is {README_LIMIT}: move detail to docs/"
+
+
+def test_every_scene_block_of_the_docs_is_a_valid_scene(tmp_path):
+    """The ```toml blocks of docs/ are whole scenes: each validates (a file packing against a packing written for it)."""
+    import tomllib
+
+    from sintercond import packing_files
+    from sintercond.scene import validate_scene
+
+    blocks = [b for page in sorted((ROOT / "docs").glob("*.md"))
+              for b in re.findall(r"```toml\n(.*?)```", page.read_text(), re.S)]
+    scenes = [tomllib.loads(b) for b in blocks if "[packing]" in b]
+    assert scenes
+    for raw in scenes:
+        if raw["packing"]["kind"] == "file":
+            unit = packing_files.LENGTH_UNITS[raw["packing"].get("length_unit", "m")]
+            path = tmp_path / raw["packing"]["path"]
+            grid = [[x, y, z] for x in range(3) for y in range(3) for z in range(3)]
+            text = "".join(f"{i + 1} 1 {x * 60e-6 / unit!r} {y * 60e-6 / unit!r} {z * 60e-6 / unit!r} {31e-6 / unit!r}\n"
+                           for i, (x, y, z) in enumerate(grid))
+            path.write_text("ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n27\nITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\n"
+                            "ITEM: ATOMS id type x y z radius\n" + text)
+            raw["packing"]["path"] = str(path)
+        validate_scene(raw)
