@@ -222,8 +222,8 @@ def _effective(args) -> int:
           "dT apart, Q the steady heat flow, L the distance of the mean centre planes of the two held sets, "
           "A the box cross-section")
     if isolated:
-        print(f"{isolated} particles touch no other and no held face: they carry no heat (no temperature in the "
-              "field: NaN, and isolated = 1)")
+        print(f"{isolated} particles are joined to neither held face by any chain of contacts: they carry no heat "
+              "(no temperature in the field: NaN, and isolated = 1)")
     if args.out is not None:
         from pathlib import Path
 

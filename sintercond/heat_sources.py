@@ -76,7 +76,8 @@ def beam_switch(t, waypoints, speed, segments_on=None, after_path=0.0):
 
     On along the segments whose entry of ``segments_on`` ``[k - 1]`` is 1 (None: every segment; 0 marks a
     jump between hatch lines), off before ``t = 0``; once the path is done, ``after_path`` (0: off, 1: the
-    beam stays on at the last waypoint). A path of one waypoint is a stationary spot, on from ``t = 0``.
+    beam stays on at the last waypoint). A path of one waypoint (or of coincident ones) is a stationary spot, on
+    from ``t = 0`` whatever ``after_path``.
     """
     waypoints = jnp.asarray(waypoints)
     s = speed * t
@@ -88,7 +89,9 @@ def beam_switch(t, waypoints, speed, segments_on=None, after_path=0.0):
     if segments_on is not None:
         index = jnp.clip(jnp.searchsorted(arc, s, side="right") - 1, 0, segments.shape[0] - 1)
         on = jnp.asarray(segments_on, segments.dtype)[index]
-    return jnp.where(s < 0, 0.0, jnp.where(s > arc[-1], jnp.asarray(after_path, segments.dtype), on))
+    # a path of coincident waypoints is a stationary spot too: on from t = 0
+    done = (s > arc[-1]) & (arc[-1] > 0)
+    return jnp.where(s < 0, 0.0, jnp.where(done, jnp.asarray(after_path, segments.dtype), on))
 
 
 def whitaker_nusselt(reynolds, prandtl, viscosity_ratio=1.0):

@@ -154,7 +154,10 @@ def _read_lammps_dump(text, path):
         raise PackingFileError(f"{path}: the last frame has no 'ITEM: ATOMS' section")
     header, _, body = frame[atoms_at:].partition("\n")
     names = header.split()[2:]
-    data = np.loadtxt(_io.StringIO(body), ndmin=2) if body.strip() else np.zeros((0, len(names)))
+    try:
+        data = np.loadtxt(_io.StringIO(body), ndmin=2) if body.strip() else np.zeros((0, len(names)))
+    except ValueError as err:
+        raise PackingFileError(f"{path}: the last frame's atoms cannot be read ({err}); a dump cut short?") from None
     if data.shape[1] != len(names):
         raise PackingFileError(f"{path}: {data.shape[1]} columns for the {len(names)} names {names}")
     column = {name: data[:, k] for k, name in enumerate(names)}

@@ -266,7 +266,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                     f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
         motion = mechanics.mechanical_state(physics, centres, contacts)
     beam = scene.get("beam")
-    if beam is not None and beam["speed"] > 0:
+    if beam is not None and beam["speed"] > 0 and _path_length(beam["path"]) > 0:
         step = BEAM_STEP_FRACTION * beam["spot_radius"] / beam["speed"]
         bounds["beam"] = (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam['speed']:g} m/s) moves "
                                 f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam['spot_radius']:g} m")
@@ -288,9 +288,15 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                  {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None)
 
 
+def _path_length(path) -> float:
+    """The length (m) of a beam's path of waypoints (0: a stationary spot)."""
+    return float(np.sum(np.linalg.norm(np.diff(np.asarray(path, float), axis=0), axis=1))) if len(path) > 1 else 0.0
+
+
 def _fastest_wall(planes) -> tuple[float, int | None]:
-    """The largest normal speed of the scene's walls (m/s) and the index of that wall (None if none moves)."""
-    speeds = [abs(float(np.dot(w.velocity, w.normal))) for w in planes]
+    """The largest speed (m/s) at which a scene's wall advances into the packing, and that wall (None if none
+    does)."""
+    speeds = [max(float(np.dot(w.velocity, w.normal)), 0.0) for w in planes]  # a receding wall meets nothing
     if not speeds or max(speeds) == 0:
         return 0.0, None
     return max(speeds), int(np.argmax(speeds))
@@ -357,12 +363,15 @@ FEW_WALL_CONTACTS = 0.5
 ROUGH_BED_PENETRATION = 0.1
 """The default ``walls[k].penetration`` (mean radii) on a generated powder bed: its bottom layer spreads over about
 a tenth of a mean radius (the default scene: 11 of its 45 floor particles within 0.02, 43 within 0.1); on other
-packings the schema's 0.02 (a DEM-poured bed rests on its floor within a Hertz overlap)."""
+packings, DEM-settled beds (they rest on their floor within a Hertz overlap) and runs with mechanics (a wall 0.1
+radii deep would launch the particles) the schema's 0.02."""
 
 
 def default_penetration(scene) -> float:
     """``walls[k].penetration`` where the scene gives none (mean radii): see :data:`ROUGH_BED_PENETRATION`."""
-    return ROUGH_BED_PENETRATION if scene["packing"]["kind"] == "powder_bed" else 0.02
+    p = scene["packing"]
+    rough = p["kind"] == "powder_bed" and p.get("method", "relax") != "dem" and not mechanics_on(scene)
+    return ROUGH_BED_PENETRATION if rough else 0.02
 
 
 def wall_contacts(scene, centres, radii, log=None) -> dict:
@@ -386,9 +395,12 @@ def wall_contacts(scene, centres, radii, log=None) -> dict:
         message = (f"{name} ({plane.mode}, axis {wall['axis']} {wall['side']}) touches {touching} of the {facing} "
                    "particles facing it")
         if touching < FEW_WALL_CONTACTS * facing and not mechanics_on(scene):  # moving particles settle onto it
-            message += (f"; only a handful: raise walls[{k}].penetration (now "
-                        f"{wall.get('penetration', default_penetration(scene)):g} "
-                        "mean radii) so that its plane reaches into the rough face")
+            depth = f"{wall.get('penetration', default_penetration(scene)):g} mean radii"
+            message += (f"; only a handful: raise walls[{k}].penetration (now {depth}) so that its plane reaches "
+                        "into the rough face" if k < len(scene.get("walls", [])) else
+                        f"; only a handful: replace boundary.floor_temperature by a held [[walls]] floor (axis = 2, "
+                        f"side = \"min\") with a penetration above its {depth}, so that its plane reaches into the "
+                        "rough face")
             warnings.warn(message, WallContactWarning, stacklevel=2)
         if log is not None:
             log(message)
@@ -638,7 +650,8 @@ def _clear_outputs(out):
     """A new run into ``out`` first removes the outputs an earlier run left there."""
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         f.unlink()
-    for name in ("dump.lammpstrj", "checkpoint.npz", "history.csv", "summary.json", "frames.pvd"):
+    for name in ("dump.lammpstrj", "checkpoint.npz", "history.csv", "summary.json", "frames.pvd",
+                 plots.STATE_PICTURE, plots.HISTORY_PLOT):
         if (out / name).exists():
             (out / name).unlink()
 
@@ -673,14 +686,18 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     _log(f"{len(model.radii)} particles, {model.contacts} contacts; stable step {model.stable_step:.4g} s, "
          f"dt {model.dt:.4g} s, {model.n_steps} steps to {model.n_steps * model.dt:.6g} s; compiling the step")
 
+    last = [int(state.step)]
+
     def on_chunk(s):
         nonlocal chunks_done
         step = int(s.step)
+        crossed = step // run["checkpoint_every"] > last[0] // run["checkpoint_every"]  # an extension's steps
+        last[0] = step  # are off the output grid: checkpoint once a multiple of checkpoint_every is passed
         obs = observe(scene, model, s, probe)
         _write_outputs(scene, out, model, s, obs)
         with open(out / "history.csv", "a") as f:
             f.write(_history_row(model, s, obs))
-        if step % run["checkpoint_every"] == 0 or step >= model.n_steps:
+        if crossed or step >= model.n_steps:
             save_checkpoint(out, s)  # the lists' capacities are the shapes of their leaves
         chunks_done += 1
         return stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps
@@ -789,13 +806,16 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
     if (out / "bed.json").exists():
         model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
     state = load_checkpoint(out / "checkpoint.npz", model.state)
-    if duration is not None:  # the run keeps its own step: the steps taken stay valid
+    if duration is not None or float(state.dt) != model.dt:
+        # the run keeps its own step (an extension, or the resume of an interrupted one): the steps taken stay valid
         dt = float(state.dt)
-        model = dataclasses.replace(model, n_steps=max(step, int(np.ceil(duration / dt * (1 - 1e-12)))),
+        model = dataclasses.replace(model, n_steps=max(step, int(np.ceil(scene["run"]["duration"] / dt * (1 - 1e-12)))),
                                     state=dataclasses.replace(model.state, dt=state.dt))
+    if duration is not None:
         (out / "scene.json").write_text(json.dumps(scene, indent=1))
-        if (out / "summary.json").exists():
-            (out / "summary.json").unlink()
+        for name in ("summary.json", plots.STATE_PICTURE, plots.HISTORY_PLOT):
+            if (out / name).exists():
+                (out / name).unlink()
     # outputs written after the checkpoint by the interrupted run are redone
     for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
         if int(f.stem.split("_")[1]) > step:

@@ -140,7 +140,7 @@ _SCHEMA = {
                                "hatch lines); default: every segment"),
         "after_path": Key(str, _choice("off", "stay"), False, default="off",
                           doc="off: the beam stops heating once its path is done; stay: it heats on at the last "
-                              "waypoint"),
+                              "waypoint (a path of one point is a stationary spot, on throughout)"),
     },
     "convection": {
         "environment_temperature": Key(float, TEMPERATURE, True, "K", doc="T_E of the gas"),
@@ -516,6 +516,7 @@ def _check_packing(packing, conduction):
     from sintercond.packing import PackingError, check_bed
 
     if packing["kind"] == "file":
+        packing["path"] = str(Path(packing["path"]).resolve())  # scene.json then finds it from anywhere
         file_packing(packing)  # read (once) and checked now: a bad file is named before anything is built
         return
     if packing["kind"] == "spheres":
@@ -597,6 +598,10 @@ def _check_details(scene):
             raise SceneError("give beam.intensity (W/m^2) or beam.power (W), one of them")
         if "power" in beam:
             beam["intensity"] = beam.pop("power") / (math.pi * beam["spot_radius"] ** 2)
+            low = _SCHEMA["beam"]["intensity"].rule[0]
+            if not _SCHEMA["beam"]["intensity"].rule[1](beam["intensity"]):
+                raise SceneError(f"beam.power over the spot (pi beam.spot_radius^2) gives an intensity of "
+                                 f"{beam['intensity']:.4g} W/m^2; it must be {low}")
         path = beam["path"]
         if not path or any(not isinstance(p, list) for p in path):
             raise SceneError(f"beam.path must be a non-empty list of [x, y] points (m); got {path!r}")
@@ -699,11 +704,14 @@ def estimate_run(scene) -> RunEstimate:
     capacity = material["density"] * material["specific_heat"] * 4 / 3 * math.pi * r**3
     dt = 0.9 * capacity / (z * k_pair + g)
     if scene.get("physics", {}).get("mechanics"):
-        wall_speed = max((abs(w.get("velocity", (0.0, 0.0, 0.0))[w["axis"]]) for w in scene["walls"]), default=0.0)
+        wall_speed = max((max((1.0 if w["side"] == "min" else -1.0) * w.get("velocity", (0.0, 0.0, 0.0))[w["axis"]],
+                              0.0) for w in scene["walls"]), default=0.0)  # advancing into the packing
         dt = min(dt, 0.9 * _mechanical_step_estimate(scene, r, wall_speed))
         if wall_speed > 0:
             dt = min(dt, 0.9 * WALL_STEP_FRACTION * r / wall_speed)
-    if "beam" in scene and scene["beam"]["speed"] > 0:
+    moving_beam = "beam" in scene and len(scene["beam"]["path"]) > 1 and any(
+        p != q for p, q in zip(scene["beam"]["path"], scene["beam"]["path"][1:]))
+    if moving_beam and scene["beam"]["speed"] > 0:
         dt = min(dt, 0.9 * BEAM_STEP_FRACTION * scene["beam"]["spot_radius"] / scene["beam"]["speed"])
     dt = dt if run["dt"] == "auto" else run["dt"]
     steps = max(1, math.ceil(run["duration"] / dt))

@@ -60,7 +60,8 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
     lattice of spacing ``a`` this is ``K_pair / a`` exactly.
 
     ``field=True`` returns ``(k*, temperature [n])``: the steady field between ``T = 1`` (hot) and ``0`` (cold),
-    NaN on particles that touch no other and are not held (their temperature is undefined, not 0).
+    NaN on particles no chain of contacts joins to a held one (isolated particles and floating clusters: their
+    temperature is undefined, not 0).
 
     Differentiable in ``kappa`` (scalar or ``[n]``) and the law's ``params``:
     the geometry (contacts, necks, hot and cold sets, ``L``, ``A``) is
@@ -91,9 +92,25 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params
     k_star = float(k_star) if concrete else k_star
     if not field:
         return k_star
-    touching = np.zeros(n, bool)
-    touching[setup.pairs.i] = touching[setup.pairs.j] = True
-    return k_star, jnp.where(jnp.asarray(touching | setup.hot | setup.cold), temperature, jnp.nan)
+    held = setup.hot | setup.cold
+    label = connected_components(n, setup.pairs.i, setup.pairs.j)
+    reached = np.isin(label, label[held])
+    return k_star, jnp.where(jnp.asarray(reached), temperature, jnp.nan)
+
+
+def connected_components(n, i, j) -> np.ndarray:
+    """A label ``[n]`` per particle, equal within each cluster of the contacts ``(i, j)`` (min-label propagation
+    with pointer jumping, vectorised: O(contacts) per sweep, a few sweeps)."""
+    label = np.arange(n)
+    i, j = np.asarray(i, np.int64), np.asarray(j, np.int64)
+    while True:
+        new = label.copy()
+        np.minimum.at(new, i, label[j])
+        np.minimum.at(new, j, label[i])
+        new = new[new]  # jump: a particle takes its label's label
+        if np.array_equal(new, label):
+            return label
+        label = new
 
 
 class _ConductivitySetup(typing.NamedTuple):

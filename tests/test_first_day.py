@@ -5,6 +5,7 @@ own reader of the files written.
 """
 
 import copy
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -80,6 +81,8 @@ def test_the_beam_jumps_between_hatch_lines_switched_off():
 def test_a_beam_given_by_its_power():
     model = _lattice_with_beam(power=2.0, intensity=None)
     assert float(model.params.beam.intensity) == pytest.approx(2.0 / (np.pi * 5e-5**2), rel=1e-15)
+    with pytest.raises(Exception, match=r"beam\.power over the spot .* gives an intensity of .* it must be in \[0, 1e\+12\]"):
+        _lattice_with_beam(power=1e6, intensity=None)
 
 
 def test_pictures_can_be_skipped_and_the_closing_line_lists_what_was_written(tmp_path, capsys):
@@ -106,6 +109,15 @@ def test_walls_say_how_many_particles_they_hold_and_warn_on_a_handful():
     face = np.count_nonzero(bottom < bottom.min() + 0.5 * radii.mean())
     assert model.bed["wall0_particles"] == int(np.count_nonzero(np.asarray(model.state.particles.fixed)))
     assert model.bed["wall0_particles"] >= 0.9 * face
+    r = 1e-4  # ten spheres in a row, each 4 % of a radius higher than the last, on the floor shorthand
+    rough = {"packing": {"kind": "spheres", "centres": [[3 * r * k, 0.0, r * (1 + 0.04 * k)] for k in range(10)],
+                         "radii": r},
+             "material": scene["material"], "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
+             "boundary": {"floor_temperature": 400.0},
+             "run": {"duration": 1e-3, "output_every": 5, "checkpoint_every": 10, "formats": ["vtp"]}}
+    with pytest.warns(runner.WallContactWarning, match=r"boundary\.floor_temperature \(held, axis 2 min\) touches 1 "
+                                                       r"of the 10 .*replace boundary\.floor_temperature by a held"):
+        runner.wall_contacts(validate_scene(rough), np.asarray(rough["packing"]["centres"]), np.full(10, r))
     shallow = copy.deepcopy(scene)
     shallow.pop("boundary")
     shallow["walls"] = [{"axis": 2, "side": "min", "mode": "held", "temperature": 300.0, "penetration": 0.0}]
@@ -171,3 +183,24 @@ def test_a_finished_run_is_extended_with_its_own_step(tmp_path, capsys):
         assert extended[name][-1] == pytest.approx(reference[name][-1], rel=1e-12)
     ended = np.load(out / "checkpoint.npz")["temperature"]
     np.testing.assert_allclose(ended, np.load(tmp_path / "ref" / "checkpoint.npz")["temperature"], rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_an_interrupted_extension_resumes_with_the_runs_own_step(tmp_path):
+    """The extension killed after one chunk, then a plain --resume: it keeps the run's step (the rebuilt model's
+    would differ), checkpoints as it goes, and ends where the uninterrupted extension ends."""
+    def first_ms(out):
+        runner.run_scene(validate_scene(load_scene(None, duration=1e-3)), out, progress=False, pictures=False)
+
+    first_ms(tmp_path / "whole")
+    whole, _ = runner.resume(tmp_path / "whole", progress=False, pictures=False, duration=6e-3)
+    first_ms(tmp_path / "cut")
+    runner.resume(tmp_path / "cut", progress=False, pictures=False, duration=6e-3, stop_after_chunks=3)
+    assert int(np.load(tmp_path / "cut" / "checkpoint.npz")["step"]) < int(
+        np.load(tmp_path / "whole" / "checkpoint.npz")["step"])  # a checkpoint inside the extension
+    resumed, summary = runner.resume(tmp_path / "cut", progress=False, pictures=False)
+    np.testing.assert_array_equal(np.asarray(resumed), np.asarray(whole))
+    assert summary["simulated_s"] >= 6e-3
+    listed = ElementTree.parse(tmp_path / "cut" / "frames.pvd").getroot()
+    times = [float(d.get("timestep")) for d in listed.iter("DataSet")]
+    assert times == sorted(times) and times[-1] == pytest.approx(summary["simulated_s"], rel=1e-12)

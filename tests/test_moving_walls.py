@@ -99,9 +99,17 @@ def test_the_automatic_step_covers_a_moving_wall():
 
 def test_a_fixed_step_a_wall_outruns_is_refused_naming_the_wall():
     scene = _resting(walls=[{"axis": 2, "side": "min", "mode": "insulated", "penetration": 0.0,
-                             "velocity": [0.0, 0.0, -1000.0]}], run={"dt": 1e-6, "duration": 1e-5})
+                             "velocity": [0.0, 0.0, 1000.0]}], run={"dt": 1e-6, "duration": 1e-5})
     with pytest.raises(SceneError, match=r"run\.dt: dt = 1e-06 s exceeds .*walls\[0\]\.velocity"):
         runner.build_model(scene)
+
+
+def test_a_receding_wall_sizes_nothing():
+    """A floor moving away from the packing meets nothing faster than the particles themselves."""
+    scene = _resting(walls=[{"axis": 2, "side": "min", "mode": "insulated", "penetration": 0.0,
+                             "velocity": [0.0, 0.0, -1000.0]}])
+    model = runner.build_model(scene)
+    assert model.sized_speed == 0.05 and "wall" not in model.limits
 
 
 def test_the_beam_spot_moves_at_most_a_fraction_of_its_radius_per_step():
@@ -115,6 +123,9 @@ def test_the_beam_spot_moves_at_most_a_fraction_of_its_radius_per_step():
     model = runner.build_model(validate_scene(copy.deepcopy(base)))
     assert model.limits["beam"] == pytest.approx(BEAM_STEP_FRACTION * spot / speed, rel=1e-15)
     assert model.dt * speed <= BEAM_STEP_FRACTION * spot
+    stationary = copy.deepcopy(base)
+    stationary["beam"]["path"] = [[1e-4, 1e-4]]  # a spot that does not move sizes nothing
+    assert "beam" not in runner.build_model(validate_scene(stationary)).limits
     base["run"]["dt"] = 2 * BEAM_STEP_FRACTION * spot / speed
     with pytest.raises(SceneError, match=r"run\.dt: .* exceeds .*beam\.speed = 2 m/s.*beam\.spot_radius"):
         runner.build_model(validate_scene(base))

@@ -4,8 +4,8 @@ Before, a CT-scanned packing could only be listed in the scene (at most 10,000 s
 refused listed spheres. The reference is a simple-cubic lattice written into each format (rows shuffled, in
 millimetres): its chains along z are independent, so with the face layers held
 k* = N_chains K / A exactly (K Rojek's pair conductance, Eq. 43, of the lattice's overlap, A the bounding box's
-cross-section). One isolated sphere sits in a cell centre (it touches nothing): it is reported and has no
-temperature.
+cross-section). One sphere sits alone in a cell centre and a touching pair floats in another: the three are
+reported and have no temperature (before, the pair came out at 0 K).
 """
 
 import math
@@ -24,8 +24,10 @@ NX, NY, NZ = 13, 13, 12  # 2,028 spheres
 
 def _lattice():
     grid = np.stack(np.meshgrid(np.arange(NX), np.arange(NY), np.arange(NZ), indexing="ij"), -1).reshape(-1, 3) * A
-    centres = np.vstack([grid, [[5.5 * A, 5.5 * A, 5.5 * A]]])  # + one sphere in a cell centre, touching nothing
-    radii = np.append(np.full(len(grid), R), 0.2 * A)
+    # + one sphere in a cell centre, touching nothing, and a touching pair floating in another cell
+    loose = [[5.5 * A, 5.5 * A, 5.5 * A], [3.36 * A, 3.5 * A, 3.5 * A], [3.64 * A, 3.5 * A, 3.5 * A]]
+    centres = np.vstack([grid, loose])
+    radii = np.append(np.full(len(grid), R), [0.2 * A, 0.15 * A, 0.15 * A])
     order = np.random.default_rng(3).permutation(len(radii))
     return centres[order], radii[order]
 
@@ -109,10 +111,10 @@ def test_effective_on_a_file_packing_is_the_lattices_closed_form(tmp_path, capsy
     out = capsys.readouterr().out
     k_star = float(out.split(":")[1].split()[0])
     assert k_star == pytest.approx(_expected_k_star(12.6), rel=1.2e-6)  # printed to 6 digits: half a unit
-    assert "1 particles touch no other" in out and "face layer" in out
+    assert "3 particles are joined to neither held face" in out and "face layer" in out
     field = io.read_vtp(tmp_path / "field" / "steady.vtp")
     isolated = field["isolated"] == 1
-    assert isolated.sum() == 1 and np.isnan(field["temperature"][isolated]).all()
+    assert isolated.sum() == 3 and np.isnan(field["temperature"][isolated]).all()  # the floating pair too
     assert np.all((field["temperature"][~isolated] >= 0) & (field["temperature"][~isolated] <= 1))
 
 
