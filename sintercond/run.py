@@ -28,8 +28,8 @@ from tqdm import tqdm
 from sintercond import forces, guards, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
 from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
-from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, file_packing,
-                              restitution_damping_ratio, validate_scene)
+from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
+                              file_packing, restitution_damping_ratio, validate_scene)
 from sintercond.state import particle_state
 
 
@@ -251,7 +251,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         sim = simulate.simulator(physics, fns)
         reallocate = simulate.reallocate_neighbors(fns)
         impact = scene["physics"].get("impact_velocity", 0.05)
-        wall_speed, fastest = _fastest_wall(planes)
+        wall_speed, fastest = _fastest_wall(scene)
         v_rel = impact + wall_speed
         mechanical_limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics,
                                                          v_rel))
@@ -266,8 +266,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                     f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
         motion = mechanics.mechanical_state(physics, centres, contacts)
     beam = scene.get("beam")
-    if beam is not None and beam["speed"] > 0 and _path_length(beam["path"]) > 0:
-        step = BEAM_STEP_FRACTION * beam["spot_radius"] / beam["speed"]
+    if beam is not None and beam_step(beam) is not None:
+        step = beam_step(beam)
         bounds["beam"] = (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam['speed']:g} m/s) moves "
                                 f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam['spot_radius']:g} m")
     limit = min(bound for bound, _ in bounds.values())
@@ -288,15 +288,10 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                  {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None)
 
 
-def _path_length(path) -> float:
-    """The length (m) of a beam's path of waypoints (0: a stationary spot)."""
-    return float(np.sum(np.linalg.norm(np.diff(np.asarray(path, float), axis=0), axis=1))) if len(path) > 1 else 0.0
-
-
-def _fastest_wall(planes) -> tuple[float, int | None]:
-    """The largest speed (m/s) at which a scene's wall advances into the packing, and that wall (None if none
-    does)."""
-    speeds = [max(float(np.dot(w.velocity, w.normal)), 0.0) for w in planes]  # a receding wall meets nothing
+def _fastest_wall(scene) -> tuple[float, int | None]:
+    """The largest speed (m/s) at which a scene's wall advances into the packing (:func:`sintercond.scene.advance_speed`),
+    and that wall (None if none does)."""
+    speeds = [advance_speed(w) for w in _walls(scene)]
     if not speeds or max(speeds) == 0:
         return 0.0, None
     return max(speeds), int(np.argmax(speeds))

@@ -704,15 +704,12 @@ def estimate_run(scene) -> RunEstimate:
     capacity = material["density"] * material["specific_heat"] * 4 / 3 * math.pi * r**3
     dt = 0.9 * capacity / (z * k_pair + g)
     if scene.get("physics", {}).get("mechanics"):
-        wall_speed = max((max((1.0 if w["side"] == "min" else -1.0) * w.get("velocity", (0.0, 0.0, 0.0))[w["axis"]],
-                              0.0) for w in scene["walls"]), default=0.0)  # advancing into the packing
+        wall_speed = max((advance_speed(w) for w in scene["walls"]), default=0.0)
         dt = min(dt, 0.9 * _mechanical_step_estimate(scene, r, wall_speed))
         if wall_speed > 0:
             dt = min(dt, 0.9 * WALL_STEP_FRACTION * r / wall_speed)
-    moving_beam = "beam" in scene and len(scene["beam"]["path"]) > 1 and any(
-        p != q for p, q in zip(scene["beam"]["path"], scene["beam"]["path"][1:]))
-    if moving_beam and scene["beam"]["speed"] > 0:
-        dt = min(dt, 0.9 * BEAM_STEP_FRACTION * scene["beam"]["spot_radius"] / scene["beam"]["speed"])
+    if "beam" in scene and beam_step(scene["beam"]) is not None:
+        dt = min(dt, 0.9 * beam_step(scene["beam"]))
     dt = dt if run["dt"] == "auto" else run["dt"]
     steps = max(1, math.ceil(run["duration"] / dt))
     frames = steps // run["output_every"] + 1
@@ -739,6 +736,21 @@ WALL_STEP_FRACTION = 0.1
 
 BEAM_STEP_FRACTION = 0.2
 """A beam's spot advances at most this fraction of its radius per automatic step (the spot is resolved)."""
+
+
+def advance_speed(wall) -> float:
+    """The speed (m/s) at which a scene wall (``[[walls]]`` table) advances into the packing; 0 if it recedes."""
+    inward = 1.0 if wall["side"] == "min" else -1.0
+    return max(inward * float(wall.get("velocity", (0.0, 0.0, 0.0))[wall["axis"]]), 0.0)
+
+
+def beam_step(beam) -> float | None:
+    """The step (s) in which the beam's spot moves :data:`BEAM_STEP_FRACTION` of its radius; None for a spot that
+    does not move (no speed, or a path of one point or of coincident points)."""
+    path = beam["path"]
+    if not beam["speed"] > 0 or all(p == path[0] for p in path):
+        return None
+    return BEAM_STEP_FRACTION * beam["spot_radius"] / beam["speed"]
 
 
 def _mechanical_step_estimate(scene, r, wall_speed=0.0):
