@@ -22,7 +22,7 @@ them (MECHANICS.md, "What users comparing with LAMMPS will see"):
   restitution e = 0.5; sintercond's xi_con = sqrt(5/6) beta(e) is the same
   delta^(1/4) viscous form;
 * tangential: Mindlin with history (``tangential mindlin NULL 1.0 mu``),
-  ``Physics(shear="mindlin")`` for G*; LAMMPS scales the tangential damping
+  ``Mechanics(shear="mindlin")`` for G*; LAMMPS scales the tangential damping
   from the normal one, sintercond uses xi_fric = 1 (Eq. 11);
 * rolling: LAMMPS ``rolling sds`` (a constant stiffness k_roll = 100 N/m,
   the order of Mindlin's 8 G* a here; no rolling damping; mu_r) against the paper's rolling resistance
@@ -150,9 +150,9 @@ def sintercond_setup(centres, radii, temperature, variant, dt=None, order="latti
         centres, radii, temperature = centres[permutation], radii[permutation], temperature[permutation]
     dtype, force_dtype = VARIANTS[variant]
     floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "insulated")
-    physics = simulate.Physics(law="batchelor_obrien", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                               mechanics=True, walls=(floor,), friction=True, rolling=True, shear="mindlin",
-                               force_dtype=force_dtype)
+    physics = simulate.Physics.create(law="batchelor_obrien", neck_model="hertz", conductance="lifted",
+                                      contacts="dynamic", mechanics=True, walls=(floor,), friction=True, rolling=True,
+                                      shear="mindlin", force_dtype=force_dtype)
     particles = particle_state(centres, radii, temperature, DENSITY)
     particles = jax.tree_util.tree_map(lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x,
                                        particles)
@@ -164,10 +164,10 @@ def sintercond_setup(centres, radii, temperature, variant, dt=None, order="latti
                                              xi_con=cast(restitution_damping_ratio(RESTITUTION)),
                                              xi_fric=cast(1.0), xi_rol=cast(0.2), mu=cast(MU), mu_r=cast(MU_R),
                                              mu_wall=cast(MU), mu_r_wall=cast(MU_R)))
-    limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics, V_REL))
+    limit = float(mechanics.stable_time_step(physics.mechanics, particles, contacts.neighbors, params.mechanics, V_REL))
     dt = 0.5 * limit if dt is None else dt
     state = simulate.init_state(particles, contacts, jnp.asarray(dt, dtype),
-                                mechanics=mechanics.mechanical_state(physics, particles.positions, contacts))
+                                mechanics=mechanics.mechanical_state(physics.mechanics, particles.positions, contacts))
     return simulate.simulator(physics, fns), fns, state, params, dt
 
 

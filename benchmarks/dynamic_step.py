@@ -6,7 +6,7 @@ Usage: python benchmarks/dynamic_step.py [--sizes 10000] [--steps 200] [--laws r
 A jittered sintered simple-cubic packing (spacing a, radii 0.53 a +- 2 %)
 shrinking affinely at a strain rate that moves the outermost particles about
 0.2 a over the run (a sintering compact). The simulator with
-``Physics(contacts="dynamic", conductance="lifted")``: conductances from the
+``Physics(contacts="dynamic", conduction=Conduction(conductance="lifted"))``: conductances from the
 current overlaps at every step (Rojek's law with the volume-conserving neck,
 or Batchelor-O'Brien with the Hertz neck), once per pair of the half pair
 list, in jitted chunks of 100 steps compiled once (as `sintercond.rollout.advance`
@@ -61,8 +61,8 @@ NECKS = {"rojek": None, "batchelor_obrien": "hertz"}
 
 def setup(centres, radii, skin, rate, law):
     n = len(radii)
-    physics = simulate.Physics(law=law, neck_model=NECKS[law], conductance="lifted", contacts="dynamic",
-                               motion=simulate.affine_shrinkage(centres, rate))
+    physics = simulate.Physics.create(law=law, neck_model=NECKS[law], conductance="lifted", contacts="dynamic",
+                                      motion=simulate.affine_shrinkage(centres, rate))
     contacts, fns = simulate.dynamic_contacts(centres, radii, skin, capacity_multiplier=1.5)
     t0 = jnp.asarray(np.random.default_rng(2).uniform(300, 1000, n))
     mass = jnp.asarray(4 / 3 * np.pi * radii**3 * 4430.0)

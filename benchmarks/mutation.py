@@ -62,9 +62,9 @@ FSINT = [T + "test_fit_sintering.py"]
 
 # (name, module, original, mutated, tests)
 MUTANTS = [
-    ("walls rub regardless", "sintercond/mechanics.py", "friction=physics.friction and physics.wall_friction",
-     "friction=physics.friction", MECH),
-    ("walls never rub", "sintercond/mechanics.py", "friction=physics.friction and physics.wall_friction",
+    ("walls rub regardless", "sintercond/mechanics.py", "friction=spec.friction and spec.wall_friction",
+     "friction=spec.friction", MECH),
+    ("walls never rub", "sintercond/mechanics.py", "friction=spec.friction and spec.wall_friction",
      "friction=False", MECH),
     # --- sintercond/neck.py
     ("coble r*", "sintercond/neck.py", "r_star = 2.0 * r_i * r_j / (r_i + r_j)\n    a = safe_sqrt(2.0 * r_star * h)",
@@ -342,12 +342,12 @@ MUTANTS = [
      "mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j]",
      "mass_f[j], modulus[i], nu[i], modulus[i], nu[i], v[i], v[j]", [T + "test_unequal_contacts.py"]),
     ("pair radius of i for both spheres", "sintercond/mechanics.py",
-     "physics, params, dt, normal, overlap, radii_f[i], radii_f[j], mass_f[i],",
-     "physics, params, dt, normal, overlap, radii_f[i], radii_f[i], mass_f[i],", [T + "test_unequal_contacts.py"]),
+     "spec, params, dt, normal, overlap, radii_f[i], radii_f[j], mass_f[i],",
+     "spec, params, dt, normal, overlap, radii_f[i], radii_f[i], mass_f[i],", [T + "test_unequal_contacts.py"]),
     ("softening at the mean temperature", "sintercond/mechanics.py", "return softened_modulus(temperature, e0",
      "return softened_modulus(jnp.mean(temperature) + 0 * temperature, e0", [T + "test_unequal_contacts.py"]),
     ("coupled step without its sources", "sintercond/simulate.py",
-     "        power = power + thermal.source_power(physics, state, params)", "        power = power + 0.0",
+     "        power = power + thermal.source_power(physics.sources, state, params)", "        power = power + 0.0",
      [T + "test_coupled_sources.py"]),
     ("beam depth from the top centre", "sintercond/thermal.py", "surface = jnp.max(positions[:, 2] + radii)",
      "surface = jnp.max(positions[:, 2])", [T + "test_coupled_sources.py"]),

@@ -102,8 +102,8 @@ class ProbeExperiment:
         probes = np.asarray(self.probes)
         if probes.ndim != 1 or probes.size == 0 or probes.min() < 0 or probes.max() >= n:
             raise ValueError(f"probes must be a non-empty 1-D array of particle indices in [0, {n}); got {probes}")
-        physics = Physics(conductance="table", pulse=True, held=self.fixed_mask is not None,
-                          conducting_walls=int(self.table.wall_conductance is not None))
+        physics = Physics.create(conductance="table", pulse=True, held=self.fixed_mask is not None,
+                                 conducting_walls=int(self.table.wall_conductance is not None))
         object.__setattr__(self, "_sim", simulator(physics))
         total = np.asarray(total_conductance(self.table))
         limit = np.min(np.where(total > 0, np.asarray(self.mass) / (self.dt * np.where(total > 0, total, 1)), np.inf))

@@ -7,7 +7,7 @@ MECHANICS.md erratum 6; :func:`sintercond.materials.softened_modulus`)::
 
 is fitted to temperature and overlap (or settlement) histories by weighted
 least squares (:func:`fitting.core.least_squares`) through
-:func:`sintercond.simulate.rollout` of ``Physics(mechanics=True,
+:func:`sintercond.simulate.rollout` of ``Physics.create(mechanics=True,
 softening=True)``: the model of the data *is* the simulation, differentiated
 by JAX itself. ``method="adam"`` uses reverse mode over the rollout's
 ``jax.checkpoint``-ed segments of ~``sqrt(n_steps)`` steps (memory
@@ -529,9 +529,10 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
 
     def physics(floor):
         walls = (PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "conducting", float(floor)),) + side
-        return simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                                mechanics=True, walls=walls, softening=True, friction=friction,
-                                wall_friction=False)  # mu_wall = 0: the walls' tangential law is skipped
+        # mu_wall = 0: the walls' tangential law is skipped
+        return simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted",
+                                       contacts="dynamic", mechanics=True, walls=walls, softening=True,
+                                       friction=friction, wall_friction=False)
 
     contacts, fns = simulate.dynamic_contacts(x, particles.radii, 0.1 * float(np.mean(r)), capacity_multiplier=2.0)
     f64 = lambda v: jnp.asarray(float(v), jnp.float64)  # noqa: E731
@@ -541,11 +542,11 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
                                  mu=f64(mu), mu_r=f64(0.0), mu_wall=f64(0.0), mu_r_wall=f64(0.0),
                                  theta_star=f64(theta_star), rate=f64(rate), E_min=f64(0.0)))
     settle = physics(initial_temperature)
-    limit = float(mechanics.stable_time_step(settle, particles, contacts.neighbors, params.mechanics, 0.05))
+    limit = float(mechanics.stable_time_step(settle.mechanics, particles, contacts.neighbors, params.mechanics, 0.05))
     dt = 0.8 * limit if dt is None else float(dt)
-    mechanics.check_time_step(dt, settle, particles, contacts.neighbors, params.mechanics, 0.05)
+    mechanics.check_time_step(dt, settle.mechanics, particles, contacts.neighbors, params.mechanics, 0.05)
     state = simulate.init_state(particles, contacts, dt,
-                                mechanics=mechanics.mechanical_state(settle, x, contacts))
+                                mechanics=mechanics.mechanical_state(settle.mechanics, x, contacts))
     chunk = 500
     speed = [math.inf]
 

@@ -59,8 +59,8 @@ def example_5_1(softening=True, dt=2e-5, t_end=40.0, law="conductivity", neck_mo
     positions = np.array([[0.0, 0.0, r]])
     particles = particle_state(positions, r, d["initial_temperature"], d["density"])
     floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "conducting", d["floor_temperature"])
-    physics = simulate.Physics(law=law, neck_model=neck_model, conductance="lifted", contacts="dynamic",
-                               mechanics=True, walls=(floor,), softening=softening)
+    physics = simulate.Physics.create(law=law, neck_model=neck_model, conductance="lifted", contacts="dynamic",
+                                      mechanics=True, walls=(floor,), softening=softening)
     contacts, fns = simulate.dynamic_contacts(positions, particles.radii, skin_fraction * r)
     f64 = lambda x: jnp.asarray(float(x), jnp.float64)  # noqa: E731
     params = simulate.Params(
@@ -68,9 +68,9 @@ def example_5_1(softening=True, dt=2e-5, t_end=40.0, law="conductivity", neck_mo
         mechanics=mechanics.MechanicalParams(E0=f64(d["E0"]), nu=f64(d["nu"]), xi_con=f64(d["xi_con"]),
                                              xi_fric=f64(1.0), xi_rol=f64(0.0), mu=f64(0.0), mu_r=f64(0.0),
                                              theta_star=f64(d["theta_star"]), rate=f64(1.0), E_min=f64(0.0)))
-    mechanics.check_time_step(dt, physics, particles, contacts.neighbors, params.mechanics, impact_velocity)
+    mechanics.check_time_step(dt, physics.mechanics, particles, contacts.neighbors, params.mechanics, impact_velocity)
     state = simulate.init_state(particles, contacts, dt,
-                                mechanics=mechanics.mechanical_state(physics, positions, contacts))
+                                mechanics=mechanics.mechanical_state(physics.mechanics, positions, contacts))
     return simulate.simulator(physics, fns), state, params, int(round(t_end / dt))
 
 
@@ -184,7 +184,8 @@ def heat_run(centres, radii, lateral_size, height, duration=EXAMPLE_5_3["duratio
     centres, radii = np.asarray(centres, np.float64), np.asarray(radii, np.float64)
     L, dT = float(lateral_size), d["hot"] - d["cold"]
     area = L * float(height)
-    physics = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", conducting_walls=2)
+    physics = simulate.Physics(conduction=simulate.Conduction(law="conductivity", neck_model="hertz", conductance="lifted",
+                                                          conducting_walls=2))
     planes = [PlaneWall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)), PlaneWall((L, 0.0, 0.0), (-1.0, 0.0, 0.0))]
     contacts = simulate.lifted_contacts(physics, centres, radii, [(np.asarray(w.penetration(centres, radii)), t)
                                                                   for w, t in zip(planes, (d["hot"], d["cold"]))])

@@ -67,11 +67,11 @@ def motion_figures(physics: simulate.Physics, state: simulate.SimState, params: 
     v, omega = np.asarray(motion.velocity, np.float64), np.asarray(motion.spin, np.float64)
     n = len(r)
     mp = params.mechanics
-    modulus = np.asarray(mechanics.particle_modulus(physics, mp, p.temperature, p.material), np.float64)
+    modulus = np.asarray(mechanics.particle_modulus(physics.mechanics, mp, p.temperature, p.material), np.float64)
     nu = np.broadcast_to(np.atleast_1d(np.asarray(mp.nu, np.float64))[np.asarray(p.material)], (n,))
     inertia = forces.SOLID_SPHERE_INERTIA * m * r**2
     kinetic = 0.5 * float(np.sum(m * np.sum(v * v, axis=1)) + np.sum(inertia * np.sum(omega * omega, axis=1)))
-    gravity = -float(np.sum(m * (x @ np.asarray(physics.gravity, np.float64))))
+    gravity = -float(np.sum(m * (x @ np.asarray(physics.mechanics.gravity, np.float64))))
     pairs = np.asarray(state.contacts.pairs.pairs)
     pairs = pairs[pairs[:, 0] < pairs[:, 1]]
     i, j = pairs[:, 0], pairs[:, 1]
@@ -94,7 +94,7 @@ def motion_figures(physics: simulate.Physics, state: simulate.SimState, params: 
         k = int(np.argmax(closing))
         fastest, where = float(closing[k]), f"particles {int(i[k])} and {int(j[k])}"
     t = float(state.time)
-    for w, wall in enumerate(physics.walls):
+    for w, wall in enumerate(physics.mechanics.walls):
         wall_normal = np.asarray(wall.normal, np.float64)
         wall_velocity = np.asarray(wall.velocity, np.float64)
         h = r - (x - (np.asarray(wall.point, np.float64) + t * wall_velocity)) @ wall_normal
@@ -126,10 +126,10 @@ def motion_guard(sim: simulate.Simulator, state: simulate.SimState, params: simu
       :func:`sintercond.rollout.finite_temperatures`, which the caller composes).
     """
     physics = sim.physics
-    if not physics.mechanics:
+    if physics.mechanics is None:
         raise ValueError("motion_guard needs a coupled simulator (Physics.mechanics)")
     start = motion_figures(physics, state, params)
-    walls_move = any(np.any(np.asarray(w.velocity) != 0) for w in physics.walls)
+    walls_move = any(np.any(np.asarray(w.velocity) != 0) for w in physics.mechanics.walls)
 
     def check(new: simulate.SimState) -> None:
         now = motion_figures(physics, new, params)

@@ -5,7 +5,7 @@ Quintana-Ruiz & Campello (2020), Sects. 2 and 4, with the readings of
 :mod:`sintercond.forces`; this module lifts them to a jax-md Dense neighbour
 table (``[n, m]``, padding ``n``) and to plane walls, and integrates the
 motion. :mod:`sintercond.simulate` builds the coupled step from it
-(``Physics(mechanics=True)``).
+(``Physics(mechanics=Mechanics(...))``, the sub-spec :class:`Mechanics`).
 
 Pairs
 -----
@@ -57,6 +57,114 @@ from sintercond._numerics import materialized
 from sintercond.materials import softened_modulus
 from sintercond.pair_list import HalfPairs, pair_exchange, pair_sum, remap_half_pairs
 from sintercond.state import pytree_dataclass
+
+
+@dataclasses.dataclass(frozen=True)
+class Mechanics:
+    """The thermo-mechanical sub-spec of :class:`sintercond.simulate.Physics` (static, hashable; no arrays).
+
+    Which contact laws and loads the coupled step (Quintana-Ruiz & Campello
+    2020, Eqs. 43-46) evaluates; its differentiable parameters are
+    :class:`MechanicalParams` (``Params.mechanics``). ``Physics(mechanics=None)``
+    is the thermal step alone: nothing of this is traced.
+
+    Attributes:
+      walls: :class:`sintercond.walls.PlaneWall` s that push, rub and (mode
+        ``"conducting"``) exchange heat at their fixed temperature: a tuple,
+        each wall's ``point``, ``normal`` and ``velocity`` tuples of floats
+        (:meth:`create` converts sequences). Static: the number of walls
+        decides what is traced; wall temperatures and positions are not
+        differentiable.
+      gravity: ``(gx, gy, gz)`` acceleration (m/s^2), floats.
+      friction: Mindlin stick-slip friction with a spring (Eqs. 7-14).
+      rolling: rolling resistance (Eqs. 15-20).
+      wall_friction, wall_rolling: with ``friction`` (``rolling``), whether
+        the walls rub (resist rolling) too. False: frictionless walls
+        (``mu_wall = 0``; without rolling resistance, ``mu_r_wall = 0``):
+        their tangential (rolling) law, whose force would be exactly zero,
+        is not evaluated and its springs are not stored. Without the
+        pairs' law the flag says nothing (:meth:`create` sets it True, so
+        that specs that mean the same compare equal).
+      softening: Young's modulus from the temperature, Eq. 42 (erratum 6).
+      damping_clamp: no tensile normal force (LAMMPS ``limit_damping``).
+      shear: ``"paper"`` (Eq. 9) or ``"mindlin"`` effective shear modulus.
+      slip_direction: ``"trial"`` or ``"velocity"`` (erratum 3).
+      rolling_projection: roll on the tangential part of the relative spin only (erratum 5).
+      force_dtype: ``None`` (the contact laws in the positions' dtype) or
+        ``"float32"``: forces, torques and springs in float32 while
+        positions, velocities and temperatures stay float64 (relative
+        separations are formed in float64 first, so the overlap keeps its
+        digits); tests/test_mechanics.py states the accuracy.
+    """
+
+    walls: tuple = ()
+    gravity: tuple = (0.0, 0.0, -9.81)
+    friction: bool = False
+    rolling: bool = False
+    wall_friction: bool = True
+    wall_rolling: bool = True
+    softening: bool = False
+    damping_clamp: bool = False
+    shear: str = "paper"
+    slip_direction: str = "trial"
+    rolling_projection: bool = False
+    force_dtype: str | None = None
+
+    def __post_init__(self):
+        from sintercond.walls import PlaneWall
+
+        if self.shear not in forces.SHEAR_CONVENTIONS:
+            raise ValueError(f"Mechanics.shear must be one of {list(forces.SHEAR_CONVENTIONS)}; got {self.shear!r}")
+        if self.slip_direction not in forces.SLIP_DIRECTIONS:
+            raise ValueError(f"Mechanics.slip_direction must be one of {list(forces.SLIP_DIRECTIONS)}; "
+                             f"got {self.slip_direction!r}")
+        if self.force_dtype not in (None, "float32", "float64"):
+            raise ValueError(f"Mechanics.force_dtype must be None, 'float32' or 'float64'; got {self.force_dtype!r}")
+        for name in ("friction", "rolling", "wall_friction", "wall_rolling", "softening", "damping_clamp",
+                     "rolling_projection"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"Mechanics.{name} must be True or False; got {getattr(self, name)!r}")
+        if not (isinstance(self.gravity, tuple) and len(self.gravity) == 3
+                and all(isinstance(g, float) and math.isfinite(g) for g in self.gravity)):
+            raise ValueError(f"Mechanics.gravity must be a tuple of 3 finite floats (m/s^2); got {self.gravity!r} "
+                             "(Mechanics.create converts sequences)")
+        if not isinstance(self.walls, tuple):
+            raise ValueError(f"Mechanics.walls must be a tuple of PlaneWall; got {type(self.walls).__name__} "
+                             "(Mechanics.create converts sequences)")
+        for k, w in enumerate(self.walls):
+            if not isinstance(w, PlaneWall):
+                raise ValueError(f"Mechanics.walls[{k}] must be a PlaneWall; got {type(w).__name__}")
+            if w.mode == "held":
+                raise ValueError(f"Mechanics.walls[{k}]: mode 'held' is not supported with mechanics; use 'conducting'")
+            if not all(isinstance(getattr(w, f), tuple) for f in ("point", "normal", "velocity")):
+                raise ValueError(f"Mechanics.walls[{k}]: point, normal and velocity must be tuples of floats (the spec "
+                                 "is hashed); Mechanics.create converts them")
+
+    @classmethod
+    def create(cls, walls=(), gravity=(0.0, 0.0, -9.81), *, friction=False, rolling=False, wall_friction=True,
+               wall_rolling=True, **flags) -> Mechanics:
+        """A normalised :class:`Mechanics`: walls and gravity as tuples of floats, NumPy booleans as bools, and
+        ``wall_friction`` (``wall_rolling``) True where ``friction`` (``rolling``) is off, so that two specs that
+        mean the same step compare equal and compile once. ``flags``: the other fields."""
+        from sintercond.walls import PlaneWall
+
+        for name, value in (("wall_friction", wall_friction), ("wall_rolling", wall_rolling)):
+            if not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"Mechanics.{name} must be True or False; got {value!r}")
+        try:
+            gravity = tuple(float(g) for g in gravity)
+        except (TypeError, ValueError):
+            raise ValueError(f"Mechanics.gravity must be 3 numbers (m/s^2); got {gravity!r}") from None
+        if len(gravity) != 3:
+            raise ValueError(f"Mechanics.gravity must be 3 numbers (m/s^2); got {gravity!r}")
+        walls = tuple(dataclasses.replace(w, point=tuple(map(float, w.point)), normal=tuple(map(float, w.normal)),
+                                          velocity=tuple(map(float, w.velocity))) if isinstance(w, PlaneWall) else w
+                      for w in walls)
+        flags = {k: bool(v) if isinstance(v, np.bool_) else v for k, v in flags.items()}
+        friction, rolling = bool(friction), bool(rolling)
+        return cls(walls=walls, gravity=gravity, friction=friction, rolling=rolling,
+                   wall_friction=bool(wall_friction) or not friction, wall_rolling=bool(wall_rolling) or not rolling,
+                   **flags)
 
 
 @pytree_dataclass
@@ -174,7 +282,7 @@ class MechanicalState:
       spring: ``[capacity, 3]`` tangential springs of the half pair list's
         pairs (m), the spring of ``i`` relative to ``j`` (``i < j``); None
         without friction. Springs are in the force dtype
-        (``Physics.force_dtype``).
+        (``Mechanics.force_dtype``).
       rolling: ``[capacity, 3]`` rolling springs per pair (rad); None without rolling.
       wall_spring, wall_rolling: ``[n_walls, n, 3]`` the same against each wall.
     """
@@ -187,11 +295,11 @@ class MechanicalState:
     wall_rolling: Any = None
 
 
-def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> MechanicalState:
+def mechanical_state(spec, positions, contacts, velocity=None, spin=None) -> MechanicalState:
     """A :class:`MechanicalState` at rest (or with ``velocity``/``spin`` ``[n, 3]``), springs zero.
 
     Args:
-      physics: the :class:`sintercond.simulate.Physics` (which springs exist).
+      spec: the :class:`Mechanics` sub-spec (which springs exist).
       positions: ``[n, 3]`` (m), for shapes and dtype.
       contacts: the :class:`sintercond.simulate.Contacts` of
         :func:`sintercond.simulate.dynamic_contacts` (or its
@@ -203,22 +311,22 @@ def mechanical_state(physics, positions, contacts, velocity=None, spin=None) -> 
         raise TypeError("mechanical_state needs the Contacts of simulate.dynamic_contacts (the springs live on its "
                         f"half pair list, Contacts.pairs); got {type(contacts).__name__}")
     positions = jnp.asarray(positions)
-    n, w = positions.shape[0], len(physics.walls)
+    n, w = positions.shape[0], len(spec.walls)
     zeros = jnp.zeros_like(positions)
     velocity = zeros if velocity is None else jnp.asarray(velocity, positions.dtype)
     spin = zeros if spin is None else jnp.asarray(spin, positions.dtype)
-    fd = force_dtype(physics, positions.dtype)
+    fd = force_dtype(spec, positions.dtype)
     pair = jnp.zeros((half.capacity, 3), fd)
     wall = jnp.zeros((w, n, 3), fd)
-    walls = wall_physics(physics)
-    return MechanicalState(velocity, spin, pair if physics.friction else None, pair if physics.rolling else None,
+    walls = wall_spec(spec)
+    return MechanicalState(velocity, spin, pair if spec.friction else None, pair if spec.rolling else None,
                            wall if walls.friction else None, wall if walls.rolling else None)
 
 
-def wall_physics(physics):
-    """The laws the walls see: ``physics`` with friction (rolling) off where ``wall_friction`` (``wall_rolling``) is."""
-    return dataclasses.replace(physics, friction=physics.friction and physics.wall_friction,
-                               rolling=physics.rolling and physics.wall_rolling)
+def wall_spec(spec):
+    """The laws the walls see: ``spec`` with friction (rolling) off where ``wall_friction`` (``wall_rolling``) is."""
+    return dataclasses.replace(spec, friction=spec.friction and spec.wall_friction,
+                               rolling=spec.rolling and spec.wall_rolling)
 
 
 def wall_coefficients(params: MechanicalParams):
@@ -227,15 +335,15 @@ def wall_coefficients(params: MechanicalParams):
             params.mu_r if params.mu_r_wall is None else params.mu_r_wall)
 
 
-def check_wall_coefficients(physics, params: MechanicalParams):
+def check_wall_coefficients(spec, params: MechanicalParams):
     """Raise ``ValueError`` if frictionless walls (``wall_friction``/``wall_rolling`` False) get concrete nonzero
     :func:`wall_coefficients`; traced values are not checked."""
     mu_w, mu_r_w = wall_coefficients(params)
-    for flag, on, name, value in (("wall_friction", physics.friction, "mu_wall", mu_w),
-                                  ("wall_rolling", physics.rolling, "mu_r_wall", mu_r_w)):
-        if on and not getattr(physics, flag) and not isinstance(value, jax.core.Tracer) and \
+    for flag, on, name, value in (("wall_friction", spec.friction, "mu_wall", mu_w),
+                                  ("wall_rolling", spec.rolling, "mu_r_wall", mu_r_w)):
+        if on and not getattr(spec, flag) and not isinstance(value, jax.core.Tracer) and \
                 bool(np.any(np.asarray(value) != 0)):
-            raise ValueError(f"Physics.{flag}=False makes the walls frictionless, but MechanicalParams.{name} "
+            raise ValueError(f"Mechanics.{flag}=False makes the walls frictionless, but MechanicalParams.{name} "
                              f"(or its fallback) is {value!r}; it must be 0 there (or set {flag}=True)")
 
 
@@ -251,8 +359,8 @@ DebugOptions and only the CPU compiler reads them (not checked on a GPU)."""
 
 
 def compiler_options(physics):
-    """:data:`COMPILER_OPTIONS` for a mechanical ``physics`` (``Physics(mechanics=True)``), else None."""
-    return dict(COMPILER_OPTIONS) if physics.mechanics else None
+    """:data:`COMPILER_OPTIONS` for a :class:`sintercond.simulate.Physics` with a mechanics sub-spec, else None."""
+    return dict(COMPILER_OPTIONS) if physics.mechanics is not None else None
 
 
 # --------------------------------------------------------------------------
@@ -301,11 +409,11 @@ def wall_penetration(walls, positions, radii, t):
                                       * jnp.asarray(w.normal, dtype), axis=-1) for w in walls])
 
 
-def particle_modulus(physics, params: MechanicalParams, temperature, material):
-    """Young's modulus ``[n]`` (Pa) per particle: ``E0``, or the softened Eq. 42 (erratum 6) when ``physics.softening``."""
+def particle_modulus(spec, params: MechanicalParams, temperature, material):
+    """Young's modulus ``[n]`` (Pa) per particle: ``E0``, or the softened Eq. 42 (erratum 6) when ``spec.softening``."""
     pick = lambda x: jnp.atleast_1d(jnp.asarray(x))[material]  # noqa: E731
     e0 = pick(params.E0).astype(temperature.dtype)
-    if not physics.softening:
+    if not spec.softening:
         return e0
     return softened_modulus(temperature, e0, pick(params.theta_star), pick(params.rate), pick(params.E_min))
 
@@ -314,14 +422,14 @@ def particle_modulus(physics, params: MechanicalParams, temperature, material):
 # forces
 
 
-def _contact_laws(physics, params, dt, normal, delta, r_i, r_j, m_i, m_j, E_i, nu_i, E_j, nu_j, v_i, v_j,
+def _contact_laws(spec, params, dt, normal, delta, r_i, r_j, m_i, m_j, E_i, nu_i, E_j, nu_j, v_i, v_j,
                   omega_i, omega_j, arm_j, spring, rolling, mu, mu_r):
     """Force on ``i``, torques on ``i`` and ``j`` and the new springs of contacts ``(i, j)`` (Eqs. 2-20).
 
-    Normal Hertz with damping (Eqs. 2-6; ``physics.damping_clamp``: no
+    Normal Hertz with damping (Eqs. 2-6; ``spec.damping_clamp``: no
     tension), Mindlin friction with the spring (Eqs. 7-13) when
-    ``physics.friction`` and its torques (Eq. 14, erratum 2), rolling
-    resistance (Eqs. 15-20) when ``physics.rolling``. ``arm_j``: the lever
+    ``spec.friction`` and its torques (Eq. 14, erratum 2), rolling
+    resistance (Eqs. 15-20) when ``spec.rolling``. ``arm_j``: the lever
     arm of ``j`` (its radius; 0 for a wall, whose ``r_j`` is ``inf``).
     """
     r_star = forces.effective_radius(r_i, r_j)
@@ -331,22 +439,22 @@ def _contact_laws(physics, params, dt, normal, delta, r_i, r_j, m_i, m_j, E_i, n
     # f_n, f_t and m_r each feed several [..., 3] outputs: computed once (materialized), XLA's CPU fusion
     # would evaluate their whole chains again in every output, per component (1.35x on the 1e5-sphere step)
     f_n = materialized(forces.hertz_normal_force(delta, delta_dot, r_star, m_star, e_star, params.xi_con,
-                                                 no_tension=physics.damping_clamp))
+                                                 no_tension=spec.damping_clamp))
     force = -f_n[..., None] * normal
     torque_i = torque_j = jnp.zeros_like(force)
-    if physics.friction or physics.rolling:
-        g_star = forces.effective_shear_modulus(E_i, nu_i, E_j, nu_j, physics.shear)
-    if physics.friction:
+    if spec.friction or spec.rolling:
+        g_star = forces.effective_shear_modulus(E_i, nu_i, E_j, nu_j, spec.shear)
+    if spec.friction:
         f_t, spring, _ = forces.mindlin_tangential_force(spring, v_t, normal, dt, delta, f_n, r_star, m_star, g_star,
-                                                         params.xi_fric, mu, slip_direction=physics.slip_direction)
+                                                         params.xi_fric, mu, slip_direction=spec.slip_direction)
         f_t = materialized(f_t)
         force = force + f_t
         torque_i, torque_j = forces.friction_torque(f_t, normal, r_i, arm_j)
-    if physics.rolling:
+    if spec.rolling:
         j_star = forces.effective_rolling_inertia(m_i, r_i, m_j, r_j)
         m_r, rolling, _ = forces.rolling_resistance_torque(
             rolling, omega_i, omega_j, normal, dt, delta, f_n, r_star, j_star, g_star, params.xi_rol, mu_r,
-            projection=physics.rolling_projection, slip_direction=physics.slip_direction)
+            projection=spec.rolling_projection, slip_direction=spec.slip_direction)
         m_r = materialized(m_r)
         torque_i, torque_j = torque_i + m_r, torque_j - m_r
     return force, torque_i, torque_j, spring, rolling, f_n
@@ -362,26 +470,26 @@ class Loads(NamedTuple):
     wall_normal_force: Any  # [n_walls, n] (N)
 
 
-def pair_loads(physics, params: MechanicalParams, geometry: PairGeometry, radii, mass, modulus, nu, velocity, spin,
+def pair_loads(spec, params: MechanicalParams, geometry: PairGeometry, radii, mass, modulus, nu, velocity, spin,
                spring, rolling, dt, dtype):
     """Per pair: force on ``i``, torques on ``i`` and ``j`` (in ``dtype``), and the new springs."""
     params, dt, radii_f, mass_f, modulus, nu, v, omega, normal, overlap = in_force_dtype(
-        physics, dtype, params, dt, radii, mass, modulus, nu, velocity, spin, geometry.normal, geometry.overlap)
+        spec, dtype, params, dt, radii, mass, modulus, nu, velocity, spin, geometry.normal, geometry.overlap)
     i, j = geometry.i, geometry.j
     f, t_i, t_j, spring, rolling, _ = _contact_laws(
-        physics, params, dt, normal, overlap, radii_f[i], radii_f[j], mass_f[i],
+        spec, params, dt, normal, overlap, radii_f[i], radii_f[j], mass_f[i],
         mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], spring,
         rolling, params.mu, params.mu_r)
     # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
     return f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype), spring, rolling
 
 
-def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, positions, radii, mass, modulus, nu,
+def contact_loads(spec, params: MechanicalParams, geometry: PairGeometry, positions, radii, mass, modulus, nu,
                   state: MechanicalState, t, dt) -> Loads:
     """Forces and torques on every particle from its pair and wall contacts and gravity, at time ``t``.
 
     Args:
-      physics: the spec (which laws, walls, gravity; static).
+      spec: the :class:`Mechanics` sub-spec (which laws, walls, gravity; static).
       params: :class:`MechanicalParams`.
       geometry: :func:`pair_geometry` of the current half pair list.
       positions, radii, mass: ``[n, 3]``, ``[n]``, ``[n]`` (m, m, kg).
@@ -390,48 +498,48 @@ def contact_loads(physics, params: MechanicalParams, geometry: PairGeometry, pos
       t, dt: time and step (s).
     """
     n = radii.shape[0]
-    f, t_i, t_j, spring, rolling = pair_loads(physics, params, geometry, radii, mass, modulus, nu, state.velocity,
+    f, t_i, t_j, spring, rolling = pair_loads(spec, params, geometry, radii, mass, modulus, nu, state.velocity,
                                               state.spin, state.spring, state.rolling, dt, positions.dtype)
     state = dataclasses.replace(state, spring=spring, rolling=rolling)
-    return body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, dt,
+    return body_loads(spec, params, positions, radii, mass, modulus, nu, state, t, dt,
                       pair_exchange(f, geometry.pairs, n), pair_sum(t_i, t_j, geometry.pairs, n))
 
 
-def body_loads(physics, params, positions, radii, mass, modulus, nu, state, t, dt, force, torque) -> Loads:
+def body_loads(spec, params, positions, radii, mass, modulus, nu, state, t, dt, force, torque) -> Loads:
     """:class:`Loads` from the pair sums ``force``, ``torque`` ``[n, 3]``: the walls' and gravity's loads added."""
     dtype = positions.dtype
-    fd = force_dtype(physics, dtype)
+    fd = force_dtype(spec, dtype)
     params, dt, radii_f, mass_f, modulus, nu, v, omega = in_force_dtype(
-        physics, dtype, params, dt, radii, mass, modulus, nu, state.velocity, state.spin)
+        spec, dtype, params, dt, radii, mass, modulus, nu, state.velocity, state.spin)
     n = radii.shape[0]
     new = state
     h = wall_n = None
-    if physics.walls:
-        h = wall_penetration(physics.walls, positions, radii, t)  # in the positions' precision
-        inward = jnp.stack([jnp.asarray(w.normal, fd) for w in physics.walls])[:, None, :]
-        wall_v = jnp.stack([jnp.asarray(w.velocity, fd) for w in physics.walls])[:, None, :]
+    if spec.walls:
+        h = wall_penetration(spec.walls, positions, radii, t)  # in the positions' precision
+        inward = jnp.stack([jnp.asarray(w.normal, fd) for w in spec.walls])[:, None, :]
+        wall_v = jnp.stack([jnp.asarray(w.velocity, fd) for w in spec.walls])[:, None, :]
         inf = jnp.asarray(jnp.inf, fd)
         mu_w, mu_r_w = wall_coefficients(params)
         # the wall is j: the normal from the particle to the wall is -n_w
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
-            wall_physics(physics), params, dt, jnp.broadcast_to(-inward, (len(physics.walls), n, 3)), h.astype(fd),
-            radii_f, inf, mass_f, inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(physics.walls), n, 3)),
+            wall_spec(spec), params, dt, jnp.broadcast_to(-inward, (len(spec.walls), n, 3)), h.astype(fd),
+            radii_f, inf, mass_f, inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(spec.walls), n, 3)),
             omega, jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
         force = force + jnp.sum(f_w.astype(dtype), axis=0)
         torque = torque + jnp.sum(t_w.astype(dtype), axis=0)
         new = dataclasses.replace(new, wall_spring=wall_spring, wall_rolling=wall_rolling)
-    force = force + mass[:, None] * jnp.asarray(physics.gravity, dtype)
+    force = force + mass[:, None] * jnp.asarray(spec.gravity, dtype)
     return Loads(force, torque, new, h, wall_n)
 
 
-def force_dtype(physics, dtype):
-    """The dtype the contact laws run in: ``physics.force_dtype``, or the positions' ``dtype`` if None."""
-    return jnp.dtype(dtype if physics.force_dtype is None else physics.force_dtype)
+def force_dtype(spec, dtype):
+    """The dtype the contact laws run in: ``spec.force_dtype``, or the positions' ``dtype`` if None."""
+    return jnp.dtype(dtype if spec.force_dtype is None else spec.force_dtype)
 
 
-def in_force_dtype(physics, dtype, *values):
+def in_force_dtype(spec, dtype, *values):
     """``values`` (arrays, pytrees such as :class:`MechanicalParams`, or None) cast to :func:`force_dtype`."""
-    fd = force_dtype(physics, dtype)
+    fd = force_dtype(spec, dtype)
     return [jax.tree.map(lambda x: jnp.asarray(x).astype(fd), v) for v in values]
 
 
@@ -463,7 +571,7 @@ def integrate(positions, state: MechanicalState, force, torque, mass, radii, dt)
 
 
 @functools.partial(jax.jit, static_argnums=0, static_argnames=("fraction", "safety"))
-def stable_time_step(physics, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
+def stable_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
     """Time step of the packing: :func:`sintercond.forces.stable_time_step` for its stiffest contact (s).
 
     Evaluated for every pair of the neighbour table (touching or not) and
@@ -473,14 +581,14 @@ def stable_time_step(physics, particles, neighbors, params: MechanicalParams, v_
     approach speed ``v_rel`` (m/s), and the damping ratios of ``params``.
     The tangential and rolling modes count only when friction or rolling is
     on. ``kwargs`` go to :func:`sintercond.forces.stable_time_step`
-    (``fraction``, ``safety``). Compiled once per physics spec and shapes
+    (``fraction``, ``safety``). Compiled once per :class:`Mechanics` spec and shapes
     (eagerly it dispatches ~100 operations: seconds at set-up).
     """
     radii, mass = particles.radii, particles.mass
     n = radii.shape[0]
     modulus = jnp.atleast_1d(jnp.asarray(params.E0, radii.dtype))[particles.material]
     nu = jnp.atleast_1d(jnp.asarray(params.nu, radii.dtype))[particles.material]
-    shear = physics.friction or physics.rolling
+    shear = spec.friction or spec.rolling
     rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
     valid = (neighbors < n) & (neighbors != rows)
     j = jnp.where(valid, neighbors, rows)
@@ -488,22 +596,22 @@ def stable_time_step(physics, particles, neighbors, params: MechanicalParams, v_
     candidates = [(radii[:, None], mass[:, None], modulus[:, None], nu[:, None], jnp.where(valid, radii[j], inf),
                    jnp.where(valid, mass[j], inf), jnp.where(valid, modulus[j], inf), nu[j], valid)]
     steps = []
-    if physics.walls:
+    if spec.walls:
         wall = jnp.full((n,), jnp.inf, radii.dtype)
         candidates.append((radii, mass, modulus, nu, wall, wall, wall, nu, jnp.ones((n,), bool)))
     for ri, mi, ei, nui, rj, mj, ej, nuj, real in candidates:
-        g_star = forces.effective_shear_modulus(ei, nui, ej, nuj, physics.shear) if shear else 0.0 * ei
+        g_star = forces.effective_shear_modulus(ei, nui, ej, nuj, spec.shear) if shear else 0.0 * ei
         dt = forces.stable_time_step(forces.effective_radius(ri, rj), forces.effective_mass(mi, mj),
                                      forces.effective_modulus(ei, nui, ej, nuj), g_star, v_rel, delta=delta,
-                                     xi_con=params.xi_con, xi_fric=params.xi_fric if physics.friction else 0.0,
-                                     xi_rol=params.xi_rol if physics.rolling else 0.0, **kwargs)
+                                     xi_con=params.xi_con, xi_fric=params.xi_fric if spec.friction else 0.0,
+                                     xi_rol=params.xi_rol if spec.rolling else 0.0, **kwargs)
         steps.append(jnp.min(jnp.where(real, dt, jnp.inf), initial=jnp.inf))
     return jnp.min(jnp.stack(steps))
 
 
-def check_time_step(dt, physics, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs) -> float:
+def check_time_step(dt, spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs) -> float:
     """Raise ``ValueError`` naming the limit if ``dt`` exceeds :func:`stable_time_step`; returns the limit (s)."""
-    limit = float(stable_time_step(physics, particles, neighbors, params, v_rel, delta, **kwargs))
+    limit = float(stable_time_step(spec, particles, neighbors, params, v_rel, delta, **kwargs))
     if math.isnan(limit):
         raise ValueError(f"the mechanical time step is undefined for v_rel = {float(v_rel)!r} m/s (the largest "
                          f"normal approach speed must be finite and > 0) and delta = {delta!r}")

@@ -464,15 +464,15 @@ def dem_physics(walls, softening=False, wall_friction=True, wall_rolling=True):
     Conduction is the paper's (``law="conductivity"``, Hertz contact radius,
     Eqs. 32-35); while settling every particle is held at its temperature, so
     no heat moves. ``wall_friction``/``wall_rolling`` False: frictionless
-    walls (``Physics.wall_friction``; :func:`dem_settle` sets them from
+    walls (``Mechanics.wall_friction``; :func:`dem_settle` sets them from
     ``DemMaterial.mu_wall``/``mu_r_wall``).
     """
     from sintercond import simulate
 
-    return simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                            mechanics=True, walls=tuple(walls), gravity=(0.0, 0.0, -GRAVITY), friction=True,
-                            rolling=True, wall_friction=wall_friction, wall_rolling=wall_rolling,
-                            softening=softening, held=True)
+    return simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                   mechanics=True, walls=tuple(walls), gravity=(0.0, 0.0, -GRAVITY), friction=True,
+                                   rolling=True, wall_friction=wall_friction, wall_rolling=wall_rolling,
+                                   softening=softening, held=True)
 
 
 GRAVITY = 9.81
@@ -498,7 +498,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
                v_rel=None) -> DemSettled:
     """Let spheres fall and settle under gravity with the real contact laws; returns a :class:`DemSettled`.
 
-    The coupled step of :mod:`sintercond.simulate` (``Physics(mechanics=True)``,
+    The coupled step of :mod:`sintercond.simulate` (``Physics(mechanics=Mechanics(...))``,
     :func:`dem_physics`): Hertz normal force with damping, Mindlin friction
     with history, rolling resistance, gravity ``g = 9.81 m/s^2 (-z)`` and the
     plane ``walls``, symplectic Euler, in compiled chunks of ``check_every``
@@ -572,11 +572,11 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
                                                   v_rel))
         step_overlap = max(static, collision)
         step_fn = mechanics.stable_time_step
-        dt = float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, step_overlap))
-        dt = min(dt, float(step_fn(physics, particles, contacts.neighbors, mp, v_rel, None)))
+        dt = float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, step_overlap))
+        dt = min(dt, float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, None)))
         params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
         state = simulate.init_state(particles, contacts, dt,
-                                    mechanics=mechanics.mechanical_state(physics, centres, contacts))
+                                    mechanics=mechanics.mechanical_state(physics.mechanics, centres, contacts))
         sim = simulate.simulator(physics, fns)
         energy_scale = float(jnp.sum(particles.mass * GRAVITY * particles.radii))
         max_steps = check_every * int(math.ceil(max_time / dt / check_every))
@@ -603,7 +603,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         raise PackingError(f"the DEM bed did not settle within {max_time:g} s ({int(state.step)} steps of "
                            f"{dt:.3g} s): " + " and ".join(missed))
     report = SettleReport(int(state.step), float(state.time), dt, figures["kinetic"], float(kinetic_tol),
-                          figures["force"], float(force_tol), _overlaps(final, radii, physics.walls), step_overlap,
+                          figures["force"], float(force_tol), _overlaps(final, radii, physics.mechanics.walls), step_overlap,
                           float(v_rel), loop.reallocations, time.perf_counter() - start)
     return DemSettled(final, state, sim, params, fns, report)
 

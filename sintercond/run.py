@@ -104,12 +104,13 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
     c = scene["conduction"]
     beam = scene.get("beam")
     return simulate.Physics(
-        law=c["law"], neck_model=c.get("neck_model"),
-        # a contact resistance makes the law nonlinear in the conductivity: lift it from the necks
-        conductance="lifted" if c.get("params", {}).get("contact_resistance", 0.0) else "table",
-        held=any(w["mode"] == "held" for w in _walls(scene)), conducting_walls=walls,
-        beam=None if beam is None else beam["kind"], convection="convection" in scene,
-        radiation="radiation" in scene)
+        conduction=simulate.Conduction(
+            law=c["law"], neck_model=c.get("neck_model"),
+            # a contact resistance makes the law nonlinear in the conductivity: lift it from the necks
+            conductance="lifted" if c.get("params", {}).get("contact_resistance", 0.0) else "table",
+            held=any(w["mode"] == "held" for w in _walls(scene)), conducting_walls=walls),
+        sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
+                                 radiation="radiation" in scene))
 
 
 def mechanics_on(scene) -> bool:
@@ -154,19 +155,20 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     """The coupled spec of a validated scene with mechanics: ``thermal_physics`` made dynamic, the walls pushing.
 
     Every wall of the scene is a :class:`~sintercond.walls.PlaneWall` of
-    ``Physics.walls``; a held wall pushes as an insulated one (its
-    particles are held by ``Physics.held``, :func:`_apply_walls`).
+    ``Mechanics.walls``; a held wall pushes as an insulated one (its
+    particles are held by ``Conduction.held``, :func:`_apply_walls`).
     """
     p, c = scene["physics"], contact_material(scene)
     walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
                    for w in planes)
-    return dataclasses.replace(
-        thermal_physics, conductance="lifted", contacts="dynamic", conducting_walls=0, mechanics=True, walls=walls_,
-        gravity=tuple(p.get("gravity", (0.0, 0.0, -9.81))), shear=p.get("shear", "paper"),
+    spec = mechanics.Mechanics.create(
+        walls_, gravity=p.get("gravity", (0.0, 0.0, -9.81)), shear=p.get("shear", "paper"),
         slip_direction=p.get("slip_direction", "trial"), rolling_projection=p.get("rolling_projection", False),
         damping_clamp=p.get("damping_clamp", False), softening="softening" in scene,
         friction=c["mu"] > 0 or c["mu_wall"] > 0, rolling=c["mu_r"] > 0 or c["mu_r_wall"] > 0,
         wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
+    conduction = dataclasses.replace(thermal_physics.conduction, conductance="lifted", conducting_walls=0)
+    return dataclasses.replace(thermal_physics, conduction=conduction, contacts="dynamic", mechanics=spec)
 
 
 def scene_params(scene) -> simulate.Params:
@@ -216,17 +218,19 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     physics = scene_physics(scene)
     log(f"network: contacts and conductances of {len(radii)} particles")
     try:
-        table = network.contact_table(centres, radii, 1.0 if physics.conductance == "table" else m["conductivity"],
+        unit = physics.conduction.conductance == "table"
+        table = network.contact_table(centres, radii, 1.0 if unit else m["conductivity"],
                                       c["law"], c.get("params"), c.get("neck_model"))
     except ValueError as err:
         raise SceneError(f"the packing does not fit the conduction model: {err}") from None
     fixed_mask, fixed_temperature, conducting = _apply_walls(scene, centres, radii)
     touching_walls = wall_contacts(scene, centres, radii, log)
-    physics = dataclasses.replace(physics, conducting_walls=len(conducting) if physics.conductance == "lifted"
-                                  else int(bool(conducting)))
+    lifted = physics.conduction.conductance == "lifted"
+    physics = dataclasses.replace(physics, conduction=dataclasses.replace(
+        physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
     particles = particle_state(centres, radii, scene["initial"]["temperature"], m["density"], m["specific_heat"],
                                fixed=fixed_mask, fixed_temperature=fixed_temperature)
-    if physics.conductance == "table":
+    if not lifted:
         k_wall, t_wall = _merged_wall_conductance(scene, centres, radii, conducting)
         contacts = simulate.table_contacts(table, k_wall, t_wall)
     else:
@@ -236,7 +240,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     sim = simulate.simulator(physics)
     state = simulate.init_state(particles, contacts, 1.0)
     run = scene["run"]
-    sources = thermal.source_conductance(physics, particles.radii, params, _highest_temperature(scene))
+    sources = thermal.source_conductance(physics.sources, particles.radii, params, _highest_temperature(scene))
     thermal_limit = float(simulate.stable_time_step(sim, state, params, sources))
     bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
                                          f"{thermal_limit:.6g} s (G_i: linearised convection and radiation)")}
@@ -253,8 +257,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         impact = scene["physics"].get("impact_velocity", 0.05)
         wall_speed, fastest = _fastest_wall(scene)
         v_rel = impact + wall_speed
-        mechanical_limit = float(mechanics.stable_time_step(physics, particles, contacts.neighbors, params.mechanics,
-                                                         v_rel))
+        mechanical_limit = float(mechanics.stable_time_step(physics.mechanics, particles, contacts.neighbors,
+                                                            params.mechanics, v_rel))
         speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
             f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")
         bounds["mechanical"] = (mechanical_limit, f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and "
@@ -264,7 +268,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
             step = WALL_STEP_FRACTION * float(np.min(radii)) / wall_speed
             bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
                                     f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
-        motion = mechanics.mechanical_state(physics, centres, contacts)
+        motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
     beam = scene.get("beam")
     if beam is not None and beam_step(beam) is not None:
         step = beam_step(beam)
@@ -516,7 +520,7 @@ def history_columns(model) -> tuple:
     """The columns of ``history.csv`` of ``model``: :data:`HISTORY_COLUMNS`, :data:`MECHANICS_COLUMNS` with
     mechanics, and ``heat_wall{k}_W`` (the heat power into the packing through scene wall ``k``, W) for each
     held or conducting wall."""
-    return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics else ())
+    return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics is not None else ())
             + tuple(spec[0] for spec in model.wall_heat))
 
 
@@ -540,7 +544,7 @@ def _probe_fn(model):
     def probe(state, params):
         prep = sim.prepare_fn(state, params)
         power = sim.heat_power_fn(state, prep)
-        after = sim.advance_fn(state, prep).mechanics.velocity if model.physics.mechanics else None
+        after = sim.advance_fn(state, prep).mechanics.velocity if model.physics.mechanics is not None else None
         return power, after
 
     return jax.jit(probe)
@@ -568,12 +572,12 @@ def observe(scene, model, state, probe) -> Observation:
     p = state.particles
     positions, radii, temperature = (np.asarray(x) for x in (p.positions, p.radii, p.temperature))
     kappa = np.asarray(model.params.conductivity)[np.asarray(p.material)]
-    needs_power = (any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics
+    needs_power = (any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics is not None
                    or "vtp" in scene["run"]["formats"])
     power, after = probe(state, model.params) if needs_power else (None, None)
     planes = scene_walls(scene, np.asarray(model.state.particles.positions), radii)
-    if model.physics.mechanics:
-        planes = list(model.physics.walls)
+    if model.physics.mechanics is not None:
+        planes = list(model.physics.mechanics.walls)
     t = float(state.time)
     conducting_power = np.zeros(len(radii))
     wall_h = [_plane_penetration(plane, positions, radii, t) for plane in planes]
@@ -584,20 +588,20 @@ def observe(scene, model, state, probe) -> Observation:
             k_w = np.asarray(walls.wall_conductance(c["law"], radii, wall_h[k], kappa, params=c.get("params"),
                                                     neck_model=c.get("neck_model")))
             q = k_w * (wall["temperature"] - temperature)
-            conducting_power += q if model.physics.mechanics else 0.0  # the thermal simulator's P_i holds it
+            conducting_power += q if model.physics.mechanics is not None else 0.0  # the thermal simulator's P_i holds it
             flows[k] = float(np.sum(q))
     for _, k, mode, mask in model.wall_heat:
         if mode == "held":
             flows[k] = -float(np.sum((np.asarray(power) + conducting_power)[mask]))
     heat = tuple(flows[spec[1]] for spec in model.wall_heat)
     total = None if power is None else np.asarray(power) + conducting_power
-    if not model.physics.mechanics:
+    if model.physics.mechanics is None:
         return Observation(heat, power=total)
     m = np.asarray(p.mass)
     v, omega = np.asarray(state.mechanics.velocity), np.asarray(state.mechanics.spin)
     inertia = forces.SOLID_SPHERE_INERTIA * m * radii**2
     kinetic = float(0.5 * np.sum(m * np.sum(v * v, axis=1)) + 0.5 * np.sum(inertia * np.sum(omega * omega, axis=1)))
-    force = m[:, None] * ((np.asarray(after) - v) / float(state.dt) - np.asarray(model.physics.gravity))
+    force = m[:, None] * ((np.asarray(after) - v) / float(state.dt) - np.asarray(model.physics.mechanics.gravity))
     pairs, overlap = _touching_pairs(positions, radii, np.asarray(state.contacts.neighbors))
     return Observation(heat, kinetic, pairs, overlap, np.stack(wall_h) if wall_h else np.zeros((0, len(radii))),
                        v, force, total)
@@ -623,7 +627,7 @@ def coordination(n, pairs):
 def _history_row(model, state, obs: Observation) -> str:
     t = np.asarray(state.particles.temperature)
     values = [float(state.time), float(t.mean()), float(t.min()), float(t.max())]  # Python floats: plain repr
-    if model.physics.mechanics:
+    if model.physics.mechanics is not None:
         touching_walls = int(np.sum(np.any(obs.wall_overlap > 0, axis=0))) if len(obs.wall_overlap) else 0
         largest = float(max(np.max(obs.pair_overlap, initial=0.0), np.max(obs.wall_overlap, initial=0.0)))
         values += [obs.kinetic_energy, len(obs.pairs), touching_walls, largest]
@@ -714,7 +718,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         "wall_s": elapsed, "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()),
         "T_max_K": float(temperature.max()),
     }
-    if model.physics.mechanics:
+    if model.physics.mechanics is not None:
         history = read_history(out)
         summary.update({"thermal_step_s": model.limits["thermal"], "mechanical_step_s": model.limits["mechanical"],
                         "kinetic_energy_J": float(history["kinetic_energy_J"][-1]),
@@ -746,7 +750,7 @@ def _write_outputs(scene, out, model, state, obs: Observation):
     temperature = state.particles.temperature
     positions = np.asarray(state.particles.positions)
     fields = {}
-    if model.physics.mechanics:
+    if model.physics.mechanics is not None:
         fields = {"velocity": obs.velocity, "force": obs.force,
                   "coordination": coordination(len(model.radii), obs.pairs)}
     if "lammps" in formats:

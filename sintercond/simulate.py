@@ -76,7 +76,7 @@ import numpy as np
 
 from sintercond import mechanics, thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
-from sintercond.mechanics import MechanicalParams, MechanicalState
+from sintercond.mechanics import MechanicalParams, MechanicalState, Mechanics
 from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow, did_rebuild
 from sintercond.pair_list import (HalfPairs, allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs,
@@ -93,8 +93,10 @@ _BEAMS = (None, "laser", "nozzle")
 
 
 @dataclasses.dataclass(frozen=True)
-class Physics:
-    """What is simulated: a static, hashable spec (nothing here is an array).
+class Conduction:
+    """How heat moves through the contacts: the conduction sub-spec of :class:`Physics` (static, hashable).
+
+    Its differentiable counterparts are ``Params.conductivity``, ``Params.specific_heat`` and ``Params.law``.
 
     Attributes:
       law: conductance law, a key of :data:`sintercond.CONDUCTANCE_LAWS`.
@@ -103,149 +105,173 @@ class Physics:
         material, no contact resistance) or ``"lifted"`` (necks stored, law
         applied to ``params`` at each rollout; any materials and law
         parameters).
-      contacts: ``"static"`` (the packing does not move) or ``"dynamic"``.
       integrator: ``"explicit"`` (Euler; check the stable step) or
         ``"implicit"`` (backward Euler by conjugate gradients; conduction
         and held particles only).
-      held: some particles are held at fixed temperatures.
-      conducting_walls: number of conducting plane walls (0: none traced).
-      beam: ``None``, ``"laser"`` (Lambert-Beer) or ``"nozzle"`` (linear attenuation).
-      convection, radiation: convective / radiative exchange with the environment.
-      pulse: a prescribed power per particle while ``t < params.pulse.duration``.
-      source: extra heat power ``fn(state, t, params) -> [n]`` W (hashable
-        callable), or None.
-      motion: prescribed positions ``fn(t) -> [n, 3]`` (m) for dynamic
-        contacts, or None (positions stay).
       implicit_tol: relative residual of the implicit CG solve.
-      mechanics: the coupled thermo-mechanical step (Quintana-Ruiz & Campello
-        2020, Eqs. 43-46; :mod:`sintercond.mechanics`): particles move under
-        contact forces, gravity and walls, and heat flows through the contacts
-        the motion opens, closes and grows. Needs ``contacts="dynamic"``,
-        ``conductance="lifted"``, the explicit integrator, no prescribed
-        ``motion`` and ``conducting_walls=0`` (walls are ``walls``), and
-        ``Params.mechanics``. The fields below matter only with it.
-      walls: :class:`sintercond.walls.PlaneWall` s that push, rub and (mode
-        ``"conducting"``) exchange heat at their fixed temperature. Static:
-        the number of walls decides what is traced and their geometry is
-        rarely a fitting target (wall temperatures and positions are
-        therefore not differentiable; give them as state if that changes).
-      gravity: ``[3]`` acceleration (m/s^2).
-      friction: Mindlin stick-slip friction with a spring (Eqs. 7-14).
-      rolling: rolling resistance (Eqs. 15-20).
-      wall_friction, wall_rolling: with ``friction`` (``rolling``), whether
-        the walls rub (resist rolling) too. False: frictionless walls
-        (``mu_wall = 0``; without rolling resistance, ``mu_r_wall = 0``):
-        their tangential (rolling) law, whose force would be exactly zero,
-        is not evaluated and its springs are not stored (a bed in such
-        walls runs and differentiates faster; docs/devlog/softening_gradient.md).
-        :func:`rollout` rejects concrete nonzero coefficients; under
-        ``jit`` they are not checked and would be ignored.
-      softening: Young's modulus from the temperature, Eq. 42 (erratum 6).
-      damping_clamp: no tensile normal force (LAMMPS ``limit_damping``).
-      shear: ``"paper"`` (Eq. 9) or ``"mindlin"`` effective shear modulus.
-      slip_direction: ``"trial"`` or ``"velocity"`` (erratum 3).
-      rolling_projection: roll on the tangential part of the relative spin only (erratum 5).
-      force_dtype: ``None`` (the contact laws in the positions' dtype) or
-        ``"float32"``: forces, torques and springs in float32 while
-        positions, velocities and temperatures stay float64 (relative
-        separations are formed in float64 first, so the overlap keeps its
-        digits); see tests/test_mechanics.py for the accuracy.
+      held: some particles are held at fixed temperatures.
+      conducting_walls: number of conducting plane walls of a thermal step
+        (0: none traced); a mechanical step takes its walls as ``Mechanics.walls``.
     """
 
     law: str = "rojek"
     neck_model: str | None = None
     conductance: str = "table"
-    contacts: str = "static"
     integrator: str = "explicit"
+    implicit_tol: float = 1e-13
     held: bool = False
     conducting_walls: int = 0
-    beam: str | None = None
-    convection: bool = False
-    radiation: bool = False
-    pulse: bool = False
-    source: Callable | None = None
-    motion: Callable | None = None
-    implicit_tol: float = 1e-13
-    mechanics: bool = False
-    walls: tuple = ()
-    gravity: tuple = (0.0, 0.0, -9.81)
-    friction: bool = False
-    rolling: bool = False
-    wall_friction: bool = True
-    wall_rolling: bool = True
-    softening: bool = False
-    damping_clamp: bool = False
-    shear: str = "paper"
-    slip_direction: str = "trial"
-    rolling_projection: bool = False
-    force_dtype: str | None = None
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
-                  ("contacts", self.contacts, _CONTACT_MODES), ("integrator", self.integrator, _INTEGRATORS),
-                  ("beam", self.beam, _BEAMS))
+                  ("integrator", self.integrator, _INTEGRATORS))
         for name, value, allowed in checks:
             if value not in allowed:
-                raise ValueError(f"Physics.{name} must be one of {list(allowed)}; got {value!r}")
+                raise ValueError(f"Conduction.{name} must be one of {list(allowed)}; got {value!r}")
         if self.neck_model is not None and self.neck_model not in NECK_MODELS:
-            raise ValueError(f"Physics.neck_model must be one of {sorted(NECK_MODELS)} or None; got {self.neck_model!r}")
-        if self.mechanics:
-            self._check_mechanics()
-        elif self.walls:
-            raise ValueError("Physics.walls are mechanical walls (mechanics=True); for heat alone use conducting_walls")
-        if self.contacts == "dynamic" and self.conductance != "lifted":
-            raise ValueError("Physics.contacts='dynamic' needs conductance='lifted' (conductances follow the motion)")
-        if self.integrator == "implicit" and (self.beam or self.convection or self.radiation or self.pulse
-                                              or self.source or self.contacts == "dynamic"):
-            raise ValueError("Physics.integrator='implicit' supports conduction on static contacts and held particles "
-                             "only; use 'explicit' with sources or motion")
+            raise ValueError(f"Conduction.neck_model must be one of {sorted(NECK_MODELS)} or None; "
+                             f"got {self.neck_model!r}")
         if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
-            raise ValueError(f"Physics.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
-
-    def _check_mechanics(self):
-        from sintercond.forces import SHEAR_CONVENTIONS, SLIP_DIRECTIONS
-        from sintercond.walls import PlaneWall
-
-        needs = {"contacts": ("dynamic", self.contacts), "conductance": ("lifted", self.conductance),
-                 "integrator": ("explicit", self.integrator)}
-        for name, (want, got) in needs.items():
-            if got != want:
-                raise ValueError(f"Physics.mechanics needs {name}={want!r}; got {got!r}")
-        if self.motion is not None:
-            raise ValueError("Physics.mechanics moves the particles itself; motion must be None")
-        if self.conducting_walls:
-            raise ValueError("Physics.mechanics takes its walls as Physics.walls (PlaneWall, mode 'conducting' "
-                             "for heat); conducting_walls must be 0")
-        if self.shear not in SHEAR_CONVENTIONS:
-            raise ValueError(f"Physics.shear must be one of {list(SHEAR_CONVENTIONS)}; got {self.shear!r}")
-        if self.force_dtype not in (None, "float32", "float64"):
-            raise ValueError(f"Physics.force_dtype must be None, 'float32' or 'float64'; got {self.force_dtype!r}")
-        for name, law in (("wall_friction", self.friction), ("wall_rolling", self.rolling)):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ValueError(f"Physics.{name} must be True or False; got {getattr(self, name)!r}")
-            # without the law the flag says nothing: the same spec compares (and compiles) as one
-            object.__setattr__(self, name, bool(getattr(self, name)) or not law)
-        if self.slip_direction not in SLIP_DIRECTIONS:
-            raise ValueError(f"Physics.slip_direction must be one of {list(SLIP_DIRECTIONS)}; got {self.slip_direction!r}")
-        gravity = tuple(float(g) for g in self.gravity)
-        if len(gravity) != 3:
-            raise ValueError(f"Physics.gravity must be 3 numbers (m/s^2); got {self.gravity!r}")
-        walls = []
-        for k, w in enumerate(self.walls):
-            if not isinstance(w, PlaneWall):
-                raise ValueError(f"Physics.walls[{k}] must be a PlaneWall; got {type(w).__name__}")
-            if w.mode == "held":
-                raise ValueError(f"Physics.walls[{k}]: mode 'held' is not supported with mechanics; use 'conducting'")
-            # tuples of floats: the spec stays hashable whatever sequences the wall was given
-            walls.append(dataclasses.replace(w, point=tuple(map(float, w.point)), normal=tuple(map(float, w.normal)),
-                                             velocity=tuple(map(float, w.velocity))))
-        object.__setattr__(self, "walls", tuple(walls))
-        object.__setattr__(self, "gravity", gravity)
+            raise ValueError(f"Conduction.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
 
     @property
     def neck(self) -> str:
         """The neck model in use."""
         return CONDUCTANCE_LAWS[self.law].neck_model if self.neck_model is None else self.neck_model
+
+
+@dataclasses.dataclass(frozen=True)
+class Sources:
+    """The heat sources of :class:`Physics` (static, hashable); their parameters are ``Params.beam``,
+    ``Params.convection``, ``Params.radiation`` and ``Params.pulse``.
+
+    Attributes:
+      beam: ``None``, ``"laser"`` (Lambert-Beer) or ``"nozzle"`` (linear attenuation).
+      convection, radiation: convective / radiative exchange with the environment.
+      pulse: a prescribed power per particle while ``t < params.pulse.duration``.
+      source: extra heat power ``fn(state, t, params) -> [n]`` W (hashable
+        callable), or None.
+    """
+
+    beam: str | None = None
+    convection: bool = False
+    radiation: bool = False
+    pulse: bool = False
+    source: Callable | None = None
+
+    def __post_init__(self):
+        if self.beam not in _BEAMS:
+            raise ValueError(f"Sources.beam must be one of {list(_BEAMS)}; got {self.beam!r}")
+
+    @property
+    def any(self) -> bool:
+        """Whether any source is on."""
+        return bool(self.beam or self.convection or self.radiation or self.pulse or self.source is not None)
+
+
+@dataclasses.dataclass(frozen=True)
+class Physics:
+    """What is simulated: a static, hashable spec (nothing here is an array), in sub-specs that mirror :class:`Params`.
+
+    :func:`simulator` branches on it in Python: a sub-spec that is ``None`` is
+    off and nothing of it is traced, and each distinct spec compiles one step.
+    Write it nested, or from flat keywords with the normalising constructor
+    :meth:`create`::
+
+        Physics(conduction=Conduction(law="rojek", conductance="lifted"), contacts="dynamic",
+                mechanics=Mechanics.create(walls=[floor], friction=True))
+        Physics.create(law="rojek", conductance="lifted", contacts="dynamic", mechanics=True,
+                       walls=[floor], friction=True)   # the same spec
+
+    Attributes:
+      conduction: :class:`Conduction`: law, neck model, table or lifted
+        conductances, integrator, held particles, conducting walls.
+      contacts: ``"static"`` (the packing does not move) or ``"dynamic"``.
+      motion: prescribed positions ``fn(t) -> [n, 3]`` (m) for dynamic
+        contacts, or None (positions stay).
+      sources: :class:`Sources`: beam, convection, radiation, pulse, a custom source.
+      mechanics: :class:`sintercond.mechanics.Mechanics`, the coupled
+        thermo-mechanical step (Quintana-Ruiz & Campello 2020, Eqs. 43-46;
+        :mod:`sintercond.mechanics`): particles move under contact forces,
+        gravity and walls, and heat flows through the contacts the motion
+        opens, closes and grows. Needs ``contacts="dynamic"``,
+        ``conduction.conductance="lifted"``, the explicit integrator, no
+        prescribed ``motion``, ``conduction.conducting_walls=0`` (walls are
+        ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
+      sintering: reserved for the sintering sub-spec (neck growth in time); must be None.
+    """
+
+    conduction: Conduction = Conduction()
+    contacts: str = "static"
+    motion: Callable | None = None
+    sources: Sources = Sources()
+    mechanics: Mechanics | None = None
+    sintering: None = None
+
+    def __post_init__(self):
+        for name, kind in (("conduction", Conduction), ("sources", Sources)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"Physics.{name} must be a {kind.__name__}; got {getattr(self, name)!r}")
+        if self.contacts not in _CONTACT_MODES:
+            raise ValueError(f"Physics.contacts must be one of {list(_CONTACT_MODES)}; got {self.contacts!r}")
+        if self.mechanics is not None and not isinstance(self.mechanics, Mechanics):
+            raise ValueError(f"Physics.mechanics must be a sintercond.mechanics.Mechanics or None; got "
+                             f"{self.mechanics!r}")
+        if self.sintering is not None:
+            raise ValueError("Physics.sintering is reserved for the sintering sub-spec; it must be None")
+        c = self.conduction
+        if self.mechanics is not None:
+            needs = {"contacts": ("dynamic", self.contacts), "conduction.conductance": ("lifted", c.conductance),
+                     "conduction.integrator": ("explicit", c.integrator)}
+            for name, (want, got) in needs.items():
+                if got != want:
+                    raise ValueError(f"Physics.mechanics needs {name}={want!r}; got {got!r}")
+            if self.motion is not None:
+                raise ValueError("Physics.mechanics moves the particles itself; motion must be None")
+            if c.conducting_walls:
+                raise ValueError("Physics.mechanics takes its walls as Mechanics.walls (PlaneWall, mode 'conducting' "
+                                 "for heat); conduction.conducting_walls must be 0")
+        if self.contacts == "dynamic" and c.conductance != "lifted":
+            raise ValueError("Physics.contacts='dynamic' needs conduction.conductance='lifted' (conductances follow "
+                             "the motion)")
+        if c.integrator == "implicit" and (self.sources.any or self.contacts == "dynamic"):
+            raise ValueError("Conduction.integrator='implicit' supports conduction on static contacts and held "
+                             "particles only; use 'explicit' with sources or motion")
+
+    @classmethod
+    def create(cls, law="rojek", neck_model=None, conductance="table", contacts="static", integrator="explicit",
+               held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
+               motion=None, implicit_tol=1e-13, mechanics=False, walls=(), **mechanical) -> Physics:
+        """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
+
+        ``mechanics=True`` turns the coupled step on, with ``walls`` and the
+        other :class:`sintercond.mechanics.Mechanics` fields in ``mechanical``
+        (``gravity``, ``friction``, ``rolling``, ``wall_friction``, ...),
+        normalised by :meth:`sintercond.mechanics.Mechanics.create`; without it
+        those keywords are refused (nothing would move).
+        """
+        if not isinstance(mechanics, (bool, np.bool_)):
+            raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
+        if mechanics:
+            spec = Mechanics.create(walls, **mechanical)
+        elif walls or mechanical:
+            given = ["walls"] * bool(walls) + sorted(mechanical)
+            raise ValueError(f"Physics.create: {', '.join(given)} belong to the mechanical step (mechanics=True; "
+                             "walls there are mechanical walls); for heat alone use conducting_walls")
+        else:
+            spec = None
+        return cls(conduction=Conduction(law=law, neck_model=neck_model, conductance=conductance,
+                                         integrator=integrator, implicit_tol=implicit_tol, held=bool(held),
+                                         conducting_walls=conducting_walls),
+                   contacts=contacts, motion=motion,
+                   sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
+                                   pulse=bool(pulse), source=source),
+                   mechanics=spec)
+
+    @property
+    def neck(self) -> str:
+        """The neck model in use (``conduction.neck``)."""
+        return self.conduction.neck
 
 
 @pytree_dataclass
@@ -419,10 +445,10 @@ class Simulator(NamedTuple):
 
 def merged_law_params(physics: Physics, params: Params) -> dict:
     """The law's default parameters overridden by ``params.law``; unknown names raise."""
-    defaults = CONDUCTANCE_LAWS[physics.law].default_params
+    defaults = CONDUCTANCE_LAWS[physics.conduction.law].default_params
     unknown = set(params.law) - set(defaults)
     if unknown:
-        raise ValueError(f"Params.law of law {physics.law!r} must be among {sorted(defaults)}; got {sorted(unknown)}")
+        raise ValueError(f"Params.law of law {physics.conduction.law!r} must be among {sorted(defaults)}; got {sorted(unknown)}")
     return {**defaults, **params.law}
 
 
@@ -445,7 +471,7 @@ def conductance_lift(physics: Physics, radii, material, neighbors, neck, overlap
 def _law_on_pairs(physics, radii, material, lo, hi, valid, neck, overlap, conductivity, law_params):
     """The conductance law on pairs ``(lo, hi)`` (any shape) from their necks (W/K); 0 where not ``valid``."""
     kappa = jnp.asarray(conductivity)
-    k = conductance_from_neck(physics.law, neck, radii[lo], radii[hi], overlap, kappa[material[lo]],
+    k = conductance_from_neck(physics.conduction.law, neck, radii[lo], radii[hi], overlap, kappa[material[lo]],
                               kappa[material[hi]], law_params)
     return jnp.where(valid, k, 0.0)
 
@@ -453,7 +479,7 @@ def _law_on_pairs(physics, radii, material, lo, hi, valid, neck, overlap, conduc
 def _wall_lift(physics, particles, contacts, conductivity, law_params):
     """``[n_walls, n]`` conductances to the conducting walls (a neighbour of infinite radius, :mod:`sintercond.walls`)."""
     kappa = jnp.asarray(conductivity)[particles.material]
-    return wall_conductance_from_neck(physics.law, contacts.wall_neck, particles.radii, contacts.wall_overlap, kappa,
+    return wall_conductance_from_neck(physics.conduction.law, contacts.wall_neck, particles.radii, contacts.wall_overlap, kappa,
                                       kappa, law_params)
 
 
@@ -528,9 +554,9 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         capacity = heat_capacity(particles, params.specific_heat)
         kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
         wall_k = wall_t = None
-        if physics.conductance == "table":
+        if physics.conduction.conductance == "table":
             conductance, scale = contacts.conductance, kappa[0]
-            if physics.conducting_walls:
+            if physics.conduction.conducting_walls:
                 wall_k, wall_t = contacts.wall_conductance[None], contacts.wall_temperature[None]
         else:
             law_params = merged_law_params(physics, params)
@@ -539,11 +565,11 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             if physics.contacts == "static":
                 conductance = conductance_lift(physics, particles.radii, particles.material, contacts.neighbors,
                                                contacts.neck, contacts.overlap, kappa, law_params)
-            if physics.conducting_walls:
+            if physics.conduction.conducting_walls:
                 wall_k = _wall_lift(physics, particles, contacts, kappa, law_params)
                 wall_t = contacts.wall_temperature[:, None]
         rates = None
-        if physics.integrator == "explicit" and physics.contacts == "static" and not physics.mechanics:
+        if physics.conduction.integrator == "explicit" and physics.contacts == "static" and physics.mechanics is None:
             # computed once per rollout: reverse mode then accumulates their cotangents per particle
             rates = thermal.conduction_rates(scale, capacity)
         return Prepared(params, capacity, conductance, scale, wall_k, wall_t, rates)
@@ -558,7 +584,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             power = pair_heat_power(conductance, neighbors, temperature)
         elif conductance is not None:
             power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
-        if physics.conducting_walls:
+        if physics.conduction.conducting_walls:
             power = power + prep.scale * jnp.sum(prep.wall_conductance * (prep.wall_temperature - temperature), axis=0)
         return power
 
@@ -584,7 +610,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             state, conductance, neighbors = current_network(state, prep)
         temperature = state.particles.temperature
         power = conduction_power(state, prep, temperature, conductance, neighbors)
-        return power + thermal.source_power(physics, state, prep.params)
+        return power + thermal.source_power(physics.sources, state, prep.params)
 
     def mechanical_advance(state: SimState, prep: Prepared) -> SimState:
         """The coupled step (Eqs. 43-46): forces and heat powers at ``t`` from one state, then symplectic Euler."""
@@ -593,7 +619,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         positions, radii, mass, t = particles.positions, particles.radii, particles.mass, state.time
         contacts, motion, overflow = follow_contacts(neighbor_fn, positions, radii, contacts, state.mechanics)
         state = dataclasses.replace(state, overflow=state.overflow | overflow, contacts=contacts)
-        modulus = mechanics.particle_modulus(physics, mp, particles.temperature, particles.material)
+        modulus = mechanics.particle_modulus(physics.mechanics, mp, particles.temperature, particles.material)
         nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, positions.dtype))[particles.material], radii.shape)
         kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
         law_params = merged_law_params(physics, params)
@@ -601,7 +627,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
 
         def on_pairs(pairs, spring, rolling):
             geometry = mechanics.pair_geometry(positions, radii, pairs)
-            f, t_i, t_j, spring, rolling = mechanics.pair_loads(physics, mp, geometry, radii, mass, modulus, nu,
+            f, t_i, t_j, spring, rolling = mechanics.pair_loads(physics.mechanics, mp, geometry, radii, mass, modulus, nu,
                                                                 motion.velocity, motion.spin, spring, rolling,
                                                                 state.dt, positions.dtype)
             # heat through the contacts of this geometry (Eqs. 32-36)
@@ -612,18 +638,18 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         f, t_i, t_j, spring, rolling, q = map_pair_blocks(on_pairs, pairs, motion.spring, motion.rolling)
         n = radii.shape[0]
         motion = dataclasses.replace(motion, spring=spring, rolling=rolling)
-        loads = mechanics.body_loads(physics, mp, positions, radii, mass, modulus, nu, motion, t, state.dt,
+        loads = mechanics.body_loads(physics.mechanics, mp, positions, radii, mass, modulus, nu, motion, t, state.dt,
                                      pair_exchange(f, pairs, n), pair_sum(t_i, t_j, pairs, n))
         power = pair_exchange(q, pairs, n)
-        for w, wall in enumerate(physics.walls):
+        for w, wall in enumerate(physics.mechanics.walls):
             if wall.mode == "conducting":
                 h = loads.wall_penetration[w]
                 k = kappa[particles.material]
-                k_w = wall_conductance_from_neck(physics.law, wall_neck_radius(physics.neck, radii, h), radii, h, k, k,
+                k_w = wall_conductance_from_neck(physics.conduction.law, wall_neck_radius(physics.neck, radii, h), radii, h, k, k,
                                                  law_params)
                 power = power + k_w * (jnp.asarray(wall.temperature, power.dtype) - particles.temperature)
-        power = power + thermal.source_power(physics, state, params)
-        fixed = particles.fixed if physics.held else None
+        power = power + thermal.source_power(physics.sources, state, params)
+        fixed = particles.fixed if physics.conduction.held else None
         temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
                                               particles.fixed_temperature)
         positions, velocity, spin = mechanics.integrate(positions, loads.mechanics, loads.force, loads.torque, mass,
@@ -633,22 +659,22 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         return dataclasses.replace(state, particles=particles, mechanics=motion, step=state.step + 1)
 
     def advance_fn(state: SimState, prep: Prepared) -> SimState:
-        if physics.mechanics:
+        if physics.mechanics is not None:
             return mechanical_advance(state, prep)
         state, conductance, neighbors = current_network(state, prep)
         particles = state.particles
-        fixed = particles.fixed if physics.held else None
-        if physics.integrator == "explicit" and physics.contacts == "static":
+        fixed = particles.fixed if physics.conduction.held else None
+        if physics.conduction.integrator == "explicit" and physics.contacts == "static":
             # the network term inside the update, whose reverse mode is written for the CPU; the pulse apart (its
             # switch, a scalar, is what reverse mode stores per step) and no field of zeros without walls or sources
-            terms, pulse = thermal.source_power_parts(physics, state, prep.params)
-            if physics.conducting_walls:
+            terms, pulse = thermal.source_power_parts(physics.sources, state, prep.params)
+            if physics.conduction.conducting_walls:
                 terms = [conduction_power(state, prep, particles.temperature, None, None)] + terms
             power = functools.reduce(jnp.add, terms) if terms else jnp.zeros((), particles.temperature.dtype)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
                                                   particles.fixed_temperature, (prep.scale, conductance, neighbors),
                                                   pulse, prep.rates)
-        elif physics.integrator == "explicit":
+        elif physics.conduction.integrator == "explicit":
             power = heat_power_fn(state, prep, conductance, neighbors)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
                                                   particles.fixed_temperature)
@@ -658,7 +684,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                 None if prep.wall_conductance is None else prep.scale * jnp.sum(prep.wall_conductance, axis=0),
                 None if prep.wall_conductance is None else prep.scale * jnp.sum(
                     prep.wall_conductance * prep.wall_temperature, axis=0),
-                prep.capacity, state.dt, fixed, particles.fixed_temperature, physics.implicit_tol)
+                prep.capacity, state.dt, fixed, particles.fixed_temperature, physics.conduction.implicit_tol)
         return dataclasses.replace(state, particles=dataclasses.replace(particles, temperature=temperature),
                                    step=state.step + 1)
 
@@ -884,6 +910,10 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     or overlapping by more than :data:`MAX_INITIAL_OVERLAP` of the smaller
     radius. Traced leaves are skipped (under ``jit`` they are the caller's).
     """
+    kinds = {"beam": BeamParams, "convection": ConvectionParams, "radiation": RadiationParams, "pulse": PulseParams}
+    for name, kind in kinds.items():
+        if getattr(sim.physics.sources, name) not in (None, False) and getattr(params, name) is None:
+            raise ValueError(f"Physics.sources.{name} is on but Params.{name} is None; give a simulate.{kind.__name__}")
     if not all_concrete(state, params):
         return
     dt = np.asarray(state.dt, np.float64)
@@ -904,7 +934,7 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     fail_where(~np.isfinite(np.asarray(p.positions)).all(axis=1),
                lambda i: f"particle positions must be finite; particle {i[0]} is not")
     require_positive("particle temperatures (K)", np.asarray(p.temperature, np.float64))
-    if not sim.physics.mechanics:
+    if sim.physics.mechanics is None:
         return
     if params.mechanics is None:
         raise ValueError("Physics.mechanics needs Params.mechanics (sintercond.mechanics.MechanicalParams)")
@@ -944,7 +974,7 @@ FLOAT32_OVERLAP_STEPS = 64
 def _warn_float32_positions(positions, overlaps):
     """Warn when float32 positions resolve the contacts' overlaps in a few float32 steps only: contacts then open
     and close on round-off (a stiff settled bed loses a third of its touching pairs), where float64 positions with
-    float32 laws (``Physics(force_dtype="float32")``) keep them."""
+    float32 laws (``Mechanics(force_dtype="float32")``) keep them."""
     if positions.dtype != jnp.float32:
         return
     touching = overlaps[overlaps > 0]
@@ -956,7 +986,7 @@ def _warn_float32_positions(positions, overlaps):
         warnings.warn(f"float32 positions resolve the contacts' overlaps (median {smallest:.3g} m) in "
                       f"{smallest / ulp:.0f} float32 steps of {ulp:.3g} m only: contacts will open and close on "
                       "round-off. Run with float64 positions (SINTERCOND_ENABLE_X64=1, the default) and "
-                      "Physics(force_dtype='float32') for float32 contact laws", PrecisionWarning, stacklevel=3)
+                      "Mechanics(force_dtype='float32') for float32 contact laws", PrecisionWarning, stacklevel=3)
 
 
 def segment_length(n_steps: int) -> int:
@@ -992,8 +1022,8 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
                          f"{n_steps // every * every} or {(n_steps // every + 1) * every} would do")
     observe = (lambda s: s.particles.temperature) if saveat.fn is None else saveat.fn
     validate_inputs(sim, state, params)
-    if sim.physics.mechanics and params.mechanics is not None:
-        mechanics.check_wall_coefficients(sim.physics, params.mechanics)
+    if sim.physics.mechanics is not None and params.mechanics is not None:
+        mechanics.check_wall_coefficients(sim.physics.mechanics, params.mechanics)
     prep = sim.prepare_fn(state, params)
     seg = segment_length(n_steps) if checkpoint else n_steps
 
@@ -1132,9 +1162,9 @@ def _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed
     if method == "implicit" and source is not None:
         raise ValueError("source terms need method='explicit'")
     walls = table.wall_conductance is not None
-    physics = Physics(conductance="table", integrator=method, held=fixed_mask is not None,
-                                 conducting_walls=int(walls),
-                                 source=None if source is None else _TemperatureSource(source))
+    physics = Physics(conduction=Conduction(conductance="table", integrator=method, held=fixed_mask is not None,
+                                            conducting_walls=int(walls)),
+                      sources=Sources(source=None if source is None else _TemperatureSource(source)))
     n = temperature.shape[0]
     capacity = jnp.broadcast_to(jnp.asarray(capacity, temperature.dtype), (n,))
     fixed = jnp.zeros(n, bool) if fixed_mask is None else jnp.broadcast_to(fixed_mask, (n,))

@@ -128,7 +128,7 @@ def _conductivity_setup(centres, radii, axis, law, neck_model, box):
     """Host-side geometry of :func:`steady_state_conductivity`: contacts, necks, faces, ``L`` and ``A``."""
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
-    physics = sim_module.Physics(law=law, neck_model=neck_model, conductance="lifted")
+    physics = sim_module.Physics(conduction=sim_module.Conduction(law=law, neck_model=neck_model, conductance="lifted"))
     pairs = contact_pairs(centres, radii)
     hot, cold, length, area = _hot_and_cold_faces(centres, radii, pairs, axis, box)
     contacts = sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)

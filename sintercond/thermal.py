@@ -269,16 +269,18 @@ def backward_euler_solve(temperature, laplacian_fn, wall_diagonal, wall_source, 
     return jnp.where(free, solution, held)
 
 
-def source_power(physics, state, params):
-    """External heat powers ``[n]`` (W) of the sources ``physics`` declares, at the state's time and positions.
+def source_power(sources, state, params):
+    """External heat powers ``[n]`` (W) of the sources ``sources`` declares, at the state's time and positions.
+
+    ``sources``: the :class:`sintercond.simulate.Sources` sub-spec of the physics.
 
     Beam (nozzle Eq. 30 or laser Eq. 31 of Quintana-Ruiz & Campello 2020,
     at the beam's position along its path at time ``t``, depths from the
     current top surface), convection (Eqs. 37-39), radiation (Eq. 41), a
-    prescribed pulse, and a user term. Zero (and nothing traced) when the
-    physics has none.
+    prescribed pulse, and a user term. Zero (and nothing traced) when no
+    source is on.
     """
-    varying, pulse = source_power_parts(physics, state, params)
+    varying, pulse = source_power_parts(sources, state, params)
     terms = varying if pulse is None else varying + [pulse[1] * pulse[0]]
     temperature = state.particles.temperature
     if not terms:
@@ -287,7 +289,7 @@ def source_power(physics, state, params):
         jnp.result_type(temperature, *terms))
 
 
-def source_power_parts(physics, state, params):
+def source_power_parts(sources, state, params):
     """The terms of :func:`source_power`: ``(terms, pulse)``.
 
     ``terms``: a list of ``[n]`` (or scalar) powers (W) of the beam,
@@ -303,30 +305,30 @@ def source_power_parts(physics, state, params):
     # a sum of the terms present, without a field of zeros to start from: inside a differentiated scan JAX
     # hoists such loop-invariant fields out of the loop, and the step then reads them from memory
     terms = []
-    if physics.beam is not None:
+    if sources.beam is not None:
         b = params.beam
         spot = heat_sources.beam_position(t, b.path, b.speed)
         surface = jnp.max(positions[:, 2] + radii)
         depth = heat_sources.beam_depth(positions, radii, spot, b.spot_radius, surface)
-        law = heat_sources.laser_power if physics.beam == "laser" else heat_sources.nozzle_power
+        law = heat_sources.laser_power if sources.beam == "laser" else heat_sources.nozzle_power
         switch = heat_sources.beam_switch(t, b.path, b.speed, b.segments_on, b.after_path)
         terms.append(switch * law(radii, depth, b.intensity, b.reach, b.absorptance))
-    if physics.convection:
+    if sources.convection:
         c = params.convection
         terms.append(heat_sources.convection_power(radii, temperature, c.environment_temperature,
                                                    c.environment_conductivity, c.nusselt))
-    if physics.radiation:
+    if sources.radiation:
         r = params.radiation
         terms.append(heat_sources.radiation_power(radii, temperature, r.environment_temperature, r.emissivity))
-    if physics.source is not None:
-        terms.append(physics.source(state, t, params))
+    if sources.source is not None:
+        terms.append(sources.source(state, t, params))
     pulse = None
-    if physics.pulse:  # the pulse's switch a scalar factor (no field of zeros for where's other branch)
+    if sources.pulse:  # the pulse's switch a scalar factor (no field of zeros for where's other branch)
         pulse = (params.pulse.power, (t < params.pulse.duration).astype(temperature.dtype))
     return terms, pulse
 
 
-def source_conductance(physics, radii, params, temperature_bound):
+def source_conductance(sources, radii, params, temperature_bound):
     """``G_i = -dQ_i/dT_i`` (W/K) of the temperature-dependent sources, an upper bound for ``T <= temperature_bound``.
 
     Convection (Quintana-Ruiz & Campello 2020, Eqs. 37-38) is linear,
@@ -335,10 +337,10 @@ def source_conductance(physics, radii, params, temperature_bound):
     the run can reach. Added to the conductances in the stable step.
     """
     g = jnp.zeros_like(radii)
-    if physics.convection:
+    if sources.convection:
         c = params.convection
         g = g + 2.0 * jnp.pi * c.nusselt * c.environment_conductivity * radii
-    if physics.radiation:
+    if sources.radiation:
         g = g + 16.0 * jnp.pi * params.radiation.emissivity * heat_sources.STEFAN_BOLTZMANN * temperature_bound**3 * radii**2
     return g
 

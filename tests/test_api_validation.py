@@ -23,11 +23,11 @@ def _mechanical(positions=((0.0, 0.0, 1.2e-3), (0.0, 0.0, 3.3e-3)), **mech):
                                                                      for k, v in base.items()}))
     positions = np.asarray(positions, np.float64)
     particles = particle_state(positions, R, 300.0, RHO)
-    physics = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                               mechanics=True, friction=True)
+    physics = simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                      mechanics=True, friction=True)
     contacts, fns = simulate.dynamic_contacts(positions, particles.radii, 0.1 * R, capacity_multiplier=3.0)
     state = simulate.init_state(particles, contacts, 1e-5,
-                                mechanics=mechanics.mechanical_state(physics, positions, contacts))
+                                mechanics=mechanics.mechanical_state(physics.mechanics, positions, contacts))
     return simulate.simulator(physics, fns), state, params
 
 

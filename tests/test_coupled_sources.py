@@ -30,13 +30,13 @@ DT = 1e-6
 
 
 def _step(beam, at_step=0):
-    physics = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                               mechanics=True, gravity=(0.0, 0.0, 0.0), beam=beam, convection=True,
-                               radiation=True, pulse=True)
+    physics = simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                      mechanics=True, gravity=(0.0, 0.0, 0.0), beam=beam, convection=True,
+                                      radiation=True, pulse=True)
     particles = particle_state(X, R, T0, RHO)
     contacts, fns = simulate.dynamic_contacts(X, particles.radii, 1e-5)
     state = simulate.init_state(particles, contacts, DT, step=at_step,
-                                mechanics=mechanics.mechanical_state(physics, X, contacts))
+                                mechanics=mechanics.mechanical_state(physics.mechanics, X, contacts))
     f = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
     params = simulate.Params(
         conductivity=f([12.6]), specific_heat=f([C]),

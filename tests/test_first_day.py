@@ -60,7 +60,7 @@ def _beam_power_at(model, t):
     from sintercond import thermal
 
     state = dataclasses.replace(model.state, step=np.asarray(round(t / model.dt), model.state.step.dtype))
-    return np.asarray(thermal.source_power(model.physics, state, model.params))
+    return np.asarray(thermal.source_power(model.physics.sources, state, model.params))
 
 
 def test_the_beam_is_off_once_its_path_is_done():

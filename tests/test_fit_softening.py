@@ -166,30 +166,30 @@ def _event_pattern(sim, params, state):
     Recomputed here from Eq. 42 and :mod:`sintercond.forces` (the stick-slip
     return map of Eqs. 7-13 on the state's springs), independently of the step.
     """
-    physics, mp = sim.physics, params.mechanics
+    spec, mp = sim.physics.mechanics, params.mechanics
     p, m = state.particles, state.mechanics
-    modulus = mechanics.particle_modulus(physics, mp, p.temperature, p.material)
+    modulus = mechanics.particle_modulus(spec, mp, p.temperature, p.material)
     nu = jnp.broadcast_to(mp.nu, p.radii.shape)
     g = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
     softening = [p.temperature > mp.theta_star,
                  mp.E0 * jnp.exp(jnp.minimum(0.0, mp.rate * (1 - p.temperature / mp.theta_star))) < mp.E_min]
-    if not physics.friction:
+    if not spec.friction:
         return jnp.concatenate(softening + [g.touching.ravel()] + [w.penetration(p.positions, p.radii) > 0
-                                                                   for w in physics.walls])
+                                                                   for w in spec.walls])
     lo, hi = g.i, g.j
     rs, ms = forces.effective_radius(p.radii[lo], p.radii[hi]), forces.effective_mass(p.mass[lo], p.mass[hi])
     dd, vt = forces.relative_contact_velocity(m.velocity[lo], m.velocity[hi], m.spin[lo], m.spin[hi], g.normal,
                                               p.radii[lo], p.radii[hi])
     es = forces.effective_modulus(modulus[lo], nu[lo], modulus[hi], nu[hi])
     fn = forces.hertz_normal_force(g.overlap, dd, rs, ms, es, mp.xi_con)
-    gs = forces.effective_shear_modulus(modulus[lo], nu[lo], modulus[hi], nu[hi], physics.shear)
+    gs = forces.effective_shear_modulus(modulus[lo], nu[lo], modulus[hi], nu[hi], spec.shear)
     _, _, slip = forces.mindlin_tangential_force(m.spring, vt, g.normal, state.dt, g.overlap, fn, rs, ms, gs,
                                                  mp.xi_fric, mp.mu)
     flags = softening + [g.touching.ravel(), slip.ravel()]
     mu_wall = mp.mu if mp.mu_wall is None else mp.mu_wall
-    for w, wall in enumerate(physics.walls):
+    for w, wall in enumerate(spec.walls):
         h = wall.penetration(p.positions, p.radii)
-        if not physics.wall_friction:  # frictionless walls: contact only
+        if not spec.wall_friction:  # frictionless walls: contact only
             flags.append(h > 0)
             continue
         n = jnp.broadcast_to(-jnp.asarray(wall.normal), p.positions.shape)
@@ -256,16 +256,16 @@ def test_gradient_across_contact_onset_and_stick_slip():
     wall = PlaneWall((0.0, 0.0, 0.0), normal, "conducting", 700.0)
     x = np.asarray([normal]) * (r + 1e-5)
     particles = particle_state(x, r, 450.0, 3000.0)
-    physics = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                               mechanics=True, walls=(wall,), softening=True, friction=True)
+    physics = simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                      mechanics=True, walls=(wall,), softening=True, friction=True)
     contacts, fns = simulate.dynamic_contacts(x, particles.radii, 0.1 * r)
     f = lambda v: jnp.asarray(float(v))  # noqa: E731
     params = simulate.Params(conductivity=jnp.asarray([60.0]), specific_heat=jnp.asarray([1.0]),
                              mechanics=mechanics.MechanicalParams(E0=f(1e6), nu=f(0.3), mu=f(0.3), theta_star=f(400.0),
                                                                   rate=f(1.0), E_min=f(0.0)))
-    mechanics.check_time_step(1e-5, physics, particles, contacts.neighbors, params.mechanics, 0.05)
+    mechanics.check_time_step(1e-5, physics.mechanics, particles, contacts.neighbors, params.mechanics, 0.05)
     state = simulate.init_state(particles, contacts, 1e-5,
-                                mechanics=mechanics.mechanical_state(physics, x, contacts))
+                                mechanics=mechanics.mechanical_state(physics.mechanics, x, contacts))
     down = jnp.asarray([-math.cos(a), 0.0, -math.sin(a)])
     observe = simulate.Observable(lambda s, d: jnp.concatenate([s.particles.temperature, s.particles.positions @ d,
                                                                 wall.penetration(s.particles.positions,

@@ -38,10 +38,10 @@ def _params(**mech):
 def _scene(positions, velocity, dt, params, skin=0.1 * R, **physics):
     positions = np.asarray(positions, np.float64)
     particles = particle_state(positions, R, 300.0, RHO)
-    phys = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                            mechanics=True, **physics)
+    phys = simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                   mechanics=True, **physics)
     contacts, fns = simulate.dynamic_contacts(positions, particles.radii, skin, capacity_multiplier=3.0)
-    motion = mechanics.mechanical_state(phys, positions, contacts, velocity=velocity)
+    motion = mechanics.mechanical_state(phys.mechanics, positions, contacts, velocity=velocity)
     return simulate.simulator(phys, fns), simulate.init_state(particles, contacts, dt, mechanics=motion), params
 
 
@@ -74,9 +74,9 @@ def test_example_5_1_settles_on_the_weight_and_hertz_overlap():
 def _loads(sim, state, params):
     p, mp = state.particles, params.mechanics
     geometry = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
-    modulus = mechanics.particle_modulus(sim.physics, mp, p.temperature, p.material)
+    modulus = mechanics.particle_modulus(sim.physics.mechanics, mp, p.temperature, p.material)
     nu = jnp.broadcast_to(mp.nu, p.radii.shape)
-    return mechanics.contact_loads(sim.physics, mp, geometry, p.positions, p.radii, p.mass, modulus, nu,
+    return mechanics.contact_loads(sim.physics.mechanics, mp, geometry, p.positions, p.radii, p.mass, modulus, nu,
                                    state.mechanics, state.time, state.dt)
 
 
@@ -122,11 +122,11 @@ def test_time_step_above_the_limit_is_refused():
 
 def test_mechanics_spec_is_validated():
     with pytest.raises(ValueError, match="contacts='dynamic'"):
-        simulate.Physics(mechanics=True, conductance="lifted")
+        simulate.Physics.create(mechanics=True, conductance="lifted")
     with pytest.raises(ValueError, match="mechanical walls"):
-        simulate.Physics(walls=(PlaneWall((0, 0, 0), (0, 0, 1)),))
+        simulate.Physics.create(walls=(PlaneWall((0, 0, 0), (0, 0, 1)),))
     wall = PlaneWall([0, 0, 0], [0, 0, 1])
-    physics = simulate.Physics(mechanics=True, contacts="dynamic", conductance="lifted", walls=(wall,))
+    physics = simulate.Physics.create(mechanics=True, contacts="dynamic", conductance="lifted", walls=(wall,))
     hash(physics)  # lists turned into tuples
 
 
@@ -262,7 +262,8 @@ def test_frictionless_walls_skip_their_laws_exactly():
     with pytest.raises(ValueError, match="mu_wall"):
         simulate.rollout(sim, state, _params(mu=0.5), 1)  # mu_wall None falls back to mu = 0.5
     with pytest.raises(ValueError, match="wall_rolling"):
-        simulate.Physics(mechanics=True, contacts="dynamic", conductance="lifted", rolling=True, wall_rolling="no")
+        simulate.Physics.create(mechanics=True, contacts="dynamic", conductance="lifted", rolling=True,
+                                wall_rolling="no")
 
 
 # --------------------------------------------------------------------------
@@ -364,10 +365,10 @@ def test_tight_lists_redone_after_overflow_equal_roomy_ones_springs_included():
     for name, multiplier in (("tight", 1.0), ("roomy", 4.0)):
         positions_ = np.asarray(positions, np.float64)
         particles = particle_state(positions_, R, 300.0, RHO)
-        phys = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                                mechanics=True, gravity=(0.0, 0.0, 0.0), friction=True, rolling=True)
+        phys = simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                       mechanics=True, gravity=(0.0, 0.0, 0.0), friction=True, rolling=True)
         contacts, fns = simulate.dynamic_contacts(positions_, particles.radii, 0.01 * R, multiplier)
-        motion = mechanics.mechanical_state(phys, positions_, contacts, velocity=velocity)
+        motion = mechanics.mechanical_state(phys.mechanics, positions_, contacts, velocity=velocity)
         state = simulate.init_state(particles, contacts, 1e-6, mechanics=motion)
         sim = simulate.simulator(phys, fns)
         final, report = advance(sim, state, _params(mu=0.3, mu_r=0.1, xi_rol=0.3), 1500, 100,
@@ -423,8 +424,8 @@ def test_momentum_of_a_colliding_cloud_is_conserved_to_round_off_float32_forces_
     v = np.asarray(ref.mechanics.velocity)
     np.testing.assert_allclose(np.asarray(f32.mechanics.velocity), v, atol=1e-5 * np.max(np.abs(v)))
     np.testing.assert_allclose(np.asarray(f32.particles.positions), np.asarray(ref.particles.positions), atol=1e-6 * R)
-    with pytest.raises(ValueError, match="Physics.force_dtype must be None, 'float32' or 'float64'"):
-        simulate.Physics(mechanics=True, contacts="dynamic", conductance="lifted", force_dtype="float16")
+    with pytest.raises(ValueError, match="Mechanics.force_dtype must be None, 'float32' or 'float64'"):
+        simulate.Physics.create(mechanics=True, contacts="dynamic", conductance="lifted", force_dtype="float16")
 
 
 @pytest.mark.slow

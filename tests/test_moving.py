@@ -22,8 +22,8 @@ def bed():
 def _moving_run(t0, positions_fn, radii, capacity, dt, steps, chunk, capacity_multiplier, skin, law="rojek",
                 neck_model=None):
     """Explicit conduction while the particles follow ``positions_fn``; the host driver redoes overflowing chunks."""
-    physics = simulate.Physics(law=law, neck_model=neck_model, conductance="lifted", contacts="dynamic",
-                               motion=positions_fn)
+    physics = simulate.Physics.create(law=law, neck_model=neck_model, conductance="lifted", contacts="dynamic",
+                                      motion=positions_fn)
     start = np.asarray(positions_fn(0.0))
     contacts, fns = simulate.dynamic_contacts(start, radii, skin, capacity_multiplier)
     n = len(radii)

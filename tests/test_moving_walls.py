@@ -75,7 +75,7 @@ def test_a_scene_walls_velocity_reaches_the_wall():
     scene = _resting(walls=[{"axis": 2, "side": "min", "mode": "insulated", "penetration": 0.0,
                              "velocity": [1e-3, 0.0, 2e-3]}])
     model = runner.build_model(scene)
-    assert model.physics.walls[0].velocity == (1e-3, 0.0, 2e-3)
+    assert model.physics.mechanics.walls[0].velocity == (1e-3, 0.0, 2e-3)
 
 
 def test_the_automatic_step_covers_a_moving_wall():
@@ -89,8 +89,8 @@ def test_the_automatic_step_covers_a_moving_wall():
     assert model.sized_speed == pytest.approx(0.05 + speed, rel=1e-15)
     alone = runner.build_model(_resting(packing=two))
     particles, neighbors = alone.state.particles, alone.state.contacts.neighbors
-    expected = float(mechanics.stable_time_step(model.physics, particles, neighbors, model.params.mechanics,
-                                                0.05 + speed))
+    expected = float(mechanics.stable_time_step(model.physics.mechanics, particles, neighbors,
+                                                model.params.mechanics, 0.05 + speed))
     assert model.limits["mechanical"] == pytest.approx(expected, rel=1e-12)
     assert model.limits["mechanical"] < alone.limits["mechanical"]
     assert model.limits["wall"] == pytest.approx(WALL_STEP_FRACTION * 0.5e-3 / speed, rel=1e-12)  # the smaller

@@ -31,7 +31,7 @@ def chain(request):
     temperature[0] = 900.0
     particles = particle_state(x, r, temperature, 4430.0)
     table = network.contact_table(x, np.full(n, r), 1.0, "rojek")
-    sim = simulate.simulator(simulate.Physics(law="rojek"))
+    sim = simulate.simulator(simulate.Physics.create(law="rojek"))
     params = simulate.Params(conductivity=jnp.asarray([12.6]), specific_heat=jnp.asarray([560.0]))
     state = simulate.init_state(particles, simulate.table_contacts(table), 1.0)
     dt = 0.5 * float(simulate.stable_time_step(sim, state, params))

@@ -15,7 +15,7 @@ def _conduction(n_side=4):
     n = len(radii)
     t0 = jnp.asarray(np.linspace(300.0, 900.0, n))
     capacity = jnp.full(n, 4 / 3 * np.pi * radii[0] ** 3 * 4430 * 560)
-    physics = simulate.Physics(law="rojek", conductance="lifted")
+    physics = simulate.Physics.create(law="rojek", conductance="lifted")
     contacts = simulate.lifted_contacts(physics, grid, radii)
     sim = simulate.simulator(physics)
     particles = ParticleState(jnp.asarray(grid), jnp.asarray(radii), t0, capacity, jnp.zeros(n, jnp.int32),
@@ -70,8 +70,8 @@ def test_an_overflow_with_no_reallocation_is_refused_and_a_flag_from_measure_cou
     """A shrinking powder bed on a list with no spare room (tests/test_moving.py's run): new contacts overflow it."""
     bed = packing.powder_bed(320.0, 260.0, seed=11)
     centres, radii = bed.centres * 1e-6, bed.radii * 1e-6
-    physics = simulate.Physics(law="batchelor_obrien", neck_model="intersection", conductance="lifted",
-                               contacts="dynamic", motion=simulate.affine_shrinkage(centres, 40.0))
+    physics = simulate.Physics.create(law="batchelor_obrien", neck_model="intersection", conductance="lifted",
+                                      contacts="dynamic", motion=simulate.affine_shrinkage(centres, 40.0))
     contacts, fns = simulate.dynamic_contacts(centres, radii, 0.0, 1.0)
     t0 = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
     particles = ParticleState(jnp.asarray(centres), jnp.asarray(radii), t0,

@@ -55,7 +55,7 @@ ROWS = [
     ("material.density", 5000.0, lambda m: f(m.state.particles.mass) / (4 / 3 * math.pi * R**3)),
     ("material.specific_heat", 700.0, lambda m: f(m.params.specific_heat)),
     ("material.conductivity", 20.0, lambda m: f(m.params.conductivity)),
-    ("conduction.law", "conductivity", lambda m: m.physics.law),
+    ("conduction.law", "conductivity", lambda m: m.physics.conduction.law),
     ("conduction.neck_model", "intersection", lambda m: m.physics.neck),
     ("conduction.params", {"slope": 1.2}, lambda m: {k: f(v) for k, v in m.params.law.items()}),
     ("initial.temperature", 310.0, lambda m: f(m.state.particles.temperature)),
@@ -72,18 +72,18 @@ ROWS = [
     ("convection.nusselt", 3.0, lambda m: f(m.params.convection.nusselt)),
     ("radiation.environment_temperature", 285.0, lambda m: f(m.params.radiation.environment_temperature)),
     ("radiation.emissivity", 0.6, lambda m: f(m.params.radiation.emissivity)),
-    ("physics.gravity", [0.0, -1.0, -9.0], lambda m: list(m.physics.gravity)),
-    ("physics.shear", "mindlin", lambda m: m.physics.shear),
-    ("physics.slip_direction", "velocity", lambda m: m.physics.slip_direction),
-    ("physics.rolling_projection", True, lambda m: m.physics.rolling_projection),
-    ("physics.damping_clamp", True, lambda m: m.physics.damping_clamp),
+    ("physics.gravity", [0.0, -1.0, -9.0], lambda m: list(m.physics.mechanics.gravity)),
+    ("physics.shear", "mindlin", lambda m: m.physics.mechanics.shear),
+    ("physics.slip_direction", "velocity", lambda m: m.physics.mechanics.slip_direction),
+    ("physics.rolling_projection", True, lambda m: m.physics.mechanics.rolling_projection),
+    ("physics.damping_clamp", True, lambda m: m.physics.mechanics.damping_clamp),
     ("physics.impact_velocity", 0.2, lambda m: m.sized_speed),
     ("mechanics.young_modulus", 2e6, lambda m: f(mech(m).E0)),
     ("mechanics.poisson_ratio", 0.25, lambda m: f(mech(m).nu)),
-    ("mechanics.friction", 0.4, lambda m: (f(mech(m).mu), m.physics.friction)),
-    ("mechanics.rolling_friction", 0.1, lambda m: (f(mech(m).mu_r), m.physics.rolling)),
-    ("mechanics.wall_friction", 0.2, lambda m: (f(mech(m).mu_wall), m.physics.wall_friction)),
-    ("mechanics.wall_rolling_friction", 0.05, lambda m: (f(mech(m).mu_r_wall), m.physics.wall_rolling)),
+    ("mechanics.friction", 0.4, lambda m: (f(mech(m).mu), m.physics.mechanics.friction)),
+    ("mechanics.rolling_friction", 0.1, lambda m: (f(mech(m).mu_r), m.physics.mechanics.rolling)),
+    ("mechanics.wall_friction", 0.2, lambda m: (f(mech(m).mu_wall), m.physics.mechanics.wall_friction)),
+    ("mechanics.wall_rolling_friction", 0.05, lambda m: (f(mech(m).mu_r_wall), m.physics.mechanics.wall_rolling)),
     ("mechanics.damping", 0.7, lambda m: f(mech(m).xi_con)),
     ("mechanics.tangential_damping", 0.6, lambda m: f(mech(m).xi_fric)),
     ("mechanics.rolling_damping", 0.3, lambda m: f(mech(m).xi_rol)),
@@ -151,7 +151,7 @@ def test_a_wall_key_reaches_its_wall(key, value, read, expected):
     if key == "mode":
         s["walls"][0].pop("temperature")
     model = runner.build_model(validate_scene(s))
-    got = read(model.physics.walls[0])
+    got = read(model.physics.mechanics.walls[0])
     assert got == (pytest.approx(expected, rel=1e-12) if isinstance(expected, (float, tuple)) else expected)
 
 
@@ -174,7 +174,7 @@ def test_nozzle_reach():
     s["beam"].pop("attenuation")
     s["beam"]["max_depth"] = 4e-4
     model = runner.build_model(validate_scene(s))
-    assert model.physics.beam == "nozzle" and f(model.params.beam.reach) == pytest.approx(4e-4, rel=1e-15)
+    assert model.physics.sources.beam == "nozzle" and f(model.params.beam.reach) == pytest.approx(4e-4, rel=1e-15)
 
 
 def test_floor_temperature_is_a_held_floor():
@@ -185,7 +185,7 @@ def test_floor_temperature_is_a_held_floor():
     s["boundary"] = {"floor_temperature": 333.0}
     model = runner.build_model(validate_scene(s))
     particles = model.state.particles
-    assert model.physics.held and bool(np.all(np.asarray(particles.fixed)))  # both spheres touch the floor
+    assert model.physics.conduction.held and bool(np.all(np.asarray(particles.fixed)))  # both spheres touch the floor
     np.testing.assert_allclose(np.asarray(particles.fixed_temperature), 333.0, rtol=1e-15)
 
 

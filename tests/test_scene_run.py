@@ -159,8 +159,8 @@ def test_nozzle_and_whitaker_convection():
     scene["convection"] = {"environment_temperature": 300.0, "environment_conductivity": 0.026, "reynolds": 10.0,
                            "prandtl": 0.7}
     model = runner.build_model(validate_scene(scene))
-    assert model.physics.beam == "nozzle" and float(model.params.convection.nusselt) > 2.0
-    t = np.asarray(thermal.source_power(model.physics, model.state, model.params))
+    assert model.physics.sources.beam == "nozzle" and float(model.params.convection.nusselt) > 2.0
+    t = np.asarray(thermal.source_power(model.physics.sources, model.state, model.params))
     assert t.max() > 0  # the nozzle heats the particles under the spot
     bad = copy.deepcopy(scene)
     bad["beam"].pop("max_depth")

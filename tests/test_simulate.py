@@ -35,7 +35,7 @@ def _setup(conductance, materials=1, walls=False, physics_extra=None):
     t0 = np.where(held, 900.0, 300.0)
     particles = ParticleState(jnp.asarray(centres), jnp.asarray(radii), jnp.asarray(t0), jnp.asarray(mass),
                               jnp.asarray(material), jnp.asarray(held), jnp.asarray(t0))
-    physics = simulate.Physics(conductance=conductance, held=True, pulse=True, **(physics_extra or {}))
+    physics = simulate.Physics.create(conductance=conductance, held=True, pulse=True, **(physics_extra or {}))
     wall_pen = radii - np.abs(centres[:, 0] - (centres[:, 0].max() + 0.97 * R))
     if conductance == "table":
         table = network.contact_table(centres, radii, 1.0)
@@ -43,7 +43,8 @@ def _setup(conductance, materials=1, walls=False, physics_extra=None):
         contacts = simulate.table_contacts(table, k_w, None if k_w is None else np.full(n, 250.0))
     else:
         contacts = simulate.lifted_contacts(physics, centres, radii, [(wall_pen, 250.0)] if walls else ())
-    physics = dataclasses.replace(physics, conducting_walls=int(walls))
+    physics = dataclasses.replace(physics, conduction=dataclasses.replace(physics.conduction,
+                                                                          conducting_walls=int(walls)))
     power = np.where(centres[:, 1] < 0.5 * A, 2e-3, 0.0)
     params = simulate.Params(conductivity=jnp.full(materials, 7.0), specific_heat=jnp.full(materials, 560.0),
                              pulse=simulate.PulseParams(jnp.asarray(power), jnp.asarray(2e-3)))
@@ -154,12 +155,12 @@ def test_rollout_checks_its_arguments():
     sim, state, params, *_ = _setup("table")
     with pytest.raises(ValueError, match=r"n_steps \(10\) must be a multiple of saveat.every \(3\)"):
         simulate.rollout(sim, state, params, 10, simulate.SaveAt(3))
-    with pytest.raises(ValueError, match="Physics.integrator must be one of"):
-        simulate.Physics(integrator="rk4")
-    with pytest.raises(ValueError, match="Physics.contacts='dynamic' needs conductance='lifted'"):
-        simulate.Physics(contacts="dynamic")
+    with pytest.raises(ValueError, match="Conduction.integrator must be one of"):
+        simulate.Physics.create(integrator="rk4")
+    with pytest.raises(ValueError, match="Physics.contacts='dynamic' needs conduction.conductance='lifted'"):
+        simulate.Physics.create(contacts="dynamic")
     with pytest.raises(ValueError, match=r"Params.law of law 'rojek' must be among"):
-        simulate.rollout(simulate.simulator(simulate.Physics(conductance="lifted")), state,
+        simulate.rollout(simulate.simulator(simulate.Physics.create(conductance="lifted")), state,
                          dataclasses.replace(params, law={"slop": 1.0}), 10, simulate.SaveAt(10))
 
 
@@ -175,7 +176,8 @@ def test_segments_do_not_change_the_numbers():
 @pytest.mark.slow
 def test_heat_is_conserved_by_the_lifted_network():
     sim, state, params, *_ = _setup("lifted", materials=2)
-    physics = dataclasses.replace(sim.physics, held=False, pulse=False)
+    physics = dataclasses.replace(sim.physics, conduction=dataclasses.replace(sim.physics.conduction, held=False),
+                                  sources=dataclasses.replace(sim.physics.sources, pulse=False))
     sim = simulate.simulator(physics)
     final, _ = simulate.rollout(sim, state, params, 200, simulate.SaveAt(200))
     capacity = np.asarray(state.particles.mass) * 560.0
@@ -252,7 +254,7 @@ def test_lifted_two_material_pair_is_the_series_of_its_halves():
     s kappa_k pi a in series, s pi a kappa_1 kappa_2 / (kappa_1 + kappa_2), whatever the numbering."""
     centres = np.array([[0.0, 0.0, 0.0], [A, 0.0, 0.0]])
     radii = np.full(2, R)
-    physics = simulate.Physics(conductance="lifted")
+    physics = simulate.Physics.create(conductance="lifted")
     contacts = simulate.lifted_contacts(physics, centres, radii)
     kappa = jnp.array([7.0, 390.0])
     for material in ([0, 1], [1, 0]):

@@ -42,10 +42,10 @@ def collision():
     gap = 0.01 * R1
     positions = np.array([[0.0, 0.0, 0.0], [R1 + R2 + gap, 0.0, 0.0]])
     particles = particle_state(positions, [R1, R2], T, RHO, material=[0, 1])
-    physics = simulate.Physics(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                               mechanics=True, softening=True, gravity=(0.0, 0.0, 0.0))
+    physics = simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                      mechanics=True, softening=True, gravity=(0.0, 0.0, 0.0))
     contacts, fns = simulate.dynamic_contacts(positions, particles.radii, 0.1 * R1, capacity_multiplier=3.0)
-    motion = mechanics.mechanical_state(physics, positions, contacts, velocity=[[V, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    motion = mechanics.mechanical_state(physics.mechanics, positions, contacts, velocity=[[V, 0.0, 0.0], [0.0, 0.0, 0.0]])
     dt = duration / STEPS_PER_CONTACT
     state = simulate.init_state(particles, contacts, dt, mechanics=motion)
     two = lambda a, b: jnp.asarray([a, b], jnp.float64)  # noqa: E731
