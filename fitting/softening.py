@@ -567,8 +567,7 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     contacts, fns = simulate.dynamic_contacts(state.particles.positions, particles.radii, 0.1 * float(np.mean(r)),
                                               capacity_multiplier=capacity_multiplier)
     state = dataclasses.replace(
-        state, contacts=dataclasses.replace(state.contacts, neighbors=contacts.neighbors,
-                                            neighbor_list=contacts.neighbor_list, pairs=contacts.pairs),
+        state, contacts=contacts,
         mechanics=mechanics.remap_history(state.mechanics, state.contacts.pairs.pairs, contacts.pairs.pairs))
     # probes: the spheres nearest the box's vertical axis, spread from the bottom to the top
     centre = np.asarray(state.particles.positions)

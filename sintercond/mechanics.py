@@ -301,15 +301,15 @@ def mechanical_state(spec, positions, contacts, velocity=None, spin=None) -> Mec
     Args:
       spec: the :class:`Mechanics` sub-spec (which springs exist).
       positions: ``[n, 3]`` (m), for shapes and dtype.
-      contacts: the :class:`sintercond.simulate.Contacts` of
+      contacts: the :class:`sintercond.state.DynamicContacts` of
         :func:`sintercond.simulate.dynamic_contacts` (or its
         :class:`sintercond.pair_list.HalfPairs`): the springs are laid on
         its half pair list.
     """
     half = getattr(contacts, "pairs", None) if not isinstance(contacts, HalfPairs) else contacts
     if not isinstance(half, HalfPairs):
-        raise TypeError("mechanical_state needs the Contacts of simulate.dynamic_contacts (the springs live on its "
-                        f"half pair list, Contacts.pairs); got {type(contacts).__name__}")
+        raise TypeError("mechanical_state needs the DynamicContacts of simulate.dynamic_contacts (the springs live on "
+                        f"its half pair list, DynamicContacts.pairs); got {type(contacts).__name__}")
     positions = jnp.asarray(positions)
     n, w = positions.shape[0], len(spec.walls)
     zeros = jnp.zeros_like(positions)

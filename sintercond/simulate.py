@@ -79,11 +79,12 @@ from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState, Mechanics
 from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow, did_rebuild
-from sintercond.pair_list import (HalfPairs, allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs,
-                                  half_pairs_overflowed, map_pair_blocks, padded_half_pairs, pair_exchange, pair_sum)
+from sintercond.pair_list import (allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs, half_pairs_overflowed,
+                                  map_pair_blocks, padded_half_pairs, pair_exchange, pair_sum)
 from sintercond._validation import all_concrete, fail_where, require_positive
 from sintercond.network import ContactTable, network_laplacian
-from sintercond.state import ParticleState, heat_capacity, pytree_dataclass
+from sintercond.state import (Contacts, DynamicContacts, LiftedContacts, ParticleState, TableContacts,  # noqa: F401
+                              heat_capacity, pytree_dataclass)
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
 
 _INTEGRATORS = ("explicit", "implicit")
@@ -350,47 +351,13 @@ class Params:
 
 
 @pytree_dataclass
-class Contacts:
-    """The contact network of a state.
-
-    Attributes:
-      neighbors: ``[n, m]`` int32 neighbour indices (static: padding is the
-        row's own index; dynamic: the neighbour list's, padding ``n``).
-      conductance: ``[n, m]`` conductances at unit conductivity (W/K per
-        W/(m K)) for ``conductance="table"``, else None.
-      neck: ``[n, m]`` neck radii (m) for static lifted contacts, else None.
-      overlap: ``[n, m]`` overlaps ``h = r_i + r_j - d`` (m), same.
-      wall_conductance: ``[n]`` conductance to the conducting walls at unit
-        conductivity (table), else None.
-      wall_temperature: ``[n]`` (table) or ``[n_walls]`` (lifted) wall temperatures (K).
-      wall_neck, wall_overlap: ``[n_walls, n]`` neck radius and penetration (m)
-        of each particle on each conducting wall (lifted), else None.
-      neighbor_list: the neighbour list of dynamic contacts
-        (:class:`sintercond.neighbors.NeighborList`), else None.
-      pairs: the half pair list (:class:`sintercond.pair_list.HalfPairs`,
-        ``[capacity, 2]``) of dynamic contacts, rebuilt with the Dense
-        list, else None.
-    """
-
-    neighbors: Any
-    conductance: Any = None
-    neck: Any = None
-    overlap: Any = None
-    wall_conductance: Any = None
-    wall_temperature: Any = None
-    wall_neck: Any = None
-    wall_overlap: Any = None
-    neighbor_list: Any = None
-    pairs: HalfPairs | None = None
-
-
-@pytree_dataclass
 class SimState:
     """The whole state of a simulation.
 
     Attributes:
       particles: positions, radii, temperatures, masses, materials, held flags.
-      contacts: the network.
+      contacts: the network, one class per mode (:data:`sintercond.state.Contacts`: :class:`TableContacts`,
+        :class:`LiftedContacts` or :class:`DynamicContacts`).
       step: int scalar, steps taken (time ``step * dt``).
       dt: the time step (s), scalar.
       overflow: bool scalar, set when a dynamic neighbour list overflowed
@@ -512,7 +479,7 @@ def pair_heat_flow(conductance, i, j, temperature):
     return conductance * (temperature[j] - temperature[i])
 
 
-def follow_contacts(neighbor_fn, positions, radii, contacts: Contacts, history=None):
+def follow_contacts(neighbor_fn, positions, radii, contacts: DynamicContacts, history=None):
     """Dynamic contacts at ``positions``: ``(contacts, history, overflow)``.
 
     Updates the Dense list (it rebuilds once a particle moved half the
@@ -530,7 +497,7 @@ def follow_contacts(neighbor_fn, positions, radii, contacts: Contacts, history=N
 
     half, history = jax.lax.cond(did_rebuild(contacts.neighbor_list, nbrs), rebuild, lambda h: (old, h), history)
     overflow = did_buffer_overflow(nbrs) | half_pairs_overflowed(half)
-    return dataclasses.replace(contacts, neighbor_list=nbrs, neighbors=nbrs.idx, pairs=half), history, overflow
+    return DynamicContacts(neighbor_list=nbrs, pairs=half), history, overflow
 
 
 # --------------------------------------------------------------------------
@@ -730,15 +697,15 @@ def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechani
                     dt=jnp.asarray(dt, dtype), overflow=jnp.zeros((), bool), mechanics=mechanics)
 
 
-def table_contacts(table, wall_conductance=None, wall_temperature=None) -> Contacts:
+def table_contacts(table, wall_conductance=None, wall_temperature=None) -> TableContacts:
     """Contacts of ``conductance="table"`` from a :class:`sintercond.network.ContactTable` at unit conductivity."""
-    return Contacts(neighbors=table.neighbors, conductance=table.conductance,
-                    wall_conductance=None if wall_conductance is None else jnp.asarray(wall_conductance),
-                    wall_temperature=None if wall_temperature is None else jnp.asarray(wall_temperature))
+    return TableContacts(neighbors=table.neighbors, conductance=table.conductance,
+                         wall_conductance=None if wall_conductance is None else jnp.asarray(wall_conductance),
+                         wall_temperature=None if wall_temperature is None else jnp.asarray(wall_temperature))
 
 
 def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=None, tolerance=1e-9,
-                    pairs=None) -> Contacts:
+                    pairs=None) -> LiftedContacts:
     """Contacts of ``conductance="lifted"``: the neck of every pair and of every conducting wall (host, once).
 
     Pairs as :func:`sintercond.network.contact_pairs` finds them, necks by
@@ -753,8 +720,8 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
     p = contact_pairs(centres, radii, tolerance, periodic_box) if pairs is None else pairs
     a = np.where(p.overlap > 0, np.asarray(NECK_MODELS[physics.neck](p.r_i, p.r_j, p.overlap)), 0.0)
     neighbors, neck, overlap = ell_table(p.n_particles, p.i, p.j, a, p.overlap)
-    contacts = Contacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=jnp.asarray(neck),
-                        overlap=jnp.asarray(overlap))
+    contacts = LiftedContacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=jnp.asarray(neck),
+                              overlap=jnp.asarray(overlap))
     if walls:
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
         a = np.asarray(wall_neck_radius(physics.neck, radii, h))
@@ -781,7 +748,7 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
 
     A Dense list with a Verlet skin from a sorted cell list (:func:`sintercond.neighbors.neighbor_list`):
     inside the step it is rebuilt only once a particle moved ``skin / 2``,
-    and the half pair list (``Contacts.pairs``, the pairs the laws run on)
+    and the half pair list (``DynamicContacts.pairs``, the pairs the laws run on)
     with it. Both are sized here with ``capacity_multiplier`` spare room.
     The cell-list region is :func:`list_region` (the packing's extent widened by ``margin``, m). Pass
     ``neighbor_fns`` to :func:`simulator`. The list keeps the float dtype of
@@ -796,7 +763,7 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
     nbrs = fns.allocate(jnp.asarray(positions, dtype))
     half = allocate_half_pairs(nbrs.idx, jnp.asarray(positions, dtype), jnp.asarray(radii, dtype), fns.skin,
                                capacity_multiplier)
-    return Contacts(neighbors=nbrs.idx, neighbor_list=nbrs, pairs=half), fns
+    return DynamicContacts(neighbor_list=nbrs, pairs=half), fns
 
 
 def reallocate_neighbors(neighbor_fns):
@@ -825,8 +792,7 @@ def reallocate_neighbors(neighbor_fns):
                                                                        end.particles.radii, neighbor_fns.skin))
             capacity = half_pair_capacity(max(capacity + 1, int(math.ceil(neighbor_fns.capacity_multiplier * need))))
         n = start.particles.radii.shape[0]
-        contacts = dataclasses.replace(start.contacts, neighbor_list=nbrs, neighbors=nbrs.idx,
-                                       pairs=padded_half_pairs(half, capacity, n))
+        contacts = DynamicContacts(neighbor_list=nbrs, pairs=padded_half_pairs(half, capacity, n))
         motion = start.mechanics
         if motion is not None and capacity > half.capacity:  # the springs stay with their pairs, zeros after them
             pad = lambda x: None if x is None else jnp.concatenate(  # noqa: E731

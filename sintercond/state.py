@@ -105,3 +105,65 @@ def particle_state(positions, radii, temperature, density, specific_heat=None, m
         mass=jnp.asarray(mass), material=jnp.asarray(material), fixed=jnp.asarray(fixed),
         fixed_temperature=jnp.asarray(held),
     )
+
+
+@pytree_dataclass
+class TableContacts:
+    """The contacts of a static packing with ``Conduction(conductance="table")``: conductances at unit conductivity.
+
+    Attributes:
+      neighbors: ``[n, m]`` int32 neighbour indices, padding the row's own index.
+      conductance: ``[n, m]`` conductances at unit conductivity (W/K per W/(m K)), 0 in padding.
+      wall_conductance: ``[n]`` conductance to the conducting walls at unit conductivity, or None.
+      wall_temperature: ``[n]`` the temperature (K) each particle's conducting wall is at, or None.
+    """
+
+    neighbors: jax.Array
+    conductance: jax.Array
+    wall_conductance: jax.Array | None = None
+    wall_temperature: jax.Array | None = None
+
+
+@pytree_dataclass
+class LiftedContacts:
+    """The contacts of a static packing with ``Conduction(conductance="lifted")``: the necks, the law applied to
+    the parameters at each rollout.
+
+    Attributes:
+      neighbors: ``[n, m]`` int32 neighbour indices, padding the row's own index.
+      neck: ``[n, m]`` neck radii (m), 0 in padding.
+      overlap: ``[n, m]`` overlaps ``h = r_i + r_j - d`` (m), 0 in padding.
+      wall_neck, wall_overlap: ``[n_walls, n]`` neck radius and penetration (m) of each particle on each
+        conducting wall, or None.
+      wall_temperature: ``[n_walls]`` conducting wall temperatures (K), or None.
+    """
+
+    neighbors: jax.Array
+    neck: jax.Array
+    overlap: jax.Array
+    wall_neck: jax.Array | None = None
+    wall_overlap: jax.Array | None = None
+    wall_temperature: jax.Array | None = None
+
+
+@pytree_dataclass
+class DynamicContacts:
+    """The contacts of a moving packing (``Physics(contacts="dynamic")``), found again as it moves.
+
+    Attributes:
+      neighbor_list: the Dense neighbour list with a skin (:class:`sintercond.neighbors.NeighborList`).
+      pairs: the half pair list (:class:`sintercond.pair_list.HalfPairs`, ``[capacity, 2]``, each pair
+        ``i < j`` once) the laws run on, rebuilt with the Dense list.
+    """
+
+    neighbor_list: object
+    pairs: object
+
+    @property
+    def neighbors(self) -> jax.Array:
+        """``[n, m]`` int32 neighbour indices of the Dense list (padding ``n``)."""
+        return self.neighbor_list.idx
+
+
+Contacts = TableContacts | LiftedContacts | DynamicContacts
+"""The contacts of a state, one class per mode (for annotations and ``isinstance``)."""
