@@ -29,7 +29,7 @@ from sintercond import forces, guards, heat_sources, mechanics, network, packing
 from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
-                              file_packing, restitution_damping_ratio, validate_scene)
+                              default_penetration, file_packing, restitution_damping_ratio, validate_scene)
 from sintercond.state import particle_state
 
 
@@ -79,15 +79,15 @@ def build_packing(scene):
         centres, radii = file_packing(p)
         return np.array(centres), np.array(radii), {}
     if p["kind"] == "poured":
-        rng = np.random.default_rng(p.get("seed", 0))
-        radii = packing.truncated_normal_radii(p["particles"], p["radius_mean"], p.get("radius_std", 0.0),
-                                               p.get("truncation", 3.0), rng)
-        packed = packing.pour(radii, p["lateral_size"], dem_material(scene), seed=rng, start=p.get("start", "relaxed"),
+        rng = np.random.default_rng(p["seed"])
+        radii = packing.truncated_normal_radii(p["particles"], p["radius_mean"], p["radius_std"],
+                                               p["truncation"], rng)
+        packed = packing.pour(radii, p["lateral_size"], dem_material(scene), seed=rng, start=p["start"],
                               temperature=scene["initial"]["temperature"])
     elif p.get("method") == "dem":
-        packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0),
+        packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],
                                     method="dem", material=dem_material(scene))
-        packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p.get("sinter_swelling", 0.0)))
+        packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p["sinter_swelling"]))
     else:
         packed = packing.from_scene(p)
     return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}
@@ -96,7 +96,7 @@ def build_packing(scene):
 def _nusselt(convection):
     if "reynolds" in convection:
         return float(heat_sources.whitaker_nusselt(convection["reynolds"], convection["prandtl"]))
-    return convection.get("nusselt", 2.0)
+    return convection["nusselt"]
 
 
 def scene_physics(scene, walls=0) -> simulate.Physics:
@@ -115,7 +115,7 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
 
 def mechanics_on(scene) -> bool:
     """Whether a validated scene runs the coupled thermo-mechanical step."""
-    return bool(scene.get("physics", {}).get("mechanics", False))
+    return scene["physics"]["mechanics"]
 
 
 def contact_material(scene) -> dict:
@@ -126,22 +126,21 @@ def contact_material(scene) -> dict:
     default to the particles'.
     """
     m = scene["mechanics"]
-    xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m.get("damping", 1.0)
-    mu, mu_r = m.get("friction", 0.0), m.get("rolling_friction", 0.0)
-    return dict(E0=m["young_modulus"], nu=m["poisson_ratio"], xi_con=xi_con, xi_fric=m.get("tangential_damping", 1.0),
-                xi_rol=m.get("rolling_damping", 0.0), mu=mu, mu_r=mu_r, mu_wall=m.get("wall_friction", mu),
-                mu_r_wall=m.get("wall_rolling_friction", mu_r))
+    xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m["damping"]
+    return dict(E0=m["young_modulus"], nu=m["poisson_ratio"], xi_con=xi_con, xi_fric=m["tangential_damping"],
+                xi_rol=m["rolling_damping"], mu=m["friction"], mu_r=m["rolling_friction"], mu_wall=m["wall_friction"],
+                mu_r_wall=m["wall_rolling_friction"])
 
 
 def mechanical_params(scene) -> mechanics.MechanicalParams | None:
     """The contact material of a validated scene (:func:`contact_material`, ``[softening]``), or None without mechanics."""
     if not mechanics_on(scene):
         return None
-    soft = scene.get("softening", {})
+    soft = scene.get("softening")
     f = lambda x: jnp.asarray(float(x))  # noqa: E731
     return mechanics.MechanicalParams(
-        **{k: f(v) for k, v in contact_material(scene).items()}, theta_star=f(soft.get("onset_temperature", 400.0)),
-        rate=f(soft.get("rate", 1.0)), E_min=f(soft.get("min_modulus", 0.0)))
+        **{k: f(v) for k, v in contact_material(scene).items()}, theta_star=f(soft["onset_temperature"] if soft else 400.0),
+        rate=f(soft["rate"] if soft else 1.0), E_min=f(soft["min_modulus"] if soft else 0.0))
 
 
 def dem_material(scene) -> packing.DemMaterial:
@@ -162,9 +161,8 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
                    for w in planes)
     spec = mechanics.Mechanics.create(
-        walls_, gravity=p.get("gravity", (0.0, 0.0, -9.81)), shear=p.get("shear", "paper"),
-        slip_direction=p.get("slip_direction", "trial"), rolling_projection=p.get("rolling_projection", False),
-        damping_clamp=p.get("damping_clamp", False), softening="softening" in scene,
+        walls_, gravity=p["gravity"], shear=p["shear"], slip_direction=p["slip_direction"],
+        rolling_projection=p["rolling_projection"], damping_clamp=p["damping_clamp"], softening="softening" in scene,
         friction=c["mu"] > 0 or c["mu_wall"] > 0, rolling=c["mu_r"] > 0 or c["mu_r_wall"] > 0,
         wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
     conduction = dataclasses.replace(thermal_physics.conduction, conductance="lifted", conducting_walls=0)
@@ -184,7 +182,7 @@ def scene_params(scene) -> simulate.Params:
             spot_radius=f(beam["spot_radius"]), absorptance=f(beam["absorptance"]), speed=f(beam["speed"]),
             path=f(beam["path"], dtype=float),
             segments_on=None if "segments_on" not in beam else f(beam["segments_on"], dtype=float),
-            after_path=f(1.0 if beam.get("after_path", "off") == "stay" else 0.0)),
+            after_path=f(1.0 if beam["after_path"] == "stay" else 0.0)),
         convection=None if conv is None else simulate.ConvectionParams(
             f(conv["environment_temperature"]), f(conv["environment_conductivity"]), f(_nusselt(conv))),
         radiation=None if rad is None else simulate.RadiationParams(f(rad["environment_temperature"]),
@@ -250,11 +248,11 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         log("mechanics: contact list and the mechanical time step")
         planes = scene_walls(scene, centres, radii)
         physics = mechanical_physics(scene, physics, planes)
-        skin = scene["physics"].get("skin", 0.1) * float(np.max(radii))
+        skin = scene["physics"]["skin"] * float(np.max(radii))
         contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
         sim = simulate.simulator(physics, fns)
         reallocate = simulate.reallocate_neighbors(fns)
-        impact = scene["physics"].get("impact_velocity", 0.05)
+        impact = scene["physics"]["impact_velocity"]
         wall_speed, fastest = _fastest_wall(scene)
         v_rel = impact + wall_speed
         mechanical_limit = float(mechanics.stable_time_step(physics.mechanics, particles, contacts.neighbors,
@@ -309,9 +307,10 @@ def _highest_temperature(scene) -> float:
 
 
 def _walls(scene):
-    walls = list(scene.get("walls", []))
+    walls = list(scene["walls"])
     if "floor_temperature" in scene.get("boundary", {}):
-        walls.append({"axis": 2, "side": "min", "mode": "held", "temperature": scene["boundary"]["floor_temperature"]})
+        walls.append({"axis": 2, "side": "min", "mode": "held", "temperature": scene["boundary"]["floor_temperature"],
+                      "penetration": default_penetration(scene), "velocity": [0.0, 0.0, 0.0]})
     return walls
 
 
@@ -323,7 +322,7 @@ def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
     """
     planes = []
     for wall in _walls(scene):
-        axis, depth = wall["axis"], wall.get("penetration", default_penetration(scene)) * float(np.mean(radii))
+        axis, depth = wall["axis"], wall["penetration"] * float(np.mean(radii))
         normal = np.zeros(3)
         if wall["side"] == "min":
             normal[axis] = 1.0
@@ -334,7 +333,7 @@ def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
         point = np.zeros(3)
         point[axis] = position
         planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall["mode"], wall.get("temperature"),
-                                      tuple(float(v) for v in wall.get("velocity", (0.0, 0.0, 0.0)))))
+                                      tuple(float(v) for v in wall["velocity"])))
     return planes
 
 
@@ -359,20 +358,6 @@ def _wall_heat_specs(scene, centres, radii, physics):
 FEW_WALL_CONTACTS = 0.5
 """A held or conducting wall touching fewer than this fraction of the particles facing it is reported as a handful."""
 
-ROUGH_BED_PENETRATION = 0.1
-"""The default ``walls[k].penetration`` (mean radii) on a generated powder bed: its bottom layer spreads over about
-a tenth of a mean radius (the default scene: 11 of its 45 floor particles within 0.02, 43 within 0.1); on other
-packings, DEM-settled beds (they rest on their floor within a Hertz overlap) and runs with mechanics (a wall 0.1
-radii deep would launch the particles) the schema's 0.02."""
-
-
-def default_penetration(scene) -> float:
-    """``walls[k].penetration`` where the scene gives none (mean radii): see :data:`ROUGH_BED_PENETRATION`."""
-    p = scene["packing"]
-    rough = p["kind"] == "powder_bed" and p.get("method", "relax") != "dem" and not mechanics_on(scene)
-    return ROUGH_BED_PENETRATION if rough else 0.02
-
-
 def wall_contacts(scene, centres, radii, log=None) -> dict:
     """``{k: particles touching scene wall k}`` for each held or conducting wall, logged; warns on a handful.
 
@@ -390,13 +375,13 @@ def wall_contacts(scene, centres, radii, log=None) -> dict:
         touching = int(np.count_nonzero(penetration >= 0 if plane.mode == "held" else penetration > 0))
         facing = int(np.count_nonzero(penetration > float(np.max(penetration)) - 0.5 * float(np.mean(radii))))
         counts[k] = touching
-        name = f"walls[{k}]" if k < len(scene.get("walls", [])) else "boundary.floor_temperature"
+        name = f"walls[{k}]" if k < len(scene["walls"]) else "boundary.floor_temperature"
         message = (f"{name} ({plane.mode}, axis {wall['axis']} {wall['side']}) touches {touching} of the {facing} "
                    "particles facing it")
         if touching < FEW_WALL_CONTACTS * facing and not mechanics_on(scene):  # moving particles settle onto it
-            depth = f"{wall.get('penetration', default_penetration(scene)):g} mean radii"
+            depth = f"{wall['penetration']:g} mean radii"
             message += (f"; only a handful: raise walls[{k}].penetration (now {depth}) so that its plane reaches "
-                        "into the rough face" if k < len(scene.get("walls", [])) else
+                        "into the rough face" if k < len(scene["walls"]) else
                         f"; only a handful: replace boundary.floor_temperature by a held [[walls]] floor (axis = 2, "
                         f"side = \"min\") with a penetration above its {depth}, so that its plane reaches into the "
                         "rough face")
@@ -477,7 +462,7 @@ def physical_range_check(scene):
                 message = (f"T = {hottest:.6g} K at step {int(state.step)} (t = {float(state.time):.6g} s) is above "
                            f"material.melting_point = {melting:g} K: the model has no melting (no latent heat, no "
                            "liquid), so what follows is not physical")
-                if scene["material"].get("on_melting", "stop") == "stop":
+                if scene["material"]["on_melting"] == "stop":
                     raise MeltingPointCrossed(message + "; lower the heat input (beam.intensity or beam.power), or "
                                               'set material.on_melting = "warn" to go on')
                 warned.append(int(state.step))
@@ -763,7 +748,7 @@ def _write_outputs(scene, out, model, state, obs: Observation):
             fields["heat_power"] = np.asarray(obs.power)
         (out / "vtp").mkdir(exist_ok=True)
         write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields,
-                  encoding=scene["run"].get("vtp_encoding", "binary"))
+                  encoding=scene["run"]["vtp_encoding"])
         write_frames_pvd(out, model.dt)
 
 

@@ -22,6 +22,7 @@ refused beyond the documented limits, all before a packing is built.
 
 from __future__ import annotations
 
+import copy
 import difflib
 import functools
 import importlib.resources
@@ -409,9 +410,64 @@ def validate_scene(raw: dict) -> dict:
         if "velocity" in wall:
             wall["velocity"] = _numbers(f"walls[{k}].velocity", wall["velocity"], 3, _within(-1e3, 1e3, "m/s"))
     _check_mechanics(scene)
+    _fill_defaults(scene)
     _check_details(scene)
     estimate_run(scene)
     return scene
+
+
+# keys whose default holds only without another key (given instead), or only with mechanics
+_ALTERNATIVES = {("mechanics", "damping"): "restitution", ("convection", "nusselt"): "reynolds"}
+_MECHANICAL_ONLY = {("physics", key) for key in _SCHEMA["physics"] if key != "mechanics"}
+
+
+def _default_of(section, key, spec: Key, table, on):
+    """The value ``spec`` declares for a missing key (None: no default to fill): a literal the key's own rule
+    accepts, or the value of the key its default names (``mechanics.wall_friction`` defaults to
+    ``mechanics.friction``); a default that needs another key absent, or mechanics on, only then."""
+    if spec.default is None or (section, key) in _ALTERNATIVES and _ALTERNATIVES[section, key] in table:
+        return None
+    if (section, key) in _MECHANICAL_ONLY and not on:
+        return None
+    if isinstance(spec.default, str) and spec.kind is float:
+        return table.get(spec.default)  # a reference, itself filled first (the schema lists it before)
+    try:
+        return _value(f"{section}.{key}", copy.deepcopy(spec.default), spec)
+    except SceneError:  # a description ("the law's"): computed where it is used
+        return None
+
+
+def _fill_defaults(scene):
+    """Fill every missing key of the sections present with the default its :class:`Key` declares, once, so that
+    the run reads ``scene[section][key]`` and no code restates a default. Run after the checks of what was
+    given; the filled scene validates again as it is (``scene.json``, read back by ``--resume``)."""
+    on = scene["physics"].get("mechanics", False)
+    penetration = default_penetration(scene)  # the schema's, or the rough bed's
+    for wall in scene["walls"]:
+        wall.setdefault("penetration", penetration)
+    tables = [(name, scene[name], _SCHEMA[name]) for name in _SCHEMA if name in scene]
+    tables.append(("packing", scene["packing"], _PACKING[scene["packing"]["kind"]]))
+    tables += [("walls", wall, _WALL) for wall in scene["walls"]]
+    for section, table, schema in tables:
+        for key, spec in schema.items():
+            if key not in table:
+                value = _default_of(section, key, spec, table, on)
+                if value is not None:
+                    table[key] = value
+
+
+ROUGH_BED_PENETRATION = 0.1
+"""``walls[k].penetration`` (mean radii) on a powder bed settled by relaxation without mechanics: the face layer of
+such a bed spreads over about a tenth of a radius, so the schema's 0.02 touches only the particles that stick out."""
+
+
+def default_penetration(scene) -> float:
+    """``walls[k].penetration`` where the scene gives none (mean radii): :data:`ROUGH_BED_PENETRATION` on a relaxed
+    powder bed without mechanics, else the schema's default."""
+    p = scene["packing"]
+    rough = (p["kind"] == "powder_bed" and p.get("method", "relax") != "dem"
+             and not scene.get("physics", {}).get("mechanics", False))
+    return ROUGH_BED_PENETRATION if rough else _WALL["penetration"].default
 
 
 def _numbers(name, value, length, rule, integer=False):
@@ -535,11 +591,10 @@ def _check_packing(packing, conduction):
         from sintercond.packing import check_radius_distribution
 
         try:
-            check_radius_distribution(packing["radius_mean"], packing.get("radius_std", 0.0),
-                                      packing.get("truncation", 3.0))
+            check_radius_distribution(packing["radius_mean"], packing["radius_std"], packing["truncation"])
         except PackingError as err:
             raise SceneError(f"packing: {err}") from None
-        largest = packing["radius_mean"] + packing.get("truncation", 3.0) * packing.get("radius_std", 0.0)
+        largest = packing["radius_mean"] + packing["truncation"] * packing["radius_std"]
         if not packing["lateral_size"] > 2 * largest:
             raise SceneError(f"packing.lateral_size must be > the largest diameter {2 * largest:g} m "
                              f"(2 (radius_mean + truncation radius_std)); got {packing['lateral_size']:g}")
@@ -589,7 +644,6 @@ def _check_details(scene):
     _check_packing(scene["packing"], conduction)
     if "beam" in scene:
         beam = scene["beam"]
-        beam.setdefault("kind", "laser")
         needed = "attenuation" if beam["kind"] == "laser" else "max_depth"
         if needed not in beam:
             raise SceneError(f"beam.{needed} is required for a {beam['kind']} beam "
@@ -624,19 +678,17 @@ def _check_details(scene):
     if "reynolds" in convection and "nusselt" in convection:
         raise SceneError("give convection.nusselt or convection.reynolds and prandtl, not both")
     run = scene["run"]
-    run.setdefault("dt", "auto")
     run["dt"] = run["dt"] if run["dt"] == "auto" else float(run["dt"])
     if run["checkpoint_every"] % run["output_every"]:
         raise SceneError(f"run.checkpoint_every ({run['checkpoint_every']}) must be a multiple of "
                          f"run.output_every ({run['output_every']})")
-    formats = run.get("formats", ["vtp"])
+    formats = run["formats"]
     allowed = ("lammps", "vtp")
     if (not formats or any(not isinstance(f, str) or f not in allowed for f in formats)
             or len(set(formats)) != len(formats)):
         raise SceneError(f"run.formats must be a non-empty list of distinct names from {list(allowed)}; "
                          f"got {formats!r}")
     run["formats"] = list(formats)
-    run.setdefault("override_limits", False)
 
 
 class RunEstimate(NamedTuple):
@@ -674,13 +726,13 @@ def estimate_run(scene) -> RunEstimate:
         h, z = 2 * r * 1e-3, 13
     elif packing["kind"] == "poured":
         n = packing["particles"]
-        r = max(packing["radius_mean"] - packing.get("truncation", 3.0) * packing.get("radius_std", 0.0),
+        r = max(packing["radius_mean"] - packing["truncation"] * packing["radius_std"],
                 1e-3 * packing["radius_mean"])
         h, z = 2 * r * 1e-3, 13
     elif packing["kind"] == "powder_bed":
         n = bed_particle_count(packing["lateral_size"], packing["height"], packing["diameter_range"])
         r = packing["diameter_range"][0] / 2
-        h, z = 2 * r * max(packing.get("sinter_swelling", 0.0), 1e-3), 13
+        h, z = 2 * r * max(packing["sinter_swelling"], 1e-3), 13
     else:
         n = math.prod(packing["counts"])
         r = packing["radius"]
@@ -693,9 +745,8 @@ def estimate_run(scene) -> RunEstimate:
     temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in scene["walls"] if "temperature" in w]
     if "convection" in scene:
         c = scene["convection"]
-        nusselt = c.get("nusselt", 2.0)
-        if "reynolds" in c:
-            nusselt = 2.0 + (0.4 * c["reynolds"] ** 0.5 + 0.06 * c["reynolds"] ** (2 / 3)) * c["prandtl"] ** 0.4
+        nusselt = c["nusselt"] if "nusselt" in c else (
+            2.0 + (0.4 * c["reynolds"] ** 0.5 + 0.06 * c["reynolds"] ** (2 / 3)) * c["prandtl"] ** 0.4)
         g += 2 * math.pi * nusselt * c["environment_conductivity"] * r
         temperatures.append(c["environment_temperature"])
     if "radiation" in scene:
@@ -703,7 +754,7 @@ def estimate_run(scene) -> RunEstimate:
         g += 16 * math.pi * scene["radiation"]["emissivity"] * STEFAN_BOLTZMANN * max(temperatures) ** 3 * r**2
     capacity = material["density"] * material["specific_heat"] * 4 / 3 * math.pi * r**3
     dt = 0.9 * capacity / (z * k_pair + g)
-    if scene.get("physics", {}).get("mechanics"):
+    if scene["physics"]["mechanics"]:
         wall_speed = max((advance_speed(w) for w in scene["walls"]), default=0.0)
         dt = min(dt, 0.9 * _mechanical_step_estimate(scene, r, wall_speed))
         if wall_speed > 0:
@@ -741,7 +792,7 @@ BEAM_STEP_FRACTION = 0.2
 def advance_speed(wall) -> float:
     """The speed (m/s) at which a scene wall (``[[walls]]`` table) advances into the packing; 0 if it recedes."""
     inward = 1.0 if wall["side"] == "min" else -1.0
-    return max(inward * float(wall.get("velocity", (0.0, 0.0, 0.0))[wall["axis"]]), 0.0)
+    return max(inward * float(wall["velocity"][wall["axis"]]), 0.0)
 
 
 def beam_step(beam) -> float | None:
@@ -764,14 +815,12 @@ def _mechanical_step_estimate(scene, r, wall_speed=0.0):
     m, physics = scene["mechanics"], scene["physics"]
     e, nu = m["young_modulus"], m["poisson_ratio"]
     mass = scene["material"]["density"] * 4 / 3 * math.pi * r**3
-    friction = m.get("friction", 0.0) > 0 or m.get("wall_friction", 0.0) > 0
-    rolling = m.get("rolling_friction", 0.0) > 0 or m.get("wall_rolling_friction", 0.0) > 0
-    xi_con = m.get("damping", 1.0)
-    if "restitution" in m:
-        xi_con = restitution_damping_ratio(m["restitution"])
-    return float(_contact_step(physics.get("shear", "paper"))(
-        r, mass, e, nu, physics.get("impact_velocity", 0.05) + wall_speed, xi_con,
-        m.get("tangential_damping", 1.0) if friction else 0.0, m.get("rolling_damping", 0.0) if rolling else 0.0))
+    friction = m["friction"] > 0 or m["wall_friction"] > 0
+    rolling = m["rolling_friction"] > 0 or m["wall_rolling_friction"] > 0
+    xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m["damping"]
+    return float(_contact_step(physics["shear"])(
+        r, mass, e, nu, physics["impact_velocity"] + wall_speed, xi_con,
+        m["tangential_damping"] if friction else 0.0, m["rolling_damping"] if rolling else 0.0))
 
 
 @functools.cache
