@@ -374,7 +374,7 @@ def _check_section(name, table, schema):
 
 
 def validate_scene(raw: dict) -> dict:
-    """Check a parsed scene and return it with numbers normalised; raises :class:`SceneError`.
+    """Check a parsed scene and return it with numbers normalised and its defaults filled; raises :class:`SceneError`.
 
     Everything is checked here, before any packing or network is built:
     keys, types and ranges, combinations (beam path over the packing,
