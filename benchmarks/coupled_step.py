@@ -164,7 +164,7 @@ def sintercond_setup(centres, radii, temperature, variant, dt=None, order="latti
                                              xi_con=cast(restitution_damping_ratio(RESTITUTION)),
                                              xi_fric=cast(1.0), xi_rol=cast(0.2), mu=cast(MU), mu_r=cast(MU_R),
                                              mu_wall=cast(MU), mu_r_wall=cast(MU_R)))
-    limit = float(mechanics.stable_time_step(physics.mechanics, particles, contacts.neighbors, params.mechanics, V_REL))
+    limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors, params.mechanics, V_REL))
     dt = 0.5 * limit if dt is None else dt
     state = simulate.init_state(particles, contacts, jnp.asarray(dt, dtype),
                                 mechanics=mechanics.mechanical_state(physics.mechanics, particles.positions, contacts))

@@ -393,7 +393,7 @@ MUTANTS = [
      [T + "test_first_day.py::test_an_interrupted_extension_resumes_with_the_runs_own_step"]),
     ("wall friction defaults to 0, not to the pairs' friction", "sintercond/scene.py",
      "        return table.get(spec.default)  # a reference", "        return 0.0  # a reference",
-     [T + "test_scene_keys.py"]),
+     [T + "test_scene_defaults.py"]),
     ("defaults filled before the mechanics-only keys are checked", "sintercond/scene.py",
      "    if (section, key) in _MECHANICAL_ONLY and not on:\n        return None",
      "    if False:\n        return None", [T + "test_scene_defaults.py"]),
@@ -458,14 +458,14 @@ def run(mutants, timeout):
 
 def main():
     parser = argparse.ArgumentParser()
-    parser.add_argument("--only", default=None, help="run the mutants whose name contains this")
+    parser.add_argument("--only", default=None, help="run the mutants whose name contains this (several: A|B)")
     parser.add_argument("--check", action="store_true", help="only check that every snippet is found once")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant")
     parser.add_argument("--no-write", action="store_true", help="do not rewrite RESULTS.md")
     parser.add_argument("--merge", action="store_true",
                         help="with --only: replace those mutants' rows in the record and rewrite RESULTS.md")
     args = parser.parse_args()
-    mutants = [m for m in MUTANTS if args.only is None or args.only in m[0]]
+    mutants = [m for m in MUTANTS if args.only is None or any(o in m[0] for o in args.only.split("|"))]
     problems = _check(mutants)
     if problems or args.check:
         print("\n".join(problems) or f"{len(mutants)} mutants, every snippet found once")

@@ -76,7 +76,7 @@ def transient_error_table():
         return t_ss + (eigvec @ (np.exp(-eigval * t) * coefficient)) / c_half
 
     reference = exact(t_end)
-    limit = float(thermal.stable_time_step(jnp.asarray(capacity), table))
+    limit = float(thermal.table_time_step(jnp.asarray(capacity), table))
     rows = []
     for method, factors in (("explicit", (0.1, 0.3, 0.9)), ("implicit", (1.0, 10.0, 100.0))):
         for factor in factors:
@@ -110,7 +110,7 @@ def main():
     start = jnp.where(fixed, held, 300.0)
     reference = steady.steady_state(table, fixed, held, tol=1e-15)
     target = 1e-6 * 700.0
-    limit = float(thermal.stable_time_step(capacity, table))
+    limit = float(thermal.table_time_step(capacity, table))
 
     rows = []
     solve = jax.jit(lambda: steady.steady_state(table, fixed, held, tol=1e-10))

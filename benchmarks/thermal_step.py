@@ -101,7 +101,7 @@ def main():
             table = network.contact_table(c, r, 7.0)
             build = time.perf_counter() - t0
             capacity = jnp.asarray(4 / 3 * np.pi * r**3 * 4430 * 560)
-            dt = float(thermal.stable_time_step(capacity, table))
+            dt = float(thermal.table_time_step(capacity, table))
             temperature = jnp.asarray(np.random.default_rng(2).uniform(300, 1000, len(r)))
             run = jax.jit(lambda t: simulate_table(t, table, capacity, dt, n_steps=STEPS, save_every=STEPS)[0])
             old = jax.jit(lambda t: previous_step_loop(t, table.neighbors, table.conductance, capacity, dt))

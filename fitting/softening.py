@@ -542,9 +542,9 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
                                  mu=f64(mu), mu_r=f64(0.0), mu_wall=f64(0.0), mu_r_wall=f64(0.0),
                                  theta_star=f64(theta_star), rate=f64(rate), E_min=f64(0.0)))
     settle = physics(initial_temperature)
-    limit = float(mechanics.stable_time_step(settle.mechanics, particles, contacts.neighbors, params.mechanics, 0.05))
+    limit = float(mechanics.mechanical_time_step(settle.mechanics, particles, contacts.neighbors, params.mechanics, 0.05))
     dt = 0.8 * limit if dt is None else float(dt)
-    mechanics.check_time_step(dt, settle.mechanics, particles, contacts.neighbors, params.mechanics, 0.05)
+    mechanics.check_mechanical_time_step(dt, settle.mechanics, particles, contacts.neighbors, params.mechanics, 0.05)
     state = simulate.init_state(particles, contacts, dt,
                                 mechanics=mechanics.mechanical_state(settle.mechanics, x, contacts))
     chunk = 500

@@ -3,7 +3,7 @@
 :func:`example_5_1` returns ``(sim, state, params, n_steps)``: the simulator,
 its initial state, the differentiable parameters and the number of steps of
 the paper's run, after refusing a step above the mechanical limit
-(:func:`sintercond.mechanics.check_time_step`). :func:`example_5_3` runs the
+(:func:`sintercond.mechanics.check_mechanical_time_step`). :func:`example_5_3` runs the
 whole example (pour, settle, heat, ``k*`` with and without softening) and
 returns its figures.
 """
@@ -68,7 +68,7 @@ def example_5_1(softening=True, dt=2e-5, t_end=40.0, law="conductivity", neck_mo
         mechanics=mechanics.MechanicalParams(E0=f64(d["E0"]), nu=f64(d["nu"]), xi_con=f64(d["xi_con"]),
                                              xi_fric=f64(1.0), xi_rol=f64(0.0), mu=f64(0.0), mu_r=f64(0.0),
                                              theta_star=f64(d["theta_star"]), rate=f64(1.0), E_min=f64(0.0)))
-    mechanics.check_time_step(dt, physics.mechanics, particles, contacts.neighbors, params.mechanics, impact_velocity)
+    mechanics.check_mechanical_time_step(dt, physics.mechanics, particles, contacts.neighbors, params.mechanics, impact_velocity)
     state = simulate.init_state(particles, contacts, dt,
                                 mechanics=mechanics.mechanical_state(physics.mechanics, positions, contacts))
     return simulate.simulator(physics, fns), state, params, int(round(t_end / dt))
@@ -192,7 +192,7 @@ def heat_run(centres, radii, lateral_size, height, duration=EXAMPLE_5_3["duratio
     particles = particle_state(centres, radii, d["initial_temperature"], d["density"])
     params = simulate.Params(conductivity=jnp.asarray([d["conductivity"]]), specific_heat=jnp.asarray([d["specific_heat"]]))
     sim = simulate.simulator(physics)
-    limit = float(simulate.stable_time_step(sim, simulate.init_state(particles, contacts, 1.0), params))
+    limit = float(simulate.thermal_time_step(sim, simulate.init_state(particles, contacts, 1.0), params))
     n_steps = max(1, int(math.ceil(duration / (0.9 * limit))))
     state = simulate.init_state(particles, contacts, duration / n_steps)
     wall_k = sim.prepare_fn(state, params).wall_conductance  # [2, n] (W/K)

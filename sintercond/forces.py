@@ -42,6 +42,7 @@ import math
 
 import jax.numpy as jnp
 
+from sintercond._deprecation import old_names
 from sintercond._numerics import as_float_arrays, materialized, safe_divide, safe_norm, safe_power, safe_sqrt
 from sintercond._validation import all_concrete, concrete_arrays, require_positive
 
@@ -547,7 +548,7 @@ def hertz_collision_duration(r_star, m_star, e_star, v_rel):
 def hertz_collision_time_step(r_star, m_star, e_star, v_rel, fraction=0.1):
     """The paper's step, ``dt = dt_con / 10`` (Eq. 47): accuracy of the normal collision only.
 
-    See :func:`stable_time_step` for the bound that also covers the
+    See :func:`contact_time_step` for the bound that also covers the
     tangential and rolling modes (erratum 8).
     """
     return fraction * hertz_collision_duration(r_star, m_star, e_star, v_rel)
@@ -592,7 +593,7 @@ def _mode_time_step(omega_squared, damping_ratio):
     return jnp.where(omega > 0, safe_divide(symplectic_euler_stability_limit(damping_ratio), omega), jnp.inf)
 
 
-def stable_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_con=1.0, xi_fric=1.0,
+def contact_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_con=1.0, xi_fric=1.0,
                      xi_rol=0.0, fraction=0.1, safety=0.5):
     """Time step of one contact: Eq. 47 and the symplectic-Euler bounds of its three modes.
 
@@ -644,10 +645,10 @@ def stable_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_co
     sized_by_load = delta is not None
     if all_concrete(v_rel, delta):
         # a step sized for no collision is inf, for a negative speed a plausible-looking number: refuse both
-        (speed,) = concrete_arrays("stable_time_step", v_rel)
+        (speed,) = concrete_arrays("contact_time_step", v_rel)
         require_positive("v_rel (m/s, the largest normal approach speed)", speed, allow_zero=sized_by_load)
         if sized_by_load:
-            (load_overlap,) = concrete_arrays("stable_time_step", delta)
+            (load_overlap,) = concrete_arrays("contact_time_step", delta)
             require_positive("delta (m, the largest overlap)", load_overlap)
     r_star, m_star, e_star, g_star, v_rel, xi_con, xi_fric, xi_rol = as_float_arrays(
         r_star, m_star, e_star, g_star, v_rel, xi_con, xi_fric, xi_rol)
@@ -666,3 +667,9 @@ def stable_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_co
                     _mode_time_step(omega_r_squared, xi_rol * sqrt_mobility)))
     dt = jnp.minimum(hertz_collision_time_step(r_star, m_star, e_star, v_rel, fraction), safety * stability)
     return jnp.where(sized, dt, jnp.nan)
+
+
+# Old names, kept for one release: each time-step function has its own name (issue 24).
+__getattr__ = old_names("sintercond.forces", {
+    "stable_time_step": ("sintercond.forces", "contact_time_step"),
+})

@@ -1,6 +1,6 @@
 """Run-time guards of the coupled step: the host refuses a state the explicit step was not sized for.
 
-The automatic mechanical step (:func:`sintercond.mechanics.stable_time_step`)
+The automatic mechanical step (:func:`sintercond.mechanics.mechanical_time_step`)
 is sized for a largest normal approach speed ``v_rel``: Eq. 47's collision
 duration and the symplectic-Euler bounds at the overlap of a collision at
 that speed (Quintana-Ruiz & Campello 2020; MECHANICS.md erratum 8). A run

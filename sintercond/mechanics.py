@@ -53,6 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond import forces
+from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
 from sintercond.materials import softened_modulus
 from sintercond.pair_list import HalfPairs, pair_exchange, pair_sum, remap_half_pairs
@@ -571,8 +572,8 @@ def integrate(positions, state: MechanicalState, force, torque, mass, radii, dt)
 
 
 @functools.partial(jax.jit, static_argnums=0, static_argnames=("fraction", "safety"))
-def stable_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
-    """Time step of the packing: :func:`sintercond.forces.stable_time_step` for its stiffest contact (s).
+def mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
+    """Time step of the packing: :func:`sintercond.forces.contact_time_step` for its stiffest contact (s).
 
     Evaluated for every pair of the neighbour table (touching or not) and
     every particle against every wall, at the unsoftened modulus ``E0``
@@ -580,7 +581,7 @@ def stable_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel
     for the static overlap under a load if that exceeds the collision's),
     approach speed ``v_rel`` (m/s), and the damping ratios of ``params``.
     The tangential and rolling modes count only when friction or rolling is
-    on. ``kwargs`` go to :func:`sintercond.forces.stable_time_step`
+    on. ``kwargs`` go to :func:`sintercond.forces.contact_time_step`
     (``fraction``, ``safety``). Compiled once per :class:`Mechanics` spec and shapes
     (eagerly it dispatches ~100 operations: seconds at set-up).
     """
@@ -601,7 +602,7 @@ def stable_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel
         candidates.append((radii, mass, modulus, nu, wall, wall, wall, nu, jnp.ones((n,), bool)))
     for ri, mi, ei, nui, rj, mj, ej, nuj, real in candidates:
         g_star = forces.effective_shear_modulus(ei, nui, ej, nuj, spec.shear) if shear else 0.0 * ei
-        dt = forces.stable_time_step(forces.effective_radius(ri, rj), forces.effective_mass(mi, mj),
+        dt = forces.contact_time_step(forces.effective_radius(ri, rj), forces.effective_mass(mi, mj),
                                      forces.effective_modulus(ei, nui, ej, nuj), g_star, v_rel, delta=delta,
                                      xi_con=params.xi_con, xi_fric=params.xi_fric if spec.friction else 0.0,
                                      xi_rol=params.xi_rol if spec.rolling else 0.0, **kwargs)
@@ -609,9 +610,9 @@ def stable_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel
     return jnp.min(jnp.stack(steps))
 
 
-def check_time_step(dt, spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs) -> float:
-    """Raise ``ValueError`` naming the limit if ``dt`` exceeds :func:`stable_time_step`; returns the limit (s)."""
-    limit = float(stable_time_step(spec, particles, neighbors, params, v_rel, delta, **kwargs))
+def check_mechanical_time_step(dt, spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs) -> float:
+    """Raise ``ValueError`` naming the limit if ``dt`` exceeds :func:`mechanical_time_step`; returns the limit (s)."""
+    limit = float(mechanical_time_step(spec, particles, neighbors, params, v_rel, delta, **kwargs))
     if math.isnan(limit):
         raise ValueError(f"the mechanical time step is undefined for v_rel = {float(v_rel)!r} m/s (the largest "
                          f"normal approach speed must be finite and > 0) and delta = {delta!r}")
@@ -623,3 +624,9 @@ def check_time_step(dt, spec, particles, neighbors, params: MechanicalParams, v_
                          f"use dt <= {limit:.6g} s")
     return limit
 
+
+# Old names, kept for one release: each time-step function has its own name (issue 24).
+__getattr__ = old_names("sintercond.mechanics", {
+    "stable_time_step": ("sintercond.mechanics", "mechanical_time_step"),
+    "check_time_step": ("sintercond.mechanics", "check_mechanical_time_step"),
+})

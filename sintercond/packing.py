@@ -22,7 +22,7 @@ thermo-mechanical DEM of :mod:`sintercond.mechanics` instead: Hertz contacts
 with damping, Mindlin friction with history, rolling resistance, gravity and
 the plane walls of the box (:func:`box_walls`), stepped by
 :mod:`sintercond.simulate` at the automatic time step of
-:func:`sintercond.mechanics.stable_time_step`, until the kinetic energy and
+:func:`sintercond.mechanics.mechanical_time_step`, until the kinetic energy and
 the largest net force over a sphere's weight are below stated thresholds
 (:data:`KINETIC_TOL`, :data:`FORCE_TOL`), reported in a :class:`SettleReport`
 (``packing.settle``). The contact material is a :class:`DemMaterial`
@@ -403,7 +403,7 @@ class SettleReport:
         (contacts, walls, gravity) taken from one probe step as ``m_i dv_i / dt``
         (exact for symplectic Euler); ``force_tol`` the threshold it met.
       max_overlap: largest sphere-sphere or sphere-wall overlap over the radius.
-      step_overlap: overlap (m) the time step was sized for (:func:`sintercond.mechanics.stable_time_step`).
+      step_overlap: overlap (m) the time step was sized for (:func:`sintercond.mechanics.mechanical_time_step`).
       v_rel: approach speed (m/s) the time step was sized for.
       reallocations: neighbour-list reallocations; wall_seconds: run time (s).
     """
@@ -510,7 +510,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     ``temperature`` (K, scalar or ``[n]``): no heat moves; with
     ``softening`` the moduli follow Eq. 42 at those temperatures.
 
-    The time step is automatic: :func:`sintercond.mechanics.stable_time_step`
+    The time step is automatic: :func:`sintercond.mechanics.mechanical_time_step`
     (Eq. 47 and the tangential and rolling bounds, erratum 8) at the approach
     speed ``v_rel`` (default: free fall from the highest sphere to the floor,
     at least over one mean diameter) and at the larger of that collision's
@@ -571,7 +571,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         collision = float(hertz_collision_overlap(r_max, effective_mass(m_max, jnp.inf), material.E / (1 - material.nu**2),
                                                   v_rel))
         step_overlap = max(static, collision)
-        step_fn = mechanics.stable_time_step
+        step_fn = mechanics.mechanical_time_step
         dt = float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, step_overlap))
         dt = min(dt, float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, None)))
         params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)

@@ -196,7 +196,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` where ``G_i`` linearises
     convection and radiation (:func:`sintercond.thermal.source_conductance`);
     with mechanics, of the smaller of that (at the initial contacts) and the
-    mechanical step (:func:`sintercond.mechanics.stable_time_step`: Eq. 47
+    mechanical step (:func:`sintercond.mechanics.mechanical_time_step`: Eq. 47
     and the tangential and rotational bounds of MECHANICS.md erratum 8, at
     the approach speed ``physics.impact_velocity`` plus the fastest wall's
     normal speed, at the unsoftened modulus: ``E_min <= E0``, so no state
@@ -239,7 +239,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     state = simulate.init_state(particles, contacts, 1.0)
     run = scene["run"]
     sources = thermal.source_conductance(physics.sources, particles.radii, params, _highest_temperature(scene))
-    thermal_limit = float(simulate.stable_time_step(sim, state, params, sources))
+    thermal_limit = float(simulate.thermal_time_step(sim, state, params, sources))
     bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
                                          f"{thermal_limit:.6g} s (G_i: linearised convection and radiation)")}
     reallocate = None
@@ -255,7 +255,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         impact = scene["physics"]["impact_velocity"]
         wall_speed, fastest = _fastest_wall(scene)
         v_rel = impact + wall_speed
-        mechanical_limit = float(mechanics.stable_time_step(physics.mechanics, particles, contacts.neighbors,
+        mechanical_limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors,
                                                             params.mechanics, v_rel))
         speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
             f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")

@@ -805,11 +805,11 @@ def beam_step(beam) -> float | None:
 
 
 def _mechanical_step_estimate(scene, r, wall_speed=0.0):
-    """:func:`sintercond.forces.stable_time_step` of two of the smallest spheres meeting at
+    """:func:`sintercond.forces.contact_time_step` of two of the smallest spheres meeting at
     ``physics.impact_velocity`` plus ``wall_speed`` (s): Eq. 47 and the symplectic-Euler bounds (erratum 8).
 
     The estimate :func:`estimate_run` counts steps with; the run's own step
-    (:func:`sintercond.mechanics.stable_time_step`) takes every listed pair
+    (:func:`sintercond.mechanics.mechanical_time_step`) takes every listed pair
     and wall (a wall contact is stiffer: about 0.8 of this).
     """
     m, physics = scene["mechanics"], scene["physics"]
@@ -833,7 +833,7 @@ def _contact_step(shear):
 
     def step(r, mass, e, nu, v, xi_con, xi_fric, xi_rol):
         g_star = forces.effective_shear_modulus(e, nu, e, nu, shear)
-        return forces.stable_time_step(r / 2, mass / 2, forces.effective_modulus(e, nu, e, nu), g_star, v,
+        return forces.contact_time_step(r / 2, mass / 2, forces.effective_modulus(e, nu, e, nu), g_star, v,
                                        xi_con=xi_con, xi_fric=xi_fric, xi_rol=xi_rol)
 
     return jax.jit(step)
@@ -887,7 +887,7 @@ def scene_reference() -> str:
           "heat through the contact they make, `held` walls hold the particles touching them at the start at "
           "their temperature (those particles still move), `insulated` walls only push. The time step "
           '`run.dt = "auto"` is 0.9 x the smallest of the thermal limit, the mechanical one '
-          "(`sintercond.mechanics.stable_time_step`: Eq. 47 and the tangential and rotational bounds of "
+          "(`sintercond.mechanics.mechanical_time_step`: Eq. 47 and the tangential and rotational bounds of "
           "MECHANICS.md erratum 8 at the unsoftened modulus and the approach speed `impact_velocity` plus the "
           "fastest wall's normal speed), the step in which a moving wall advances a tenth of the smallest radius, "
           "and the step in which a beam's spot advances a fifth of its radius; a larger `run.dt` is refused, "

@@ -81,6 +81,7 @@ from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow, did_rebuild
 from sintercond.pair_list import (allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs, half_pairs_overflowed,
                                   map_pair_blocks, padded_half_pairs, pair_exchange, pair_sum)
+from sintercond._deprecation import old_names
 from sintercond._validation import all_concrete, fail_where, require_positive
 from sintercond.network import ContactTable, network_laplacian
 from sintercond.state import (Contacts, DynamicContacts, LiftedContacts, ParticleState, TableContacts,  # noqa: F401
@@ -661,7 +662,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
     return Simulator(physics, step_fn, prepare_fn, advance_fn, heat_power_fn)
 
 
-def stable_time_step(sim: Simulator, state: SimState, params: Params, source_conductance=None):
+def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_conductance=None):
     """Largest explicit-Euler step with the maximum principle, ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` (s).
 
     Static contacts at the state's geometry; ``source_conductance`` ``G_i``
@@ -672,7 +673,7 @@ def stable_time_step(sim: Simulator, state: SimState, params: Params, source_con
     """
     prep = sim.prepare_fn(state, params)
     if prep.conductance is None:
-        raise ValueError("stable_time_step needs static contacts")
+        raise ValueError("thermal_time_step needs static contacts")
     total = prep.scale * jnp.sum(prep.conductance, axis=1)
     if prep.wall_conductance is not None:
         total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
@@ -1102,7 +1103,7 @@ def simulate_table(temperature, table: ContactTable, capacity, dt, n_steps, save
 
     A convenience over :func:`rollout` for a network
     already built at its conductivity: ``method`` ``"explicit"`` (check
-    ``dt <= thermal.stable_time_step`` first) or ``"implicit"`` (backward Euler, any
+    ``dt <= thermal.table_time_step`` first) or ``"implicit"`` (backward Euler, any
     ``dt``; conduction only). ``source(temperature, t)``: heat powers (W), a
     hashable callable (explicit only), called with the time
     ``(start_step + k) dt`` of step ``k``. ``probes``: indices of the
@@ -1146,3 +1147,9 @@ def _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed
     sim = simulator(physics)
     final, saved = rollout(sim, state, params, n_steps, saveat)
     return final.particles.temperature, saved
+
+
+# Old names, kept for one release: each time-step function has its own name (issue 24).
+__getattr__ = old_names("sintercond.simulate", {
+    "stable_time_step": ("sintercond.simulate", "thermal_time_step"),
+})

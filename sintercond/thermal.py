@@ -6,7 +6,7 @@ particles may be held at fixed temperatures. For a static packing the
 conductances are computed once (:mod:`sintercond.network`) and each step is
 one gather-and-sum over the padded contact table.
 
-* :func:`stable_time_step`: ``min_i C_i / sum_j K_ij``. At or below it
+* :func:`table_time_step`: ``min_i C_i / sum_j K_ij``. At or below it
   explicit Euler is stable and every new temperature is a convex combination
   of old ones (discrete maximum principle).
 * :func:`explicit_euler_step` / :func:`backward_euler_step`: one step; the
@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import importlib
-import warnings
 
 import jax
 import jax.numpy as jnp
@@ -31,13 +29,14 @@ import numpy as np
 from jax.scipy.sparse.linalg import cg
 
 from sintercond import heat_sources
+from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
 from sintercond._symmetric import linear_call
 from sintercond.network import (ContactTable, gather_laplacian, heat_inflow, laplacian, network_laplacian,
                                 total_conductance, wall_inflow)
 
 
-def stable_time_step(capacity, table: ContactTable):
+def table_time_step(capacity, table: ContactTable):
     """Largest explicit-Euler step with the maximum principle: ``min_i C_i / sum_j K_ij`` (s).
 
     Args:
@@ -54,13 +53,13 @@ def explicit_stability_limit(capacity, total):
     return jnp.min(jnp.where(total > 0, capacity / jnp.where(total > 0, total, 1.0), jnp.inf))
 
 
-def check_time_step(dt, capacity, table: ContactTable) -> float:
-    """Raise ``ValueError`` if an explicit step ``dt`` exceeds :func:`stable_time_step`; returns the limit.
+def check_table_time_step(dt, capacity, table: ContactTable) -> float:
+    """Raise ``ValueError`` if an explicit step ``dt`` exceeds :func:`table_time_step`; returns the limit.
 
     For concrete input at the API boundary (scene loading), before anything
     is compiled.
     """
-    limit = float(stable_time_step(capacity, table))
+    limit = float(table_time_step(capacity, table))
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be finite and > 0 s; got {dt!r}")
     if dt > limit:
@@ -368,20 +367,14 @@ def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_ma
                                 capacity, dt, fixed_mask, fixed_temperature, tol)
 
 
-# Old homes of functions that moved up a layer (they drive the simulator, which imports this module). Kept for one
-# release; resolved by name so that this module imports nothing above it (tests/test_layers.py).
-_MOVED = {
+# Old names, kept for one release: functions that moved up a layer (they drive the simulator, which imports this
+# module; resolved by name so that this module imports nothing above it, tests/test_layers.py) and the table's time
+# step, renamed so that each time-step function has its own name (issue 24).
+__getattr__ = old_names("sintercond.thermal", {
     "simulate": ("sintercond.simulate", "simulate_table"),
     "steady_state": ("sintercond.steady", "steady_state"),
     "steady_state_conductivity": ("sintercond.steady", "steady_state_conductivity"),
     "steady_state_network_conductivity": ("sintercond.steady", "steady_state_network_conductivity"),
-}
-
-
-def __getattr__(name):
-    if name in _MOVED:
-        module, new = _MOVED[name]
-        warnings.warn(f"sintercond.thermal.{name} moved to {module}.{new}; the old name goes in the next release",
-                      DeprecationWarning, stacklevel=2)
-        return getattr(importlib.import_module(module), new)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    "stable_time_step": ("sintercond.thermal", "table_time_step"),
+    "check_time_step": ("sintercond.thermal", "check_table_time_step"),
+})

@@ -263,7 +263,7 @@ def test_gradient_across_contact_onset_and_stick_slip():
     params = simulate.Params(conductivity=jnp.asarray([60.0]), specific_heat=jnp.asarray([1.0]),
                              mechanics=mechanics.MechanicalParams(E0=f(1e6), nu=f(0.3), mu=f(0.3), theta_star=f(400.0),
                                                                   rate=f(1.0), E_min=f(0.0)))
-    mechanics.check_time_step(1e-5, physics.mechanics, particles, contacts.neighbors, params.mechanics, 0.05)
+    mechanics.check_mechanical_time_step(1e-5, physics.mechanics, particles, contacts.neighbors, params.mechanics, 0.05)
     state = simulate.init_state(particles, contacts, 1e-5,
                                 mechanics=mechanics.mechanical_state(physics.mechanics, x, contacts))
     down = jnp.asarray([-math.cos(a), 0.0, -math.sin(a)])

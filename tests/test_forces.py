@@ -367,8 +367,8 @@ LAWS = {
     "hertz_collision_duration": (forces.hertz_collision_duration, (R_STAR, M_STAR, E_STAR, 0.5)),
     "hertz_collision_overlap": (forces.hertz_collision_overlap, (R_STAR, M_STAR, E_STAR, 0.5)),
     "stability_limit": (forces.symplectic_euler_stability_limit, (1.3,)),
-    "stable_time_step": (lambda r, m, e, g, v: forces.stable_time_step(r, m, e, g, v, xi_rol=2.0),
-                         (R_STAR, M_STAR, E_STAR, G_STAR, 0.5)),
+    "contact_time_step": (lambda r, m, e, g, v: forces.contact_time_step(r, m, e, g, v, xi_rol=2.0),
+                          (R_STAR, M_STAR, E_STAR, G_STAR, 0.5)),
 }
 
 
@@ -443,9 +443,9 @@ def test_eq_47_collision_time_step():
 def test_tangential_mode_binds_for_the_papers_materials():
     v = 0.3
     eq_47 = float(forces.hertz_collision_time_step(R_STAR, M_STAR, E_STAR, v))
-    auto = float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v))
+    auto = float(forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v))
     assert auto < 0.6 * eq_47  # erratum 8: Eq. 47 alone is too long for the stick mode
-    no_friction = float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, 0.0, v))
+    no_friction = float(forces.contact_time_step(R_STAR, M_STAR, E_STAR, 0.0, v))
     assert no_friction == pytest.approx(eq_47, rel=1e-14)
 
 
@@ -477,7 +477,7 @@ def test_automatic_step_is_stable_and_three_times_it_is_not():
     v = 0.3  # the collision that brought them together
     delta = float(forces.hertz_collision_overlap(R_STAR, M_STAR, E_STAR, v))
     f_n = 4 / 3 * math.sqrt(R_STAR) * E_STAR * delta**1.5
-    auto = float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v))
+    auto = float(forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v))
     period = 2 * math.pi / math.sqrt(3.5 * _k_t(delta) / M_STAR)
     n_steps = int(20 * period / auto)
     assert _stick_oscillation(auto, n_steps, delta, f_n) < 1e-3  # damped out
@@ -490,7 +490,7 @@ def test_automatic_step_is_stable_and_three_times_it_is_not():
 def test_head_on_collision_at_the_automatic_step():
     # symplectic Euler (the simulator's scheme) on a head-on collision, against the converged RK4 value
     v0, xi = 0.3, 0.3
-    auto = float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v0, xi_con=xi))
+    auto = float(forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v0, xi_con=xi))
     reference = float(_collision_restitution(jnp.asarray(xi), v0, 16000, R_STAR, M_STAR, E_STAR))
 
     def restitution(dt):
@@ -560,10 +560,10 @@ def test_float32_within_tolerance():
             continue
         scale = np.max(np.abs(np.asarray(a)))
         np.testing.assert_allclose(np.asarray(b, dtype=np.float64), a, rtol=0, atol=2e-5 * scale)
-    dt32 = forces.stable_time_step(np.float32(R_STAR), np.float32(M_STAR), np.float32(E_STAR), np.float32(G_STAR),
+    dt32 = forces.contact_time_step(np.float32(R_STAR), np.float32(M_STAR), np.float32(E_STAR), np.float32(G_STAR),
                                    np.float32(0.3))
     assert dt32.dtype == jnp.float32
-    assert float(dt32) == pytest.approx(float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.3)), rel=1e-5)
+    assert float(dt32) == pytest.approx(float(forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.3)), rel=1e-5)
 
 
 def test_stable_time_step_refuses_an_approach_speed_that_sizes_nothing():
@@ -573,13 +573,13 @@ def test_stable_time_step_refuses_an_approach_speed_that_sizes_nothing():
 
     for bad in (0.0, -1.0, np.nan, np.inf):
         with pytest.raises(ValueError, match=r"v_rel \(m/s"):
-            forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, bad)
+            forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, bad)
     with pytest.raises(ValueError, match=r"delta \(m"):
-        forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.0, delta=0.0)
-    traced = jax.jit(lambda v: forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v))
+        forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.0, delta=0.0)
+    traced = jax.jit(lambda v: forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, v))
     assert np.isnan(float(traced(-1.0))) and np.isnan(float(traced(0.0)))
-    assert float(traced(0.3)) == pytest.approx(float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.3)),
+    assert float(traced(0.3)) == pytest.approx(float(forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.3)),
                                                rel=1e-14)
     # a static load: v_rel = 0 sizes the step from delta alone, the same as a slow approach to that overlap
-    static = float(forces.stable_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.0, delta=DELTA))
+    static = float(forces.contact_time_step(R_STAR, M_STAR, E_STAR, G_STAR, 0.0, delta=DELTA))
     assert np.isfinite(static) and static > 0

@@ -76,7 +76,7 @@ def test_adjoint_with_held_particles_and_walls(heated):
     ex = inverse.ProbeExperiment(table=table, mass=jnp.asarray(mass), initial=jnp.full(len(radii), 300.0),
                                  power=jnp.where(jnp.asarray(on_edge if heated == "edge" else on_face), 1e-3, 0.0),
                                  pulse_duration=0.02,
-                                 dt=0.4 * float(thermal.stable_time_step(mass * C_TRUE, table)) / KAPPA_TRUE,
+                                 dt=0.4 * float(thermal.table_time_step(mass * C_TRUE, table)) / KAPPA_TRUE,
                                  n_steps=150, save_every=3, probes=jnp.asarray([5, 40, 63]), fixed_mask=held,
                                  fixed_temperature=jnp.full(len(radii), 320.0))
     np.testing.assert_allclose(ex.temperatures(KAPPA_TRUE, C_TRUE), ex.temperatures(KAPPA_TRUE, C_TRUE, "autodiff"),

@@ -16,7 +16,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 # lowest first; a module may import its own layer and those below it
 LAYERS = {
-    "private": ["_numerics", "_validation", "_symmetric", "_cache"],
+    "private": ["_numerics", "_validation", "_symmetric", "_cache", "_deprecation"],
     "state": ["state"],
     "laws": ["neck", "conductance", "forces", "materials", "heat_sources", "walls", "sintering", "effective",
              "dryden_zok", "tortuosity", "geometry"],
@@ -99,7 +99,9 @@ def test_import_sintercond_as_sc_gives_every_submodule():
                                       ("steady_state", "sintercond.steady:steady_state"),
                                       ("steady_state_conductivity", "sintercond.steady:steady_state_conductivity"),
                                       ("steady_state_network_conductivity",
-                                       "sintercond.steady:steady_state_network_conductivity")])
+                                       "sintercond.steady:steady_state_network_conductivity"),
+                                      ("stable_time_step", "sintercond.thermal:table_time_step"),
+                                      ("check_time_step", "sintercond.thermal:check_table_time_step")])
 def test_moved_thermal_names_still_resolve_with_a_deprecation_warning(old, new):
     from sintercond import thermal
 
@@ -110,3 +112,19 @@ def test_moved_thermal_names_still_resolve_with_a_deprecation_warning(old, new):
         warnings.simplefilter("error")
         with pytest.raises(AttributeError):
             thermal.no_such_function  # noqa: B018
+
+
+@pytest.mark.parametrize("module, old, new", [("forces", "stable_time_step", "contact_time_step"),
+                                              ("mechanics", "stable_time_step", "mechanical_time_step"),
+                                              ("mechanics", "check_time_step", "check_mechanical_time_step"),
+                                              ("simulate", "stable_time_step", "thermal_time_step")])
+def test_renamed_time_steps_still_resolve_with_a_deprecation_warning(module, old, new):
+    """Four functions were called stable_time_step (one contact's, the packing's mechanical, a simulator's and a
+    table's thermal step): each has its own name now, the old one kept for one release."""
+    mod = importlib.import_module(f"sintercond.{module}")
+    with pytest.warns(DeprecationWarning, match=f"sintercond.{module}.{old} moved to sintercond.{module}.{new}"):
+        assert getattr(mod, old) is getattr(mod, new)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(AttributeError, match="has no attribute 'no_such_function'"):
+            mod.no_such_function  # noqa: B018

@@ -72,7 +72,7 @@ def test_static_motion_equals_the_static_solver():
     radii = np.full(len(centres), r)
     table = network.contact_table(centres, radii, 7.0)
     capacity = jnp.full(len(radii), 1e-3)
-    dt = 0.5 * float(thermal.stable_time_step(capacity, table))
+    dt = 0.5 * float(thermal.table_time_step(capacity, table))
     t0 = jnp.asarray(np.linspace(300, 1000, len(radii)))
     static, _ = simulate_table(t0, table, capacity, dt, n_steps=200, save_every=200)
     still, _ = _moving_run(t0, simulate.affine_shrinkage(centres, 0.0), radii, capacity, dt, 200, 50, 1.25, 0.0)

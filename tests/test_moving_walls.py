@@ -89,7 +89,7 @@ def test_the_automatic_step_covers_a_moving_wall():
     assert model.sized_speed == pytest.approx(0.05 + speed, rel=1e-15)
     alone = runner.build_model(_resting(packing=two))
     particles, neighbors = alone.state.particles, alone.state.contacts.neighbors
-    expected = float(mechanics.stable_time_step(model.physics.mechanics, particles, neighbors,
+    expected = float(mechanics.mechanical_time_step(model.physics.mechanics, particles, neighbors,
                                                 model.params.mechanics, 0.05 + speed))
     assert model.limits["mechanical"] == pytest.approx(expected, rel=1e-12)
     assert model.limits["mechanical"] < alone.limits["mechanical"]

@@ -34,7 +34,7 @@ def chain(request):
     sim = simulate.simulator(simulate.Physics.create(law="rojek"))
     params = simulate.Params(conductivity=jnp.asarray([12.6]), specific_heat=jnp.asarray([560.0]))
     state = simulate.init_state(particles, simulate.table_contacts(table), 1.0)
-    dt = 0.5 * float(simulate.stable_time_step(sim, state, params))
+    dt = 0.5 * float(simulate.thermal_time_step(sim, state, params))
     return sim, simulate.init_state(particles, simulate.table_contacts(table), dt), params
 
 

@@ -22,7 +22,7 @@ def _conduction(n_side=4):
                               jnp.zeros(n, bool), t0)
     params = simulate.Params(conductivity=jnp.array([7.0]), specific_heat=jnp.array([1.0]))
     probe = simulate.init_state(particles, contacts, 1.0)
-    dt = 0.5 * float(simulate.stable_time_step(sim, probe, params))
+    dt = 0.5 * float(simulate.thermal_time_step(sim, probe, params))
     return sim, simulate.init_state(particles, contacts, dt), params
 
 

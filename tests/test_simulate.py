@@ -50,7 +50,7 @@ def _setup(conductance, materials=1, walls=False, physics_extra=None):
                              pulse=simulate.PulseParams(jnp.asarray(power), jnp.asarray(2e-3)))
     state = simulate.init_state(particles, contacts, 1.0)
     sim = simulate.simulator(physics)
-    dt = 0.5 * float(simulate.stable_time_step(sim, state, params))
+    dt = 0.5 * float(simulate.thermal_time_step(sim, state, params))
     return sim, simulate.init_state(particles, contacts, dt), params, centres, radii
 
 

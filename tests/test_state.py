@@ -32,7 +32,7 @@ def test_is_a_pytree_through_jit_and_scan():
     assert len(leaves) == 7 and isinstance(jax.tree.unflatten(treedef, leaves), ParticleState)
     table = network.contact_table(np.asarray(s.positions), np.asarray(s.radii), 20.0)
     capacity = heat_capacity(s, [560.0, 385.0])
-    dt = float(thermal.stable_time_step(capacity, table))
+    dt = float(thermal.table_time_step(capacity, table))
 
     @jax.jit
     def advance(state):

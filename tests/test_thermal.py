@@ -54,7 +54,7 @@ def test_insulated_packing_conserves_heat(bed):
     t = network.contact_table(centres, radii, 20.0)
     capacity = jnp.asarray(4 / 3 * np.pi * radii**3 * 4430 * 560)  # Ti6Al4V rho c (J/K)
     temperature = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
-    dt = float(thermal.stable_time_step(capacity, t))
+    dt = float(thermal.table_time_step(capacity, t))
     final, saved = simulate_table(temperature, t, capacity, dt, n_steps=400, save_every=100)
     energy = jnp.sum(capacity * saved, axis=1)
     np.testing.assert_allclose(energy, float(jnp.sum(capacity * temperature)), rtol=1e-13)
@@ -97,7 +97,7 @@ def test_chain_converges_to_the_heat_equation():
         mode = jnp.asarray(np.sin(np.pi * x / length))
         held = jnp.asarray((x == 0) | (x == length))
         capacity = 1e-3
-        dt = 0.05 * float(thermal.stable_time_step(capacity, t))
+        dt = 0.05 * float(thermal.table_time_step(capacity, t))
         steps = 2000
         final, _ = simulate_table(mode, t, capacity, dt, n_steps=steps, save_every=steps, fixed_mask=held,
                                     fixed_temperature=0.0)
@@ -118,7 +118,7 @@ def test_explicit_implicit_and_steady_agree():
     field = steady.steady_state(t, fixed, held)
     np.testing.assert_allclose(field, 900 - 600 * centres[:, 0] / centres[:, 0].max(), rtol=1e-11)  # linear
     capacity = 1e-3
-    dt = float(thermal.stable_time_step(capacity, t))
+    dt = float(thermal.table_time_step(capacity, t))
     start = jnp.where(fixed, held, 300.0)
     explicit, _ = simulate_table(start, t, capacity, dt, n_steps=4000, save_every=4000, fixed_mask=fixed,
                                    fixed_temperature=held)
@@ -147,11 +147,11 @@ def test_bad_packing_input():
 def test_unstable_step_is_refused():
     centres, radii = sc_lattice(4)
     t = network.contact_table(centres, radii, 20.0)
-    limit = thermal.check_time_step(1e-6, 1e-3, t)
+    limit = thermal.check_table_time_step(1e-6, 1e-3, t)
     with pytest.raises(ValueError, match=r"dt = .* exceeds the explicit stability limit"):
-        thermal.check_time_step(1.5 * limit, 1e-3, t)
+        thermal.check_table_time_step(1.5 * limit, 1e-3, t)
     with pytest.raises(ValueError, match="dt must be finite and > 0"):
-        thermal.check_time_step(-1.0, 1e-3, t)
+        thermal.check_table_time_step(-1.0, 1e-3, t)
     # and the limit is real: 2.5x above it the explicit step blows up (largest mode |1 - 2.5 * lambda| > 1)
     start = jnp.asarray(np.random.default_rng(0).uniform(300, 1000, len(radii)))
     final, _ = simulate_table(start, t, 1e-3, 2.5 * limit, n_steps=200, save_every=200)
@@ -193,7 +193,7 @@ def test_conducting_walls_in_series():
     np.testing.assert_allclose(field, [1000 - q / k_w[0], 300 + q / k_w[0]], rtol=1e-12)
     # the wall counts in the stable step, and explicit and implicit runs reach the same field
     capacity = 1e-3
-    dt = float(thermal.stable_time_step(capacity, table))
+    dt = float(thermal.table_time_step(capacity, table))
     assert dt == pytest.approx(capacity / (k_w[0] + k_12), rel=1e-12)
     explicit, _ = simulate_table(jnp.full(2, 300.0), table, capacity, dt, n_steps=20000, save_every=20000)
     implicit, _ = simulate_table(jnp.full(2, 300.0), table, capacity, 50 * dt, n_steps=400, save_every=400,
@@ -216,7 +216,7 @@ def test_periodic_packing_contacts_and_conservation():
     np.testing.assert_allclose(np.sort(np.asarray(t.conductance), axis=1)[:, -2:], k, rtol=1e-14)
     capacity = 1e-3
     start = jnp.asarray([1000.0, 300, 300, 300, 300])
-    final, _ = simulate_table(start, t, capacity, float(thermal.stable_time_step(capacity, t)), n_steps=3000,
+    final, _ = simulate_table(start, t, capacity, float(thermal.table_time_step(capacity, t)), n_steps=3000,
                                 save_every=3000)
     np.testing.assert_allclose(final, 440.0, rtol=1e-9)  # a ring equilibrates to the mean
 
