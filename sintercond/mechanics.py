@@ -423,16 +423,60 @@ def particle_modulus(spec, params: MechanicalParams, temperature, material):
 # forces
 
 
-def _contact_laws(spec, params, dt, normal, delta, r_i, r_j, m_i, m_j, E_i, nu_i, E_j, nu_j, v_i, v_j,
-                  omega_i, omega_j, arm_j, spring, rolling, mu, mu_r):
-    """Force on ``i``, torques on ``i`` and ``j`` and the new springs of contacts ``(i, j)`` (Eqs. 2-20).
+@pytree_dataclass
+class Body:
+    """One side of a set of contacts as the contact laws see it (SI units; arrays over the contacts).
+
+    A wall is a body of infinite radius and mass (:mod:`sintercond.walls`) that does not spin.
+
+    Attributes:
+      radius: (m).
+      mass: (kg).
+      modulus: Young's modulus (Pa), softened or not.
+      poisson: Poisson ratio.
+      velocity: ``[..., 3]`` (m/s).
+      spin: ``[..., 3]`` angular velocity (rad/s).
+    """
+
+    radius: Any
+    mass: Any
+    modulus: Any
+    poisson: Any
+    velocity: Any
+    spin: Any
+
+
+@pytree_dataclass
+class Contact:
+    """Contacts ``(i, j)`` as the contact laws see them (SI units; arrays over the contacts).
+
+    Attributes:
+      normal: ``[..., 3]`` unit normal from ``i`` to ``j``.
+      overlap: ``delta = r_i + r_j - d`` (m).
+      i, j: the two :class:`Body` s.
+      arm_j: the lever arm of ``j`` (its radius; 0 for a wall, whose radius is ``inf``) (m).
+    """
+
+    normal: Any
+    overlap: Any
+    i: Body
+    j: Body
+    arm_j: Any
+
+
+def _contact_laws(spec, params, dt, contact: Contact, spring, rolling, mu, mu_r):
+    """Force on ``i``, torques on ``i`` and ``j`` and the new springs of ``contact`` (Eqs. 2-20).
 
     Normal Hertz with damping (Eqs. 2-6; ``spec.damping_clamp``: no
     tension), Mindlin friction with the spring (Eqs. 7-13) when
     ``spec.friction`` and its torques (Eq. 14, erratum 2), rolling
-    resistance (Eqs. 15-20) when ``spec.rolling``. ``arm_j``: the lever
-    arm of ``j`` (its radius; 0 for a wall, whose ``r_j`` is ``inf``).
+    resistance (Eqs. 15-20) when ``spec.rolling``.
     """
+    normal, delta, arm_j = contact.normal, contact.overlap, contact.arm_j
+    r_i, m_i, E_i, nu_i, v_i, omega_i = (contact.i.radius, contact.i.mass, contact.i.modulus, contact.i.poisson,
+                                         contact.i.velocity, contact.i.spin)
+    r_j, m_j, E_j, nu_j, v_j, omega_j = (contact.j.radius, contact.j.mass, contact.j.modulus, contact.j.poisson,
+                                         contact.j.velocity, contact.j.spin)
     r_star = forces.effective_radius(r_i, r_j)
     m_star = forces.effective_mass(m_i, m_j)
     e_star = forces.effective_modulus(E_i, nu_i, E_j, nu_j)
@@ -477,10 +521,13 @@ def pair_loads(spec, params: MechanicalParams, geometry: PairGeometry, radii, ma
     params, dt, radii_f, mass_f, modulus, nu, v, omega, normal, overlap = in_force_dtype(
         spec, dtype, params, dt, radii, mass, modulus, nu, velocity, spin, geometry.normal, geometry.overlap)
     i, j = geometry.i, geometry.j
-    f, t_i, t_j, spring, rolling, _ = _contact_laws(
-        spec, params, dt, normal, overlap, radii_f[i], radii_f[j], mass_f[i],
-        mass_f[j], modulus[i], nu[i], modulus[j], nu[j], v[i], v[j], omega[i], omega[j], radii_f[j], spring,
-        rolling, params.mu, params.mu_r)
+    # gathered in this order (the same program as before the laws took a Contact)
+    r_i, r_j, m_i, m_j, e_i, nu_i, e_j, nu_j = (radii_f[i], radii_f[j], mass_f[i], mass_f[j], modulus[i], nu[i],
+                                                modulus[j], nu[j])
+    v_i, v_j, w_i, w_j = v[i], v[j], omega[i], omega[j]
+    contact = Contact(normal, overlap, Body(r_i, m_i, e_i, nu_i, v_i, w_i), Body(r_j, m_j, e_j, nu_j, v_j, w_j),
+                      arm_j=radii_f[j])
+    f, t_i, t_j, spring, rolling, _ = _contact_laws(spec, params, dt, contact, spring, rolling, params.mu, params.mu_r)
     # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
     return f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype), spring, rolling
 
@@ -522,10 +569,12 @@ def body_loads(spec, params, positions, radii, mass, modulus, nu, state, t, dt, 
         inf = jnp.asarray(jnp.inf, fd)
         mu_w, mu_r_w = wall_coefficients(params)
         # the wall is j: the normal from the particle to the wall is -n_w
+        shape = (len(spec.walls), n, 3)
+        normal, overlap = jnp.broadcast_to(-inward, shape), h.astype(fd)
+        wall = Body(inf, inf, inf, nu, jnp.broadcast_to(wall_v, shape), jnp.zeros_like(omega))
+        contact = Contact(normal, overlap, Body(radii_f, mass_f, modulus, nu, v, omega), wall, jnp.zeros((), fd))
         f_w, t_w, _, wall_spring, wall_rolling, wall_n = _contact_laws(
-            wall_spec(spec), params, dt, jnp.broadcast_to(-inward, (len(spec.walls), n, 3)), h.astype(fd),
-            radii_f, inf, mass_f, inf, modulus, nu, inf, nu, v, jnp.broadcast_to(wall_v, (len(spec.walls), n, 3)),
-            omega, jnp.zeros_like(omega), jnp.zeros((), fd), state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
+            wall_spec(spec), params, dt, contact, state.wall_spring, state.wall_rolling, mu_w, mu_r_w)
         force = force + jnp.sum(f_w.astype(dtype), axis=0)
         torque = torque + jnp.sum(t_w.astype(dtype), axis=0)
         new = dataclasses.replace(new, wall_spring=wall_spring, wall_rolling=wall_rolling)
