@@ -56,7 +56,7 @@ from sintercond import forces
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
 from sintercond.materials import softened_modulus
-from sintercond.pair_list import HalfPairs, pair_exchange, pair_sum, remap_half_pairs
+from sintercond.pair_list import HalfPairs, remap_half_pairs
 from sintercond.state import pytree_dataclass
 
 
@@ -530,27 +530,6 @@ def pair_loads(spec, params: MechanicalParams, geometry: PairGeometry, radii, ma
     f, t_i, t_j, spring, rolling, _ = _contact_laws(spec, params, dt, contact, spring, rolling, params.mu, params.mu_r)
     # summed in the positions' dtype: momentum conserved to its round-off whatever the force dtype
     return f.astype(dtype), t_i.astype(dtype), t_j.astype(dtype), spring, rolling
-
-
-def contact_loads(spec, params: MechanicalParams, geometry: PairGeometry, positions, radii, mass, modulus, nu,
-                  state: MechanicalState, t, dt) -> Loads:
-    """Forces and torques on every particle from its pair and wall contacts and gravity, at time ``t``.
-
-    Args:
-      spec: the :class:`Mechanics` sub-spec (which laws, walls, gravity; static).
-      params: :class:`MechanicalParams`.
-      geometry: :func:`pair_geometry` of the current half pair list.
-      positions, radii, mass: ``[n, 3]``, ``[n]``, ``[n]`` (m, m, kg).
-      modulus, nu: ``[n]`` Young's modulus (Pa, softened or not) and Poisson ratio.
-      state: velocities, spins and springs at ``t`` (springs on ``geometry``'s pairs).
-      t, dt: time and step (s).
-    """
-    n = radii.shape[0]
-    f, t_i, t_j, spring, rolling = pair_loads(spec, params, geometry, radii, mass, modulus, nu, state.velocity,
-                                              state.spin, state.spring, state.rolling, dt, positions.dtype)
-    state = dataclasses.replace(state, spring=spring, rolling=rolling)
-    return body_loads(spec, params, positions, radii, mass, modulus, nu, state, t, dt,
-                      pair_exchange(f, geometry.pairs, n), pair_sum(t_i, t_j, geometry.pairs, n))
 
 
 def body_loads(spec, params, positions, radii, mass, modulus, nu, state, t, dt, force, torque) -> Loads:

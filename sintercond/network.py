@@ -179,19 +179,6 @@ def pair_conductances(law, pairs: ContactPairs, kappa_i, kappa_j, params=None, n
     return np.asarray(compiled(*args, params=params))[:n]
 
 
-def find_contacts(centres, radii, tolerance=1e-9, periodic_box=None):
-    """Contacts of every particle as a padded ``[n, m]`` index table (padding = own index).
-
-    Spheres ``i, j`` are in contact when ``|c_i - c_j| <= (r_i + r_j)(1 + tolerance)``
-    (touching lattices have gaps of a few ulp). With ``periodic_box`` (``[3]``
-    side lengths, m) distances are minimum-image: a periodic packing.
-    Neighbours are listed in ascending order.
-    """
-    pairs = contact_pairs(centres, radii, tolerance, periodic_box)
-    (table,) = ell_table(pairs.n_particles, pairs.i, pairs.j)
-    return table
-
-
 def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=None, tolerance=1e-9,
                   periodic_box=None) -> ContactTable:
     """Build the pipe network of a static packing.

@@ -9,7 +9,7 @@ one gather-and-sum over the padded contact table.
 * :func:`table_time_step`: ``min_i C_i / sum_j K_ij``. At or below it
   explicit Euler is stable and every new temperature is a convex combination
   of old ones (discrete maximum principle).
-* :func:`explicit_euler_step` / :func:`backward_euler_step`: one step; the
+* :func:`explicit_update` / :func:`backward_euler_solve`: one step; the
   implicit step solves ``(C/dt + L) T' = C/dt T`` by conjugate gradients and
   is stable for any ``dt``.
 
@@ -20,7 +20,6 @@ Time stepping a whole table network is :func:`sintercond.simulate.simulate_table
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 
 import jax
@@ -32,8 +31,8 @@ from sintercond import heat_sources
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
 from sintercond._symmetric import linear_call
-from sintercond.network import (ContactTable, gather_laplacian, heat_inflow, laplacian, network_laplacian,
-                                total_conductance, wall_inflow)
+from sintercond.network import (ContactTable, gather_laplacian, network_laplacian,
+                                total_conductance)
 
 
 def table_time_step(capacity, table: ContactTable):
@@ -342,29 +341,6 @@ def source_conductance(sources, radii, params, temperature_bound):
     if sources.radiation:
         g = g + 16.0 * jnp.pi * params.radiation.emissivity * heat_sources.STEFAN_BOLTZMANN * temperature_bound**3 * radii**2
     return g
-
-
-def explicit_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
-                        source=None, time=0.0):
-    """One explicit Euler step on a table, ``T + dt / C * (sum_j K_ij (T_j - T_i) + Q(T, t))``; held particles stay.
-
-    ``source(temperature, time) -> [n]`` adds heat powers in W; None traces
-    nothing. The update is :func:`explicit_update`.
-    """
-    inflow = heat_inflow(temperature, table)
-    if source is not None:
-        inflow = inflow + source(temperature, time)
-    return explicit_update(temperature, inflow, capacity, dt, fixed_mask, fixed_temperature)
-
-
-def backward_euler_step(temperature, table: ContactTable, capacity, dt, fixed_mask=None, fixed_temperature=None,
-                        tol=1e-13):
-    """One backward Euler step on a table (:func:`backward_euler_solve`)."""
-    walls = table.wall_conductance is not None
-    return backward_euler_solve(temperature, lambda x: laplacian(x, dataclasses.replace(table, wall_conductance=None)),
-                                table.wall_conductance if walls else None,
-                                wall_inflow(table, temperature.dtype) if walls else None,
-                                capacity, dt, fixed_mask, fixed_temperature, tol)
 
 
 # Old names, kept for one release: functions that moved up a layer (they drive the simulator, which imports this

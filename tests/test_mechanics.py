@@ -18,6 +18,7 @@ import pytest
 from sintercond import examples, mechanics, simulate
 from sintercond.state import particle_state
 from sintercond.walls import PlaneWall
+from _helpers import contact_loads
 
 R, RHO, E0, NU, G = 1e-3, 3000.0, 1e6, 0.3, 9.81
 MASS = 4.0 / 3.0 * math.pi * R**3 * RHO
@@ -76,7 +77,7 @@ def _loads(sim, state, params):
     geometry = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
     modulus = mechanics.particle_modulus(sim.physics.mechanics, mp, p.temperature, p.material)
     nu = jnp.broadcast_to(mp.nu, p.radii.shape)
-    return mechanics.contact_loads(sim.physics.mechanics, mp, geometry, p.positions, p.radii, p.mass, modulus, nu,
+    return contact_loads(sim.physics.mechanics, mp, geometry, p.positions, p.radii, p.mass, modulus, nu,
                                    state.mechanics, state.time, state.dt)
 
 

@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sintercond import geometry, network, neighbors, pair_list
+from _helpers import find_contacts
 
 
 def random_packing(n, seed, spread=1.0, polydispersity=0.5):
@@ -78,7 +79,7 @@ def test_contact_table_layout():
     d = np.linalg.norm(centres[bi] - centres[bj], axis=1)
     np.testing.assert_array_equal(pairs.overlap, np.maximum(radii[bi] + radii[bj] - d, 0.0))
     np.testing.assert_array_equal(pairs.r_i, radii[bi])
-    table = network.find_contacts(centres, radii)
+    table = find_contacts(centres, radii)
     own = np.arange(len(radii))[:, None]
     real = table != own
     # padding at the end of each row, neighbours ascending
@@ -98,8 +99,8 @@ def test_contact_table_layout():
 
 
 def test_isolated_particles_and_empty_packings():
-    assert network.find_contacts(np.zeros((0, 3)), np.zeros(0)).shape == (0, 1)
-    table = network.find_contacts(np.array([[0.0, 0, 0], [5.0, 0, 0]]), np.ones(2))
+    assert find_contacts(np.zeros((0, 3)), np.zeros(0)).shape == (0, 1)
+    table = find_contacts(np.array([[0.0, 0, 0], [5.0, 0, 0]]), np.ones(2))
     np.testing.assert_array_equal(table, [[0], [1]])
 
 

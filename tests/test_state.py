@@ -9,6 +9,7 @@ import pytest
 
 from sintercond import network, thermal
 from sintercond.state import ParticleState, heat_capacity, particle_state
+from _helpers import explicit_euler_step
 
 
 def _state():
@@ -37,7 +38,7 @@ def test_is_a_pytree_through_jit_and_scan():
     @jax.jit
     def advance(state):
         def step(st, _):
-            t = thermal.explicit_euler_step(st.temperature, table, capacity, dt, st.fixed, st.fixed_temperature)
+            t = explicit_euler_step(st.temperature, table, capacity, dt, st.fixed, st.fixed_temperature)
             return dataclasses.replace(st, temperature=t), None
         return jax.lax.scan(step, state, None, length=50)[0]
 

@@ -22,6 +22,7 @@ from sintercond.simulate import simulate_table
 from sintercond import run as runner
 from sintercond.scene import validate_scene
 from test_scene_run import SMALL as _SMALL
+from _helpers import find_contacts
 
 # the small scene of test_scene_run (54 particles, a laser beam crossing the top face in 12 ms) run for the
 # whole crossing: 24-25 steps of 0.52 ms
@@ -211,7 +212,7 @@ def test_touching_within_the_tolerance_is_a_contact():
     radii = np.array([1e-4, 2e-4])
     for gap, touching in ((1e-12, True), (1e-10, True), (1e-8, False)):
         centres = np.array([[0.0, 0.0, 0.0], [3e-4 * (1 + gap), 0.0, 0.0]])
-        table = network.find_contacts(centres, radii, tolerance=1e-9)
+        table = find_contacts(centres, radii, tolerance=1e-9)
         assert (table[0] == 1).any() == touching and (table[1] == 0).any() == touching
 
 

@@ -9,6 +9,7 @@ from sintercond import geometry, network, packing, thermal
 from sintercond.simulate import simulate_table
 from sintercond import steady
 from sintercond.conductance import rojek_pair_conductance
+from _helpers import find_contacts
 
 A, R = 1.0e-4, 0.52e-4  # lattice spacing and radius (m): sintered SC lattice, h = 2R - A
 
@@ -27,7 +28,7 @@ def bed():
 
 def test_contacts_equal_brute_force(bed):
     centres, radii = bed
-    table = network.find_contacts(centres, radii, tolerance=1e-9)
+    table = find_contacts(centres, radii, tolerance=1e-9)
     rows = np.arange(len(radii))[:, None]
     found = {(i, j) for i, j in zip(*np.nonzero(table != rows)) for j in [table[i, j]] if i < j}
     brute = {tuple(p) for p in geometry.contacts(centres, radii, tolerance=1e-9)}
@@ -206,8 +207,8 @@ def test_periodic_packing_contacts_and_conservation():
     # a ring: 5 particles along x in a periodic box of 5 spacings, so the ends touch across the boundary
     centres, radii = sc_lattice(5)
     box = np.array([5 * A, 10 * A, 10 * A])
-    free_table = network.find_contacts(centres, radii)
-    periodic_table = network.find_contacts(centres, radii, periodic_box=box)
+    free_table = find_contacts(centres, radii)
+    periodic_table = find_contacts(centres, radii, periodic_box=box)
     degree = lambda t: np.sum(t != np.arange(len(radii))[:, None], axis=1)  # noqa: E731
     assert list(degree(free_table)) == [1, 2, 2, 2, 1]
     assert list(degree(periodic_table)) == [2, 2, 2, 2, 2]
