@@ -18,3 +18,32 @@ hypothesis.settings.register_profile(
 )
 hypothesis.settings.register_profile("thorough", parent=hypothesis.settings.get_profile("default"), max_examples=2000)
 hypothesis.settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+# The longest files first (CPU seconds of a full run on the project's 2-core machine, contended, in brackets):
+# xdist hands out whole files in collection order (--dist loadfile with --no-loadscope-reorder, pyproject.toml),
+# so a long file collected late would run alone at the end while the other worker idles. Those behind these
+# keep pytest's order. A worker is given its next file as soon as 2 of its tests are left, before they run:
+# hence the short-listed notebook file is followed by test_mechanics.py, not by the other notebooks.
+LONGEST_FIRST = (
+    "test_notebooks_alone.py",  # (350) calibrate_softening
+    "test_fit_softening.py",  # (470)
+    "test_mechanics.py",  # (190)
+    "test_notebooks.py",  # (220) the other six notebooks
+    "test_moving.py",  # (90)
+    "test_inverse.py",  # (110)
+    "test_dryden_zok.py",  # (105)
+    "test_packing.py",  # (100)
+    "test_neighbors.py",  # (95)
+    "test_fit_sintering.py",  # (85)
+    "test_scene_mechanics.py",  # (85)
+    "test_simulate.py",  # (80)
+    "test_first_day.py",  # (70)
+    "test_fitting.py",  # (65)
+    "test_teeth_thermal.py",  # (60)
+    "test_readme.py",  # (60)
+)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: each file's tests keep their order

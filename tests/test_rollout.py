@@ -67,7 +67,12 @@ def _spread_and_mean(sim, state, params):
 
 @pytest.mark.slow
 def test_an_overflow_with_no_reallocation_is_refused_and_a_flag_from_measure_counts_as_one():
-    """A shrinking powder bed on a list with no spare room (tests/test_moving.py's run): new contacts overflow it."""
+    """A shrinking powder bed on a list with no spare room (tests/test_moving.py's run): new contacts overflow it.
+
+    Two chunks of 50 steps, not that test's eight: each chunk of the shrinking bed overflows and is redone on a
+    reallocated (so recompiled, about 5 s) list, so two chunks already show a refusal, a reallocation and one after
+    it, the run reaching its last step without an overflow; test_moving.py runs all 400 steps and checks the
+    temperatures and contacts of the end."""
     bed = packing.powder_bed(320.0, 260.0, seed=11)
     centres, radii = bed.centres * 1e-6, bed.radii * 1e-6
     physics = simulate.Physics.create(law="batchelor_obrien", neck_model="intersection", conductance="lifted",
@@ -81,9 +86,9 @@ def test_an_overflow_with_no_reallocation_is_refused_and_a_flag_from_measure_cou
     params = simulate.Params(conductivity=jnp.array([7.0]), specific_heat=jnp.array([1.0]))
     sim = simulate.simulator(physics, fns)
     with pytest.raises(rollout.ListOverflow, match="overflowed at step 0 and no reallocation"):
-        rollout.advance(sim, state, params, 400, 50)
-    final, report = rollout.advance(sim, state, params, 400, 50, reallocate=simulate.reallocate_neighbors(fns))
-    assert report.reallocations >= 1 and int(final.step) == 400 and not bool(final.overflow)
+        rollout.advance(sim, state, params, 100, 50)
+    final, report = rollout.advance(sim, state, params, 100, 50, reallocate=simulate.reallocate_neighbors(fns))
+    assert report.reallocations >= 1 and int(final.step) == 100 and not bool(final.overflow)
 
     static, state, params = _conduction()
 
