@@ -515,8 +515,8 @@ def write_record(rows) -> None:
     survivors = [r for r in rows if not r[2].startswith("killed")]
     body = (
         "## Mutation testing\n\n"
-        "Small deliberate bugs (benchmarks/mutation.py: each replaces one snippet of one module) run against "
-        "the tests that cover that module (`pytest -x`, first failure stops). Killed: the tests fail. "
+        "Small deliberate bugs (benchmarks/mutation.py: each replaces one snippet of one module) against the "
+        "tests of that module (`pytest -x`). Killed: the tests fail. "
         f"{summary}. Every mutant's result: [results/mutation.csv](results/mutation.csv).\n\n"
         + markdown_table(("module", "mutants", "killed", "seconds"), per_module)
         + ("\n\nSurvivors:\n" + "\n".join(f"- {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}"
