@@ -286,7 +286,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     state = simulate.init_state(particles, contacts, dt, mechanics=motion)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
     return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
-                 _wall_heat_specs(scene, centres, radii, physics),
+                 _wall_heat_specs(scene, centres, radii),
                  {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None)
 
 
@@ -337,7 +337,7 @@ def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
     return planes
 
 
-def _wall_heat_specs(scene, centres, radii, physics):
+def _wall_heat_specs(scene, centres, radii):
     """``(column, index of the scene wall, mode, held mask or None)`` of each held or conducting wall of a scene.
 
     A particle held by several walls counts for the first (as in

@@ -427,6 +427,8 @@ def _default_of(section, key, spec: Key, table, on):
     ``mechanics.friction``); a default that needs another key absent, or mechanics on, only then."""
     if spec.default is None or (section, key) in _ALTERNATIVES and _ALTERNATIVES[section, key] in table:
         return None
+    if (section, key) == ("walls", "penetration"):  # computed from the packing: default_penetration
+        return None
     if (section, key) in _MECHANICAL_ONLY and not on:
         return None
     if isinstance(spec.default, str) and spec.kind is float:
@@ -442,9 +444,6 @@ def _fill_defaults(scene):
     the run reads ``scene[section][key]`` and no code restates a default. Run after the checks of what was
     given; the filled scene validates again as it is (``scene.json``, read back by ``--resume``)."""
     on = scene["physics"].get("mechanics", False)
-    penetration = default_penetration(scene)  # the schema's, or the rough bed's
-    for wall in scene["walls"]:
-        wall.setdefault("penetration", penetration)
     tables = [(name, scene[name], _SCHEMA[name]) for name in _SCHEMA if name in scene]
     tables.append(("packing", scene["packing"], _PACKING[scene["packing"]["kind"]]))
     tables += [("walls", wall, _WALL) for wall in scene["walls"]]
@@ -454,6 +453,9 @@ def _fill_defaults(scene):
                 value = _default_of(section, key, spec, table, on)
                 if value is not None:
                     table[key] = value
+    penetration = default_penetration(scene)  # with the packing's method filled
+    for wall in scene["walls"]:
+        wall.setdefault("penetration", penetration)
 
 
 ROUGH_BED_PENETRATION = 0.1
@@ -465,8 +467,7 @@ def default_penetration(scene) -> float:
     """``walls[k].penetration`` where the scene gives none (mean radii): :data:`ROUGH_BED_PENETRATION` on a relaxed
     powder bed without mechanics, else the schema's default."""
     p = scene["packing"]
-    rough = (p["kind"] == "powder_bed" and p.get("method", "relax") != "dem"
-             and not scene.get("physics", {}).get("mechanics", False))
+    rough = p["kind"] == "powder_bed" and p["method"] != "dem" and not scene["physics"]["mechanics"]
     return ROUGH_BED_PENETRATION if rough else _WALL["penetration"].default
 
 
