@@ -27,7 +27,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from sintercond import mechanics, simulate
+from sintercond import mechanics, neck_growth, simulate
 
 MAX_REALLOCATIONS = 100
 """Reallocations of the lists one :func:`advance` call allows before it gives up."""
@@ -59,7 +59,8 @@ def advance(sim: simulate.Simulator, state: simulate.SimState, params: simulate.
         (:func:`sintercond.simulate.reallocate_neighbors`); the chunk is then redone from ``start``. None: an
         overflow raises.
       progress: ``progress(steps)`` after each chunk (a progress bar's ``update``).
-      check: ``check(state)`` raises on a state that must not go on (default: non-finite temperatures).
+      check: ``check(state)`` raises on a state that must not go on (default :func:`finite_temperatures`:
+        non-finite temperatures, or necks grown beyond the time step's stability).
       measure: ``measure(sim, state, params) -> (figures, overflowed)``, a hashable function traced into the
         chunk on its end state: figures for ``on_chunk`` (a pytree), and a flag that counts as an overflow of
         the chunk (a probe step that ran out of list room).
@@ -101,7 +102,9 @@ def advance(sim: simulate.Simulator, state: simulate.SimState, params: simulate.
 
 
 def finite_temperatures(state: simulate.SimState) -> None:
-    """:func:`advance`'s default check: every temperature finite."""
+    """:func:`advance`'s default check: every temperature finite, and a sintering state still stable
+    (:func:`sintercond.neck_growth.check_stable`, first: the cause of the other)."""
+    neck_growth.check_stable(state)
     if not bool(jnp.all(jnp.isfinite(state.particles.temperature))):
         raise FloatingPointError(f"non-finite temperature at step {int(state.step)}; reduce the time step")
 

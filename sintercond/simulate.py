@@ -74,9 +74,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import mechanics, thermal
+from sintercond import mechanics, neck_growth, thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState, Mechanics
+from sintercond.neck_growth import NeckState, Sintering
 from sintercond.neck import NECK_MODELS
 from sintercond.neighbors import did_buffer_overflow, did_rebuild
 from sintercond.pair_list import (allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs, half_pairs_overflowed,
@@ -200,7 +201,11 @@ class Physics:
         ``conduction.conductance="lifted"``, the explicit integrator, no
         prescribed ``motion``, ``conduction.conducting_walls=0`` (walls are
         ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
-      sintering: reserved for the sintering sub-spec (neck growth in time); must be None.
+      sintering: :class:`sintercond.neck_growth.Sintering`, necks that grow with each contact's temperature
+        history (first stage: the packing does not move; :mod:`sintercond.neck_growth`). Needs
+        ``contacts="static"``, ``conduction.conductance="lifted"``, the explicit integrator, the
+        ``"volume_conserving"`` neck model, no mechanics, ``Params.sintering`` and ``SimState.sintering``.
+        None: the necks stay.
     """
 
     conduction: Conduction = Conduction()
@@ -208,7 +213,7 @@ class Physics:
     motion: Callable | None = None
     sources: Sources = Sources()
     mechanics: Mechanics | None = None
-    sintering: None = None
+    sintering: Sintering | None = None
 
     def __post_init__(self):
         for name, kind in (("conduction", Conduction), ("sources", Sources)):
@@ -219,9 +224,20 @@ class Physics:
         if self.mechanics is not None and not isinstance(self.mechanics, Mechanics):
             raise ValueError(f"Physics.mechanics must be a sintercond.mechanics.Mechanics or None; got "
                              f"{self.mechanics!r}")
-        if self.sintering is not None:
-            raise ValueError("Physics.sintering is reserved for the sintering sub-spec; it must be None")
         c = self.conduction
+        if self.sintering is not None:
+            if not isinstance(self.sintering, Sintering):
+                raise ValueError(f"Physics.sintering must be a sintercond.neck_growth.Sintering or None; got "
+                                 f"{self.sintering!r}")
+            needs = {"contacts": ("static", self.contacts), "conduction.conductance": ("lifted", c.conductance),
+                     "conduction.integrator": ("explicit", c.integrator),
+                     "conduction.neck_model": ("volume_conserving", c.neck)}
+            for name, (want, got) in needs.items():
+                if got != want:
+                    raise ValueError(f"Physics.sintering needs {name}={want!r} (the necks grow on a packing that "
+                                     f"does not move, by Rojek's volume-conserving geometry); got {got!r}")
+            if self.mechanics is not None:
+                raise ValueError("Physics.sintering runs on a packing that does not move; mechanics must be None")
         if self.mechanics is not None:
             needs = {"contacts": ("dynamic", self.contacts), "conduction.conductance": ("lifted", c.conductance),
                      "conduction.integrator": ("explicit", c.integrator)}
@@ -243,14 +259,16 @@ class Physics:
     @classmethod
     def create(cls, law="rojek", neck_model=None, conductance="table", contacts="static", integrator="explicit",
                held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
-               motion=None, implicit_tol=1e-13, mechanics=False, walls=(), **mechanical) -> Physics:
+               motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None,
+               **mechanical) -> Physics:
         """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
 
         ``mechanics=True`` turns the coupled step on, with ``walls`` and the
         other :class:`sintercond.mechanics.Mechanics` fields in ``mechanical``
         (``gravity``, ``friction``, ``rolling``, ``wall_friction``, ...),
         normalised by :meth:`sintercond.mechanics.Mechanics.create`; without it
-        those keywords are refused (nothing would move).
+        those keywords are refused (nothing would move). ``sintering``: a
+        :class:`sintercond.neck_growth.Sintering` or None.
         """
         if not isinstance(mechanics, (bool, np.bool_)):
             raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
@@ -268,7 +286,7 @@ class Physics:
                    contacts=contacts, motion=motion,
                    sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
                                    pulse=bool(pulse), source=source),
-                   mechanics=spec)
+                   mechanics=spec, sintering=sintering)
 
     @property
     def neck(self) -> str:
@@ -339,6 +357,9 @@ class Params:
         the physics has no such source.
       mechanics: :class:`sintercond.mechanics.MechanicalParams` (moduli,
         damping, friction, softening) with ``Physics.mechanics``, else None.
+      sintering: the kinetic law's parameters in use (e.g. ``{"A": 1e-17, "activation_energy": 40.0}``),
+        merged over the law's defaults (:data:`sintercond.sintering.KINETIC_LAWS`), with
+        ``Physics.sintering``; else None.
     """
 
     conductivity: Any
@@ -349,6 +370,7 @@ class Params:
     radiation: RadiationParams | None = None
     pulse: PulseParams | None = None
     mechanics: MechanicalParams | None = None
+    sintering: dict | None = None
 
 
 @pytree_dataclass
@@ -366,6 +388,9 @@ class SimState:
       mechanics: velocities, spins and contact springs
         (:class:`sintercond.mechanics.MechanicalState`) with
         ``Physics.mechanics``, else None (nothing traced).
+      sintering: the start approaches, the growth interval's start temperatures and the stability flag
+        (:class:`sintercond.neck_growth.NeckState`) with ``Physics.sintering``, else None; the necks
+        themselves are ``contacts.neck``.
     """
 
     particles: ParticleState
@@ -374,6 +399,7 @@ class SimState:
     dt: Any
     overflow: Any
     mechanics: MechanicalState | None = None
+    sintering: NeckState | None = None
 
     @property
     def temperature(self):
@@ -449,6 +475,13 @@ def _wall_lift(physics, particles, contacts, conductivity, law_params):
     kappa = jnp.asarray(conductivity)[particles.material]
     return wall_conductance_from_neck(physics.conduction.law, contacts.wall_neck, particles.radii, contacts.wall_overlap, kappa,
                                       kappa, law_params)
+
+
+def neck_conductance(physics: Physics, state: SimState, params: Params):
+    """Conductances ``[n, m]`` (W/K) of a static lifted state from the necks it holds now (growing necks)."""
+    p, contacts = state.particles, state.contacts
+    return conductance_lift(physics, p.radii, p.material, contacts.neighbors, contacts.neck, contacts.overlap,
+                            jnp.atleast_1d(jnp.asarray(params.conductivity)), merged_law_params(physics, params))
 
 
 def pair_conductance(physics: Physics, radii, material, geometry, conductivity, law_params):
@@ -530,7 +563,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             law_params = merged_law_params(physics, params)
             scale = jnp.ones((), capacity.dtype)
             conductance = None
-            if physics.contacts == "static":
+            if physics.contacts == "static" and physics.sintering is None:  # growing necks: at every step
                 conductance = conductance_lift(physics, particles.radii, particles.material, contacts.neighbors,
                                                contacts.neck, contacts.overlap, kappa, law_params)
             if physics.conduction.conducting_walls:
@@ -559,7 +592,8 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
     def current_network(state: SimState, prep: Prepared):
         """``(state, conductance, neighbors)`` at this step: static tables, or the dynamic list updated."""
         if physics.contacts == "static":
-            return state, prep.conductance, state.contacts.neighbors
+            conductance = prep.conductance if physics.sintering is None else neck_conductance(physics, state, prep.params)
+            return state, conductance, state.contacts.neighbors
         particles, contacts = state.particles, state.contacts
         if physics.motion is not None:
             positions = physics.motion(state.time).astype(particles.positions.dtype)
@@ -653,8 +687,36 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                 None if prep.wall_conductance is None else prep.scale * jnp.sum(
                     prep.wall_conductance * prep.wall_temperature, axis=0),
                 prep.capacity, state.dt, fixed, particles.fixed_temperature, physics.conduction.implicit_tol)
-        return dataclasses.replace(state, particles=dataclasses.replace(particles, temperature=temperature),
-                                   step=state.step + 1)
+        state = dataclasses.replace(state, particles=dataclasses.replace(particles, temperature=temperature),
+                                    step=state.step + 1)
+        return state if physics.sintering is None else grow_necks(state, prep)
+
+    def grow_necks(state: SimState, prep: Prepared) -> SimState:
+        """At the end of a growth interval, the necks grown over it and the stability of the step on them."""
+        spec, carried, particles = physics.sintering, state.sintering, state.particles
+        law = neck_growth.law_params(spec, prep.params.sintering)
+
+        def grow(contacts, carried):
+            neck, overlap = neck_growth.grow_table_necks(spec, law, contacts.neighbors, contacts.neck, particles.radii,
+                                                         carried.interval_temperature, particles.temperature,
+                                                         spec.every * state.dt)
+            contacts = dataclasses.replace(contacts, neck=neck, overlap=overlap)
+            conductance = neck_conductance(physics, dataclasses.replace(state, contacts=contacts), prep.params)
+            total = jnp.sum(conductance, axis=1)
+            if prep.wall_conductance is not None:
+                total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
+            limit = thermal.explicit_stability_limit(prep.capacity, total)
+            if physics.conduction.held:
+                limit = jnp.where(particles.fixed, jnp.inf, limit)
+            unstable = carried.unstable | jnp.any(state.dt > limit)
+            return contacts, NeckState(carried.start_overlap, particles.temperature, unstable)
+
+        if spec.every == 1:
+            contacts, carried = grow(state.contacts, carried)
+        else:
+            contacts, carried = jax.lax.cond(neck_growth.update_interval(spec, state.step), grow, lambda c, n: (c, n),
+                                             state.contacts, carried)
+        return dataclasses.replace(state, contacts=contacts, sintering=carried)
 
     def step_fn(state: SimState, params: Params) -> SimState:
         return advance_fn(state, prepare_fn(state, params))
@@ -672,9 +734,12 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
     combination of old ones and the sources' reference temperatures.
     """
     prep = sim.prepare_fn(state, params)
-    if prep.conductance is None:
+    conductance = prep.conductance
+    if sim.physics.sintering is not None:
+        conductance = neck_conductance(sim.physics, state, params)
+    if conductance is None:
         raise ValueError("thermal_time_step needs static contacts")
-    total = prep.scale * jnp.sum(prep.conductance, axis=1)
+    total = prep.scale * jnp.sum(conductance, axis=1)
     if prep.wall_conductance is not None:
         total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
     if source_conductance is not None:
@@ -686,16 +751,19 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
 # building states
 
 
-def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechanics=None) -> SimState:
+def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechanics=None, sintering=None) -> SimState:
     """A :class:`SimState` at ``step`` (default 0) with time step ``dt`` (s).
 
     ``mechanics``: a :class:`sintercond.mechanics.MechanicalState` for
     ``Physics.mechanics`` (:func:`sintercond.mechanics.mechanical_state`).
+    ``sintering``: a :class:`sintercond.neck_growth.NeckState` for ``Physics.sintering``
+    (:func:`sintercond.neck_growth.neck_state`).
     """
     dtype = particles.temperature.dtype
     return SimState(particles=particles, contacts=contacts, step=jnp.asarray(step, jnp.int64 if jax.config.jax_enable_x64
                                                                             else jnp.int32),
-                    dt=jnp.asarray(dt, dtype), overflow=jnp.zeros((), bool), mechanics=mechanics)
+                    dt=jnp.asarray(dt, dtype), overflow=jnp.zeros((), bool), mechanics=mechanics,
+                    sintering=sintering)
 
 
 def table_contacts(table, wall_conductance=None, wall_temperature=None) -> TableContacts:
@@ -901,6 +969,11 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     fail_where(~np.isfinite(np.asarray(p.positions)).all(axis=1),
                lambda i: f"particle positions must be finite; particle {i[0]} is not")
     require_positive("particle temperatures (K)", np.asarray(p.temperature, np.float64))
+    if sim.physics.sintering is not None:
+        if state.sintering is None:
+            raise ValueError("Physics.sintering needs SimState.sintering (simulate.init_state(..., "
+                             "sintering=neck_growth.neck_state(contacts, temperature)))")
+        neck_growth.validate_sintering(sim.physics.sintering, params.sintering, state.contacts, p.radii)
     if sim.physics.mechanics is None:
         return
     if params.mechanics is None:

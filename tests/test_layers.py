@@ -21,7 +21,7 @@ LAYERS = {
     "laws": ["neck", "conductance", "forces", "materials", "heat_sources", "walls", "sintering", "effective",
              "dryden_zok", "tortuosity", "geometry"],
     "space": ["neighbors", "pair_list"],
-    "lifts": ["network", "mechanics", "thermal"],
+    "lifts": ["network", "mechanics", "thermal", "neck_growth"],
     "drive": ["simulate", "steady", "rollout", "guards"],
     "use": ["scene", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
 }

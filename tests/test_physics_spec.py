@@ -97,7 +97,7 @@ def test_the_spec_classes_validate_and_never_rewrite():
         simulate.Physics(mechanics=True)
     with pytest.raises(ValueError, match=r"Physics\.conduction must be a Conduction"):
         simulate.Physics(conduction="rojek")
-    with pytest.raises(ValueError, match=r"Physics\.sintering is reserved"):
+    with pytest.raises(ValueError, match=r"Physics\.sintering must be a sintercond\.neck_growth\.Sintering or None"):
         simulate.Physics(sintering="grain_boundary")
     with pytest.raises(ValueError, match=r"Sources\.beam must be one of"):
         simulate.Sources(beam="electron")

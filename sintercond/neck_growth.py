@@ -1,0 +1,203 @@
+"""Necks that grow in the simulator: the sintering sub-spec of :class:`sintercond.simulate.Physics`, its state and
+its update.
+
+First stage (SINTERING.md section 3 of the design notes; docs/simulator.md): the packing does not move and each
+contact sinters on its own. The neck radius ``a`` of every contact is state; every ``Sintering.every`` thermal steps
+it grows by the kinetic law of :mod:`sintercond.sintering` over those steps' duration, and the contact's approach
+follows it through Rojek et al. (2022)'s volume-conserving geometry, ``h = H(a)`` (Eqs. 23-27;
+:func:`sintercond.sintering.neck_overlap`). The conductance law is applied to the grown neck at every step
+(``Conduction(conductance="lifted")``), so the pipe network stiffens as the necks grow, and the parameters of both
+laws stay differentiable.
+
+The temperature of a growth interval
+------------------------------------
+A neck update covers the ``every`` steps since the last one. The pair temperature of the interval is the mean of the
+pair temperature (:func:`sintercond.sintering.pair_temperature`, the mean of the two particles) at its start and at
+its end, and the neck grows over the interval at that constant temperature, integrated exactly by
+:func:`sintercond.sintering.grow_neck`. The trapezoid makes the error second order in the interval for a smooth
+temperature history (``benchmarks/sintering_step.py`` measures it against ``every``).
+
+Shrinkage
+---------
+Positions are fixed in the first stage, so the shrinkage is what the contacts' approaches would give: the mean
+over contacts of ``(H(a) - h_0) / (r_i + r_j)``, ``h_0`` the approach at the start of the run
+(:func:`neck_statistics`). It is the linear shrinkage of a chain of such contacts.
+
+Stability
+---------
+Growing necks raise the conductances, and with them lower the explicit step's limit
+(:func:`sintercond.thermal.explicit_stability_limit`). Every neck update checks ``dt <= C_i / sum_j K_ij`` on the
+grown necks and sets :attr:`NeckState.unstable` where it fails; :func:`sintercond.rollout.advance` refuses such a
+state on the host, naming the step and the limit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sintercond import sintering
+from sintercond._validation import all_concrete, require_law_params
+from sintercond.state import LiftedContacts, pytree_dataclass
+
+
+@dataclasses.dataclass(frozen=True)
+class Sintering:
+    """The sintering sub-spec of :class:`sintercond.simulate.Physics`: necks that grow with the temperature history.
+
+    Attributes:
+      law: a key of :data:`sintercond.sintering.KINETIC_LAWS` (``"grain_boundary"``, ``"power_law"``,
+        ``"viscous"``); its parameters are ``Params.sintering``.
+      every: thermal steps between two neck updates (>= 1); each update grows the necks over those steps.
+      quadrature_nodes, newton_iterations: of :func:`sintercond.sintering.grow_neck` (>= 1).
+    """
+
+    law: str = "grain_boundary"
+    every: int = 1
+    quadrature_nodes: int = 8
+    newton_iterations: int = 4
+
+    def __post_init__(self):
+        if self.law not in sintering.KINETIC_LAWS:
+            raise ValueError(f"Sintering.law must be one of {sorted(sintering.KINETIC_LAWS)}; got {self.law!r}")
+        for name in ("every", "quadrature_nodes", "newton_iterations"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"Sintering.{name} must be an integer >= 1; got {value!r}")
+
+
+@pytree_dataclass
+class NeckState:
+    """What the sintering step carries besides the necks (which live in the contacts).
+
+    Attributes:
+      start_overlap: ``[n, m]`` the approach of each contact at the start of the run (m), for the shrinkage.
+      interval_temperature: ``[n]`` particle temperatures at the last neck update (K): the start of the
+        current growth interval.
+      unstable: bool scalar, set when grown necks made the time step exceed the explicit limit.
+    """
+
+    start_overlap: Any
+    interval_temperature: Any
+    unstable: Any
+
+
+def neck_state(contacts: LiftedContacts, temperature) -> NeckState:
+    """The :class:`NeckState` at the start of a run on ``contacts`` with particle ``temperature`` ``[n]`` (K)."""
+    return NeckState(start_overlap=jnp.asarray(contacts.overlap), interval_temperature=jnp.asarray(temperature),
+                     unstable=jnp.zeros((), bool))
+
+
+def law_params(spec: Sintering, params) -> dict:
+    """The kinetic law's defaults overridden by ``params`` (``Params.sintering``); unknown keys raise, naming them."""
+    if params is None:
+        raise ValueError("Physics.sintering needs Params.sintering: a dict of the kinetic law's parameters "
+                         f"({sorted(sintering.KINETIC_LAWS[spec.law].default_params)}), {{}} for its defaults")
+    if not isinstance(params, dict):
+        raise ValueError(f"Params.sintering must be a dict of the kinetic law's parameters; got {params!r}")
+    try:
+        return sintering.law_params(spec.law, params)
+    except ValueError as error:
+        raise ValueError(f"Params.sintering: {error}") from None
+
+
+def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii) -> None:
+    """Raise ``ValueError`` naming the field unless the necks and the kinetic parameters can grow (concrete values).
+
+    Parameters as :func:`sintercond.sintering.validate_growth_inputs` wants them; every neck in
+    ``[0, min(r_i, r_j)]`` of its pair.
+    """
+    merged = law_params(spec, params)
+    if not all_concrete(merged, contacts.neck, radii):
+        return
+    law = sintering.kinetic_law(spec.law)
+    require_law_params("Params.sintering", law, merged,
+                       lambda name: f"Params.sintering[{name!r}] of kinetic law {law.name!r} ({law.units[name]})")
+    if "dihedral_angle" in merged and not float(np.max(merged["dihedral_angle"])) <= 180.0:
+        raise ValueError(f"Params.sintering['dihedral_angle'] must be in (0, 180] degrees; got "
+                         f"{merged['dihedral_angle']!r}")
+    neighbors, neck, r = np.asarray(contacts.neighbors), np.asarray(contacts.neck, np.float64), np.asarray(radii)
+    n = r.shape[0]
+    rows = np.arange(n)[:, None]
+    valid = (neighbors != rows) & (neighbors < n)
+    limit = np.minimum(r[:, None], r[np.minimum(neighbors, n - 1)])
+    bad = valid & ~((neck >= 0) & (neck <= limit * (1 + 1e-12)))
+    if bad.any():
+        i, k = map(int, np.argwhere(bad)[0])
+        raise ValueError(f"contact necks must lie in [0, min(r_i, r_j)]; the neck of particles {i} and "
+                         f"{int(neighbors[i, k])} is {neck[i, k]!r} m")
+
+
+def _pairs(neighbors, n):
+    """``(lo, hi, valid)`` of every slot of a padded table: the pair in index order, and whether it is a contact."""
+    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
+    valid = (neighbors != rows) & (neighbors < n)
+    j = jnp.where(valid, neighbors, rows)
+    return jnp.minimum(rows, j), jnp.maximum(rows, j), valid
+
+
+def grow_table_necks(spec: Sintering, params: dict, neighbors, neck, radii, start_temperature, end_temperature,
+                     duration):
+    """Necks and approaches ``[n, m]`` (m) of a padded table after one growth interval of ``duration`` (s).
+
+    The pair temperature is the mean of its value at the start (``start_temperature`` ``[n]``, K) and at the end
+    (``end_temperature``) of the interval (module docstring). Each slot grows its pair in index order, so both
+    rows of a pair hold bitwise the same neck (the conductances stay symmetric, heat is conserved). Padding
+    slots stay 0.
+    """
+    lo, hi, valid = _pairs(neighbors, radii.shape[0])
+    r_lo, r_hi = radii[lo], radii[hi]
+    pair_start = sintering.pair_temperature(start_temperature[lo], start_temperature[hi])
+    pair_end = sintering.pair_temperature(end_temperature[lo], end_temperature[hi])
+    temperature = 0.5 * (pair_start + pair_end)
+    dtype = neck.dtype
+    a = sintering._grow_neck(sintering.kinetic_law(spec.law), jnp.where(valid, neck, 0.0), r_lo, r_hi,
+                             temperature[None], jnp.reshape(jnp.asarray(duration, dtype), (1,)), params,
+                             spec.quadrature_nodes, spec.newton_iterations)[0]
+    a = jnp.where(valid, a, 0.0)
+    h = jnp.where(valid, sintering.neck_overlap(a, r_lo, r_hi), 0.0)
+    return a, h
+
+
+def neck_statistics(state) -> dict:
+    """Mean and largest neck ratio ``a / min(r_i, r_j)`` over the contacts, and the mean linear shrinkage
+    ``(H(a) - h_0) / (r_i + r_j)`` (module docstring) of a :class:`sintercond.simulate.SimState` with sintering.
+
+    Returns ``{"mean_neck_ratio", "max_neck_ratio", "shrinkage"}`` (scalars; 0 without contacts).
+    """
+    contacts, radii = state.contacts, state.particles.radii
+    lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
+    r_lo, r_hi = radii[lo], radii[hi]
+    count = jnp.sum(valid.astype(radii.dtype))
+    per = lambda x: jnp.sum(jnp.where(valid, x, 0.0)) / jnp.maximum(count, 1.0)  # noqa: E731
+    ratio = contacts.neck / jnp.minimum(r_lo, r_hi)
+    approach = contacts.overlap - state.sintering.start_overlap
+    return {"mean_neck_ratio": per(ratio), "max_neck_ratio": jnp.max(jnp.where(valid, ratio, 0.0), initial=0.0),
+            "shrinkage": per(approach / (r_lo + r_hi))}
+
+
+def time_step_exceeded(dt, capacity, conductance):
+    """Whether ``dt`` exceeds the explicit limit ``C_i / sum_j K_ij`` of any particle (bool scalar)."""
+    return jnp.any(dt * jnp.sum(conductance, axis=1) > capacity)
+
+
+def check_stable(state) -> None:
+    """Refuse (``FloatingPointError``) a state whose grown necks made its time step unstable."""
+    if state.sintering is not None and bool(state.sintering.unstable):
+        raise FloatingPointError(
+            f"the necks grew so that the time step {float(state.dt):.4g} s exceeds the explicit stability limit "
+            f"by step {int(state.step)}; start from a smaller dt (simulate.thermal_time_step on the necks you "
+            "expect at the end, e.g. at the kinetic law's cap)")
+
+
+def update_interval(spec: Sintering, step) -> jax.Array:
+    """Whether the step numbered ``step`` (after it was taken) ends a growth interval."""
+    return step % spec.every == 0
+
+
+__all__ = ["NeckState", "Sintering", "check_stable", "grow_table_necks", "law_params", "neck_state",
+           "neck_statistics", "time_step_exceeded", "validate_sintering"]

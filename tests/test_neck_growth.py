@@ -1,0 +1,188 @@
+"""Necks that grow in the simulator (first stage: the packing does not move, contacts sinter independently).
+
+References: the law tier (:func:`sintercond.sintering.grow_neck`, itself tested against closed forms), conservation of
+heat, the kinetic law's cap, and central differences.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from sintercond import neck_growth, rollout, simulate, sintering
+from sintercond.state import particle_state
+
+DENSITY, HEAT, KAPPA = 4430.0, 560.0, 7.0  # Ti6Al4V
+KINETICS = {"A": 1e-16, "activation_energy": 100.0}  # necks of a few um in a second at 1000-1200 K
+
+
+def chain(radii, temperatures, every=1, dt=1e-3, pulse=None, kinetics=KINETICS, law="grain_boundary"):
+    """Spheres in a row along x, each touching the next at a point; ``(sim, state, params)``."""
+    radii = np.asarray(radii, np.float64)
+    x = np.zeros((len(radii), 3))
+    x[1:, 0] = np.cumsum(radii[:-1] + radii[1:])
+    physics = simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted",
+                                      pulse=pulse is not None, sintering=neck_growth.Sintering(law, every=every))
+    particles = particle_state(x, radii, np.asarray(temperatures, np.float64), DENSITY)
+    contacts = simulate.lifted_contacts(physics, x, radii)
+    state = simulate.init_state(particles, contacts, dt, sintering=neck_growth.neck_state(contacts,
+                                                                                          particles.temperature))
+    params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT], sintering=dict(kinetics), pulse=pulse)
+    return simulate.simulator(physics), state, params
+
+
+def pulsed_chain(every=1):
+    pulse = simulate.PulseParams(power=jnp.array([2e-3, 0.0, 0.0]), duration=0.15)
+    return chain([40e-6, 30e-6, 35e-6], [1000.0, 1100.0, 1050.0], every=every, pulse=pulse)
+
+
+def saved_states(sim, state, params, n_steps):
+    """Temperatures ``[n_steps + 1, n]`` and necks ``[n_steps + 1, n, m]`` after every step, the start included."""
+    observe = lambda s: (s.particles.temperature, s.contacts.neck)  # noqa: E731
+    end, (temperature, neck) = jax.jit(lambda s, p: simulate.rollout(sim, s, p, n_steps, simulate.SaveAt(1, observe))
+                                       )(state, params)
+    return end, (jnp.concatenate([state.particles.temperature[None], temperature]),
+                 jnp.concatenate([state.contacts.neck[None], neck]))
+
+
+@pytest.mark.parametrize("every", [1, 4])
+def test_each_contact_grows_as_the_law_tier_does_along_its_own_temperature_history(every):
+    sim, state, params = pulsed_chain(every)
+    n_steps = 240
+    end, (temperature, _) = saved_states(sim, state, params, n_steps)
+    radii = np.asarray(state.particles.radii)
+    for i, j, slot in ((0, 1, 0), (1, 2, 1)):
+        pair = 0.5 * (temperature[:, i] + temperature[:, j])
+        ends = pair[every::every]
+        starts = pair[0:-every:every]
+        history = 0.5 * (starts + ends)  # the trapezoid of each growth interval (neck_growth's docstring)
+        durations = np.full(len(history), every * float(state.dt))
+        expected = sintering.grow_neck("grain_boundary", 0.0, radii[i], radii[j], history, durations, KINETICS)[-1]
+        got = float(end.contacts.neck[i, slot])
+        assert float(expected) > 0.1 * min(radii[i], radii[j])  # the necks did grow
+        np.testing.assert_allclose(got, float(expected), rtol=1e-12)
+        np.testing.assert_allclose(float(end.contacts.overlap[i, slot]),
+                                   float(sintering.neck_overlap(expected, radii[i], radii[j])), rtol=1e-12)
+    assert np.ptp(np.asarray(temperature[:, 0])) > 50.0  # the history is not isothermal
+
+
+def test_an_insulated_sintering_cluster_conserves_heat_and_its_necks_grow_monotone_symmetric_and_capped():
+    rng = np.random.default_rng(3)
+    radii = rng.uniform(30e-6, 45e-6, 5)
+    sim, state, params = chain(radii, rng.uniform(900.0, 1300.0, 5), dt=1e-4,
+                               kinetics={"A": 1e-10, "activation_energy": 100.0})
+    capacity = state.particles.mass * HEAT
+    end, (temperature, neck) = saved_states(sim, state, params, 600)
+    heat = np.asarray(temperature) @ np.asarray(capacity)
+    np.testing.assert_allclose(heat, heat[0], rtol=1e-13)
+    neck = np.asarray(neck)
+    assert not bool(end.sintering.unstable)
+    assert np.all(np.isfinite(neck)) and np.all(np.isfinite(np.asarray(temperature)))
+    assert np.all(np.diff(neck, axis=0) >= 0.0)
+    nbrs = np.asarray(state.contacts.neighbors)
+    lo = np.arange(len(radii) - 1)
+    # both rows of a contact hold bitwise the same neck
+    np.testing.assert_array_equal(neck[:, lo, np.where(nbrs[lo, 0] == lo + 1, 0, 1)],
+                                  neck[:, lo + 1, np.where(nbrs[lo + 1, 0] == lo, 0, 1)])
+    # stopped at the equilibrium neck r_min sin(psi / 2), psi the default dihedral angle
+    psi = sintering.KINETIC_LAWS["grain_boundary"].default_params["dihedral_angle"]
+    cap = np.minimum(radii[:-1], radii[1:]) * np.sin(np.deg2rad(psi) / 2)
+    final = neck[-1, lo, np.where(nbrs[lo, 0] == lo + 1, 0, 1)]
+    assert np.all(final <= cap * (1 + 1e-12))
+    np.testing.assert_allclose(final, cap, rtol=1e-9)
+    stats = neck_growth.neck_statistics(end)
+    np.testing.assert_allclose(float(stats["max_neck_ratio"]), np.max(final / np.minimum(radii[:-1], radii[1:])),
+                               rtol=1e-12)
+    expected_shrinkage = np.mean(sintering.neck_overlap(final, radii[:-1], radii[1:]) / (radii[:-1] + radii[1:]))
+    np.testing.assert_allclose(float(stats["shrinkage"]), expected_shrinkage, rtol=1e-9)
+
+
+def test_the_conductance_follows_the_necks():
+    sim, state, params = pulsed_chain()
+    end, _ = saved_states(sim, state, params, 100)
+    start_k = simulate.neck_conductance(sim.physics, state, params)
+    end_k = simulate.neck_conductance(sim.physics, end, params)
+    assert float(jnp.max(start_k)) < 1e-9  # point contacts
+    from sintercond.conductance import conductance_from_neck
+    a, h = end.contacts.neck[0, 0], end.contacts.overlap[0, 0]
+    expected = conductance_from_neck("rojek", a, 40e-6, 30e-6, h, KAPPA, KAPPA)
+    np.testing.assert_allclose(float(end_k[0, 0]), float(expected), rtol=1e-14)
+
+
+@pytest.mark.slow
+def test_gradients_of_a_neck_and_a_probe_temperature_by_the_kinetic_parameters_equal_central_differences():
+    sim, state, params = pulsed_chain(every=2)
+    n_steps = 60
+
+    def observe(log_a, q):
+        p = simulate.Params(params.conductivity, params.specific_heat, sintering={"A": jnp.exp(log_a),
+                                                                                   "activation_energy": q},
+                            pulse=params.pulse)
+        end, _ = simulate.rollout(sim, state, p, n_steps)
+        return jnp.stack([end.contacts.neck[0, 0] / 1e-6, end.particles.temperature[2]])
+
+    log_a, q = jnp.log(KINETICS["A"]), KINETICS["activation_energy"]
+    jac = jax.jit(jax.jacrev(observe, argnums=(0, 1)))(log_a, q)
+    value = jax.jit(observe)
+    for k, (x0, h) in enumerate(((log_a, 1e-4), (q, 1e-3))):
+        args = [log_a, q]
+        args[k] = x0 + h
+        up = value(*args)
+        args[k] = x0 - h
+        down = value(*args)
+        central = (up - down) / (2 * h)
+        assert np.all(np.abs(np.asarray(central)) > 0)
+        np.testing.assert_allclose(np.asarray(jac[k]), np.asarray(central), rtol=1e-6)
+
+
+def test_a_step_that_grown_necks_make_unstable_is_refused_on_the_host():
+    sim, state, params = chain([40e-6, 40e-6], [1000.0, 1200.0], dt=2e-2,
+                               kinetics={"A": 1e-13, "activation_energy": 100.0})
+    with pytest.raises(FloatingPointError, match="explicit stability limit"):
+        rollout.advance(sim, state, params, 200, 20)
+
+
+def test_the_stable_time_step_is_taken_on_the_current_necks():
+    sim, state, params = pulsed_chain()
+    end, _ = saved_states(sim, state, params, 100)
+    capacity = np.asarray(state.particles.mass) * HEAT
+    total = np.asarray(jnp.sum(simulate.neck_conductance(sim.physics, end, params), axis=1))
+    np.testing.assert_allclose(float(simulate.thermal_time_step(sim, end, params)), np.min(capacity / total),
+                               rtol=1e-14)
+
+
+@pytest.mark.parametrize("sintering_params, match", [
+    ({"Q": 100.0}, "unknown parameter 'Q'"),
+    ({"A": -1.0}, r"Params.sintering\['A'\]"),
+    ({"dihedral_angle": 200.0}, "dihedral_angle"),
+    (None, "needs Params.sintering"),
+])
+def test_bad_kinetic_parameters_are_refused_naming_them_before_anything_compiles(sintering_params, match):
+    sim, state, params = chain([40e-6, 40e-6], [1000.0, 1200.0])
+    params = simulate.Params(params.conductivity, params.specific_heat, sintering=sintering_params)
+    with pytest.raises(ValueError, match=match):
+        simulate.rollout(sim, state, params, 4)
+
+
+@pytest.mark.parametrize("keywords, match", [
+    ({"contacts": "dynamic"}, "contacts='static'"),
+    ({"conductance": "table"}, "conductance='lifted'"),
+    ({"neck_model": "coble"}, "neck_model='volume_conserving'"),
+])
+def test_a_sintering_spec_on_what_the_first_stage_cannot_grow_is_refused(keywords, match):
+    base = dict(law="rojek", neck_model="volume_conserving", conductance="lifted", sintering=neck_growth.Sintering())
+    with pytest.raises(ValueError, match=match):
+        simulate.Physics.create(**{**base, **keywords})
+
+
+@pytest.mark.parametrize("field, value", [("every", 0), ("law", "surface_diffusion"), ("newton_iterations", 1.5)])
+def test_a_bad_sintering_spec_is_refused_naming_the_field(field, value):
+    with pytest.raises(ValueError, match=f"Sintering.{field}"):
+        neck_growth.Sintering(**{field: value})
+
+
+def test_a_state_without_its_neck_state_is_refused():
+    sim, state, params = chain([40e-6, 40e-6], [1000.0, 1200.0])
+    import dataclasses
+    with pytest.raises(ValueError, match="SimState.sintering"):
+        simulate.rollout(sim, dataclasses.replace(state, sintering=None), params, 4)
