@@ -180,9 +180,26 @@ def neck_statistics(state) -> dict:
             "shrinkage": per(approach / (r_lo + r_hi))}
 
 
-def time_step_exceeded(dt, capacity, conductance):
-    """Whether ``dt`` exceeds the explicit limit ``C_i / sum_j K_ij`` of any particle (bool scalar)."""
-    return jnp.any(dt * jnp.sum(conductance, axis=1) > capacity)
+def particle_neck_ratio(state):
+    """``[n]`` each particle's mean neck ratio ``a / min(r_i, r_j)`` over its contacts (0 without contacts)."""
+    contacts, radii = state.contacts, state.particles.radii
+    lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
+    ratio = jnp.where(valid, contacts.neck / jnp.minimum(radii[lo], radii[hi]), 0.0)
+    count = jnp.sum(valid.astype(radii.dtype), axis=1)
+    return jnp.sum(ratio, axis=1) / jnp.maximum(count, 1.0)
+
+
+def necks_at_cap(spec: Sintering, params, contacts: LiftedContacts, radii) -> LiftedContacts:
+    """``contacts`` with every neck at the kinetic law's cap (and its approach ``H``): the largest conductances
+    the run can reach, for its time step."""
+    merged = law_params(spec, params)
+    radii = jnp.asarray(radii)
+    lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
+    r_lo, r_hi = radii[lo], radii[hi]
+    cap = jnp.minimum(sintering.kinetic_law(spec.law).cap(r_lo, r_hi, merged), jnp.minimum(r_lo, r_hi))
+    neck = jnp.where(valid, jnp.maximum(cap, contacts.neck), 0.0)
+    return dataclasses.replace(contacts, neck=neck, overlap=jnp.where(valid, sintering.neck_overlap(neck, r_lo, r_hi),
+                                                                      0.0))
 
 
 def check_stable(state) -> None:
@@ -200,4 +217,4 @@ def update_interval(spec: Sintering, step) -> jax.Array:
 
 
 __all__ = ["NeckState", "Sintering", "check_stable", "grow_table_necks", "law_params", "neck_state",
-           "neck_statistics", "time_step_exceeded", "validate_sintering"]
+           "neck_statistics", "necks_at_cap", "particle_neck_ratio", "validate_sintering"]

@@ -786,7 +786,7 @@ def from_scene(p) -> Packing:
         cap = max(r - a / 2, 0.0)  # each of the 6 neighbours cuts a cap of this height off the sphere
         fraction = (4 / 3 * math.pi * r**3 - 6 * math.pi * cap**2 * (3 * r - cap) / 3) / a**3
         bonds = 3 * counts.prod() - (counts[1] * counts[2] + counts[0] * counts[2] + counts[0] * counts[1])
-        coordination = 2 * bonds / counts.prod() if 2 * r > a else 0.0
+        coordination = 2 * bonds / counts.prod() if 2 * r >= a else 0.0  # touching: point contacts (sintering)
         return Packing(centres, radii, (np.zeros(3), hi), overlap, float(hi[2]), fraction, float(coordination))
     method = p.get("method", "relax")
     material = DemMaterial(**p["dem"]) if method == "dem" and "dem" in p else None

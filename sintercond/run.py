@@ -25,7 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import forces, guards, heat_sources, mechanics, network, packing, plots, simulate, thermal, walls
+from sintercond import (forces, guards, heat_sources, mechanics, neck_growth, network, packing, plots, simulate, thermal,
+                        walls)
 from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
@@ -101,16 +102,17 @@ def _nusselt(convection):
 
 def scene_physics(scene, walls=0) -> simulate.Physics:
     """The static physics spec of a validated scene."""
-    c = scene["conduction"]
+    c, s = scene["conduction"], scene.get("sintering")
     beam = scene.get("beam")
+    # a contact resistance makes the law nonlinear in the conductivity, and growing necks change it: lift it
+    lifted = c.get("params", {}).get("contact_resistance", 0.0) or s is not None
     return simulate.Physics(
         conduction=simulate.Conduction(
-            law=c["law"], neck_model=c.get("neck_model"),
-            # a contact resistance makes the law nonlinear in the conductivity: lift it from the necks
-            conductance="lifted" if c.get("params", {}).get("contact_resistance", 0.0) else "table",
+            law=c["law"], neck_model=c.get("neck_model"), conductance="lifted" if lifted else "table",
             held=any(w["mode"] == "held" for w in _walls(scene)), conducting_walls=walls),
         sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
-                                 radiation="radiation" in scene))
+                                 radiation="radiation" in scene),
+        sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"]))
 
 
 def mechanics_on(scene) -> bool:
@@ -177,6 +179,8 @@ def scene_params(scene) -> simulate.Params:
         mechanics=mechanical_params(scene),
         conductivity=f([m["conductivity"]]), specific_heat=f([m["specific_heat"]]),
         law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
+        sintering=None if "sintering" not in scene else {k: f(v) for k, v in
+                                                         scene["sintering"].get("params", {}).items()},
         beam=None if beam is None else simulate.BeamParams(
             intensity=f(beam["intensity"]), reach=f(beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"]),
             spot_radius=f(beam["spot_radius"]), absorptance=f(beam["absorptance"]), speed=f(beam["speed"]),
@@ -236,12 +240,20 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                             [(penetration, wall.temperature) for _, wall, penetration in conducting])
     params = scene_params(scene)
     sim = simulate.simulator(physics)
-    state = simulate.init_state(particles, contacts, 1.0)
+    necks = None
+    if physics.sintering is not None:
+        necks = neck_growth.neck_state(contacts, particles.temperature)
+    # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
+    limiting = contacts if necks is None else neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts,
+                                                                      particles.radii)
+    state = simulate.init_state(particles, limiting, 1.0, sintering=necks)
     run = scene["run"]
     sources = thermal.source_conductance(physics.sources, particles.radii, params, _highest_temperature(scene))
     thermal_limit = float(simulate.thermal_time_step(sim, state, params, sources))
+    at_cap = " on the necks at the kinetic law's cap" if necks is not None else ""
     bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
-                                         f"{thermal_limit:.6g} s (G_i: linearised convection and radiation)")}
+                                         f"{thermal_limit:.6g} s{at_cap} (G_i: linearised convection and "
+                                         "radiation)")}
     reallocate = None
     motion = None
     if mechanics_on(scene):
@@ -283,7 +295,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                  + (" or the implicit integrator" if kind == "thermal" and motion is None else ""))
     n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
     dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
-    state = simulate.init_state(particles, contacts, dt, mechanics=motion)
+    state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
     return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
                  _wall_heat_specs(scene, centres, radii),
@@ -501,11 +513,17 @@ MECHANICS_COLUMNS = ("kinetic_energy_J", "contacts", "wall_contacts", "max_overl
 particles touching a wall, and the largest overlap of a pair or a wall contact."""
 
 
+SINTERING_COLUMNS = ("mean_neck_ratio", "max_neck_ratio", "shrinkage")
+"""Columns a run with ``[sintering]`` adds (:func:`sintercond.neck_growth.neck_statistics`): the mean and largest
+neck ratio ``a / min(r_i, r_j)`` over the contacts and the mean linear shrinkage of their approaches."""
+
+
 def history_columns(model) -> tuple:
     """The columns of ``history.csv`` of ``model``: :data:`HISTORY_COLUMNS`, :data:`MECHANICS_COLUMNS` with
-    mechanics, and ``heat_wall{k}_W`` (the heat power into the packing through scene wall ``k``, W) for each
-    held or conducting wall."""
+    mechanics, :data:`SINTERING_COLUMNS` with sintering, and ``heat_wall{k}_W`` (the heat power into the packing
+    through scene wall ``k``, W) for each held or conducting wall."""
     return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics is not None else ())
+            + (SINTERING_COLUMNS if model.physics.sintering is not None else ())
             + tuple(spec[0] for spec in model.wall_heat))
 
 
@@ -616,6 +634,9 @@ def _history_row(model, state, obs: Observation) -> str:
         touching_walls = int(np.sum(np.any(obs.wall_overlap > 0, axis=0))) if len(obs.wall_overlap) else 0
         largest = float(max(np.max(obs.pair_overlap, initial=0.0), np.max(obs.wall_overlap, initial=0.0)))
         values += [obs.kinetic_energy, len(obs.pairs), touching_walls, largest]
+    if model.physics.sintering is not None:
+        stats = neck_growth.neck_statistics(state)
+        values += [float(stats[name]) for name in SINTERING_COLUMNS]
     values += list(obs.wall_heat)
     return f"{int(state.step)}," + ",".join(repr(v) if isinstance(v, float) else str(v) for v in values) + "\n"
 
@@ -709,6 +730,8 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
                         "kinetic_energy_J": float(history["kinetic_energy_J"][-1]),
                         "final_contacts": int(history["contacts"][-1]),
                         "max_overlap_m": float(history["max_overlap_m"][-1])})
+    if model.physics.sintering is not None:
+        summary.update({name: float(value) for name, value in neck_growth.neck_statistics(state).items()})
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     if pictures:
         plots.write_run_pictures(out, np.asarray(state.particles.positions), model.radii, temperature, summary,
@@ -746,6 +769,8 @@ def _write_outputs(scene, out, model, state, obs: Observation):
                   np.zeros(len(model.radii), np.int64), "material": np.asarray(p.material, np.int64)}
         if obs.power is not None:
             fields["heat_power"] = np.asarray(obs.power)
+        if model.physics.sintering is not None:
+            fields["neck_ratio"] = np.asarray(neck_growth.particle_neck_ratio(state))
         (out / "vtp").mkdir(exist_ok=True)
         write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields,
                   encoding=scene["run"]["vtp_encoding"])

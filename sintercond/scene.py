@@ -36,6 +36,7 @@ import numpy as np
 from sintercond.conductance import CONDUCTANCE_LAWS
 from sintercond.mechanics import PARAMETER_RANGES, validate_mechanical_params
 from sintercond.neck import NECK_MODELS
+from sintercond.sintering import KINETIC_LAWS
 
 
 class SceneError(ValueError):
@@ -211,6 +212,17 @@ _SCHEMA = {
         "min_modulus": Key(float, _parameter("E_min"), False, "Pa", default=0.0,
                            doc="E_min, the floor (at most mechanics.young_modulus)"),
     },
+    "sintering": {
+        "law": Key(str, _choice(*sorted(KINETIC_LAWS)), False, default="grain_boundary",
+                   doc="kinetic law of the necks (sintercond.sintering): grain_boundary (Bouvard & McMeeking; "
+                       "Nosewicz et al. 2013), power_law (d(a^n)/dt = K0 exp(-Q/RT) (r*/r_ref)^p) or viscous "
+                       "(Frenkel)"),
+        "every": Key(int, _within(1, 1e6), False, "steps", default=1,
+                     doc="thermal steps between two neck updates; each grows the necks over those steps at the "
+                         "mean of the pair temperatures at their start and end"),
+        "params": Key(dict, None, False, default="the law's",
+                      doc="the kinetic law's parameters, see [sintering.params]"),
+    },
     "run": {
         "duration": Key(float, _within(0.0, 1e6, "s", low_open=True), True, "s",
                         doc="simulated time; the run ends exactly there"),
@@ -321,8 +333,27 @@ _LAW_PARAMS = {
     **{c: Key(float, _within(-1e3, 1e3), False, doc="coefficient of the fitted smooth law")
        for c in ("c1", "c2", "c3", "c4")},
 }
+# the kinetic laws' parameters in a scene: physical ranges
+_SINTERING_PARAMS = {
+    "A": Key(float, _within(0.0, 1e6, "m^4 K/s", low_open=True), False, "m^4 K/s",
+             doc="Omega delta_b D_0b gamma_s / k_B of the grain-boundary law (sintercond.sintering.grain_boundary_a)"),
+    "activation_energy": Key(float, _within(0.0, 1e4, "kJ/mol"), False, "kJ/mol", doc="Q of exp(-Q / (R T))"),
+    "dihedral_angle": Key(float, _within(0.0, 180.0, "degrees", low_open=True), False, "degrees",
+                          doc="psi; the grain-boundary neck stops at the equilibrium neck r_min sin(psi/2)"),
+    "K0": Key(float, _within(0.0, 1e300, "m^n/s", low_open=True), False, "m^n/s", doc="K0 of the power law"),
+    "exponent": Key(float, _within(0.0, 20.0, low_open=True), False, doc="n of the power law (6 grain boundary, "
+                                                                         "5 volume, 2 viscous)"),
+    "size_exponent": Key(float, _within(-20.0, 20.0), False, doc="p of the power law's (r*/r_ref)^p"),
+    "reference_radius": Key(float, _within(0.0, 1.0, "m", low_open=True), False, "m", doc="r_ref of the power law"),
+    "max_neck_ratio": Key(float, _within(0.0, 1.0, low_open=True), False,
+                          doc="the power law's and viscous flow's neck stops at this fraction of min(r_i, r_j)"),
+    "surface_energy": Key(float, _within(0.0, 100.0, "N/m", low_open=True), False, "N/m",
+                          doc="gamma_s of viscous flow"),
+    "viscosity": Key(float, _within(0.0, 1e30, "Pa s", low_open=True), False, "Pa s",
+                     doc="eta0 of viscous flow, eta = eta0 exp(Q / (R T))"),
+}
 _SECTIONS = ("packing", "material", "conduction", "initial", "boundary", "walls", "beam", "convection", "radiation",
-             "physics", "mechanics", "softening", "run")
+             "physics", "mechanics", "softening", "sintering", "run")
 _REQUIRED_SECTIONS = ("packing", "material", "conduction", "initial", "run")
 
 
@@ -568,7 +599,7 @@ def _check_mechanics(scene):
         raise SceneError(str(err)) from None
 
 
-def _check_packing(packing, conduction):
+def _check_packing(packing, conduction, sintering=False):
     from sintercond import neck
     from sintercond.packing import PackingError, check_bed
 
@@ -615,6 +646,8 @@ def _check_packing(packing, conduction):
         raise SceneError(f"packing.counts {packing['counts']} make {n} particles; the limit is "
                          f"{MAX_LATTICE_PARTICLES} (product of the counts)")
     radius, spacing = packing["radius"], packing["spacing"]
+    if sintering and radius == spacing / 2:
+        return  # point contacts: the necks grow from them
     if not radius > spacing / 2:
         raise SceneError(f"packing.radius must be > packing.spacing/2 = {spacing / 2:g} m for the lattice to conduct "
                          f"(touching spheres have no neck); got {radius:g}")
@@ -633,6 +666,27 @@ def _largest_lattice_radius(model, spacing):
     return {"volume_conserving": 0.75 * spacing}.get(model, spacing)
 
 
+def _check_sintering(scene):
+    """``[sintering]``: its law's parameters, and the physics the first stage grows necks on."""
+    if "sintering" not in scene:
+        return
+    s, conduction = scene["sintering"], scene["conduction"]
+    law = KINETIC_LAWS[s["law"]]
+    params = s.get("params", {})
+    for key, value in params.items():
+        if key not in law.default_params:
+            raise SceneError(f"unknown key sintering.params.{key}{_suggest(key, list(law.default_params))}; "
+                             f"kinetic law {law.name!r} takes {sorted(law.default_params)}")
+        params[key] = _value(f"sintering.params.{key}", value, _SINTERING_PARAMS[key])
+    if scene["physics"]["mechanics"]:
+        raise SceneError("[sintering] grows necks on a packing that does not move (the first stage): it needs "
+                         "physics.mechanics = false")
+    model = conduction.get("neck_model", CONDUCTANCE_LAWS[conduction["law"]].neck_model)
+    if model != "volume_conserving":
+        raise SceneError(f"[sintering] grows Rojek's volume-conserving necks: conduction.neck_model must be "
+                         f"\"volume_conserving\" (conduction.law {conduction['law']!r} takes {model!r})")
+
+
 def _check_details(scene):
     conduction = scene["conduction"]
     law = CONDUCTANCE_LAWS[conduction["law"]]
@@ -642,7 +696,8 @@ def _check_details(scene):
             raise SceneError(f"unknown key conduction.params.{key}{_suggest(key, list(law.default_params))}; "
                              f"law {law.name!r} takes {sorted(law.default_params)}")
         params[key] = _value(f"conduction.params.{key}", value, _LAW_PARAMS[key])
-    _check_packing(scene["packing"], conduction)
+    _check_sintering(scene)
+    _check_packing(scene["packing"], conduction, "sintering" in scene)
     if "beam" in scene:
         beam = scene["beam"]
         needed = "attenuation" if beam["kind"] == "laser" else "max_depth"
@@ -738,6 +793,8 @@ def estimate_run(scene) -> RunEstimate:
         n = math.prod(packing["counts"])
         r = packing["radius"]
         h, z = 2 * r - packing["spacing"], 7
+    if "sintering" in scene:
+        h = r  # the necks grow up to about the radius, a = sqrt(r h): the step is taken on them
     kappa = material["conductivity"]
     law = scene["conduction"]["law"]
     k_pair = kappa * scene["conduction"].get("params", {}).get("thickness", 1.0) * math.pi if law == "feng" else (
@@ -900,6 +957,16 @@ def scene_reference() -> str:
           "Walls are rigid (`E* = E/(1 - nu^2)`).")
     table("[softening]", _SCHEMA["softening"],
           "Thermal softening of Young's modulus (Eq. 42, MECHANICS.md erratum 6), with `physics.mechanics = true`.")
+    table("[sintering]", _SCHEMA["sintering"],
+          "Necks that grow with each contact's temperature history (`sintercond.neck_growth`; issue 26's first "
+          "stage): the packing does not move, each contact's volume-conserving neck (Rojek et al. 2022, Eqs. 23-27) "
+          "grows by the kinetic law, and the conductance law is applied to the grown neck at every step. Touching "
+          "spheres (a lattice with `radius = spacing/2`) start from point contacts. `history.csv` gains the mean "
+          "and largest neck ratio a/min(r_i, r_j) and the mean linear shrinkage (H(a) - h_0)/(r_i + r_j); the "
+          "VTP frames each particle's mean neck ratio. The automatic time step is taken on the necks at the law's "
+          "cap (they only grow).")
+    table("[sintering.params]", _SINTERING_PARAMS, "Keys the chosen law takes: " + "; ".join(
+        f"`{name}`: {', '.join(law.default_params)}" for name, law in sorted(KINETIC_LAWS.items())))
     table("[run]", _SCHEMA["run"])
     lines.extend(["## Limits", "",
                   f"- at most {MAX_LATTICE_PARTICLES} lattice particles and 20000 powder-bed particles, "

@@ -116,6 +116,8 @@ ELSEWHERE = {
     "run.formats": "test_scene_run.py: the formats written",
     "run.vtp_encoding": "test_io.py: both encodings read back by VTK (binary is the default a run writes)",
     "run.override_limits": "test_bad_input.py: the limits refused and overridden",
+    **{f"sintering.{key}": "test_sintering_scene.py: test_the_sintering_keys_reach_the_model (no mechanics)"
+       for key in ("law", "every", "params")},
 }
 WALL_ROWS = [  # walls[0] with mechanics is physics.walls[0]
     ("axis", 1, lambda w: tuple(w.normal), (0.0, 1.0, 0.0)),

@@ -1,0 +1,114 @@
+"""Scenes with ``[sintering]``: necks that grow in `sintercond run`, their history columns, frames, resume and keys."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from sintercond import io, neck_growth, sintering
+from sintercond import run as runner
+from sintercond.scene import SceneError, load_scene, validate_scene
+
+# a small touching lattice on a hot floor, necks from point contacts (the built-in sintering_hot_floor, shrunk)
+CELL = {
+    "packing": {"kind": "simple_cubic", "counts": [2, 2, 4], "spacing": 80e-6, "radius": 40e-6},
+    "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 7.0},
+    "conduction": {"law": "rojek"},
+    "initial": {"temperature": 845.0},
+    "walls": [{"axis": 2, "side": "min", "mode": "held", "temperature": 1273.0}],
+    "sintering": {"every": 5, "params": {"A": 1e-17, "activation_energy": 37.0}},
+    "run": {"duration": 0.05, "output_every": 40, "checkpoint_every": 80, "formats": ["vtp"]},
+}
+
+
+def test_a_sintering_scene_grows_necks_from_point_contacts_and_reports_them(tmp_path):
+    scene = validate_scene(copy.deepcopy(CELL))
+    _, summary = runner.run_scene(scene, tmp_path, progress=False, pictures=False)
+    history = runner.read_history(tmp_path)
+    for name in runner.SINTERING_COLUMNS:
+        assert np.all(np.diff(history[name]) >= 0), name  # necks only grow
+    assert history["mean_neck_ratio"][0] < 1e-6 < history["mean_neck_ratio"][-1]
+    assert 0 < history["shrinkage"][-1] and history["max_neck_ratio"][-1] < np.sin(np.deg2rad(75.0))
+    assert summary["mean_neck_ratio"] == pytest.approx(history["mean_neck_ratio"][-1], rel=1e-12)
+    # the shrinkage of a contact is its approach over r_i + r_j: here every contact joins two equal spheres
+    a = summary["mean_neck_ratio"] * 40e-6
+    assert summary["shrinkage"] == pytest.approx(float(sintering.neck_overlap(a, 40e-6, 40e-6)) / 80e-6, rel=0.05)
+    assert summary["coordination"] == pytest.approx(2 * (3 * 16 - (8 + 8 + 4)) / 16)  # touching lattice bonds
+    last = io.read_vtp(sorted((tmp_path / "vtp").glob("*.vtp"))[-1])
+    # each particle's mean over its contacts: positive, at most the largest contact's
+    assert last["neck_ratio"].shape == (16,) and np.all(last["neck_ratio"] > 0)
+    assert np.all(last["neck_ratio"] <= summary["max_neck_ratio"] * (1 + 1e-12))
+
+
+def test_the_hot_bottom_sinters_ahead_of_the_cold_top(tmp_path):
+    scene = copy.deepcopy(CELL)
+    scene["run"].update(duration=0.01, output_every=20, checkpoint_every=20)
+    model = runner.build_model(validate_scene(scene))
+    state, _ = runner.advance(model.sim, model.state, model.params, model.n_steps, 20)
+    ratio = np.asarray(neck_growth.particle_neck_ratio(state))
+    z = np.asarray(state.particles.positions)[:, 2]
+    assert ratio[z == z.min()].mean() > 1.2 * ratio[z == z.max()].mean()
+
+
+def test_the_automatic_step_holds_for_necks_at_the_kinetic_laws_cap():
+    model = runner.build_model(validate_scene(copy.deepcopy(CELL)))
+    capped = neck_growth.necks_at_cap(model.physics.sintering, model.params.sintering, model.state.contacts,
+                                      model.state.particles.radii)
+    psi = sintering.KINETIC_LAWS["grain_boundary"].default_params["dihedral_angle"]
+    valid = np.asarray(capped.neck) > 0
+    np.testing.assert_allclose(np.asarray(capped.neck)[valid], 40e-6 * np.sin(np.deg2rad(psi / 2)), rtol=1e-14)
+    from sintercond import simulate
+    import dataclasses
+    at_cap = dataclasses.replace(model.state, contacts=capped)
+    assert model.dt <= float(simulate.thermal_time_step(model.sim, at_cap, model.params))
+
+
+@pytest.mark.slow
+def test_a_sintering_run_killed_mid_way_resumes_bitwise(tmp_path):
+    scene = copy.deepcopy(CELL)
+    scene["run"].update(duration=0.02, output_every=20, checkpoint_every=40)
+    full, _ = runner.run_scene(validate_scene(copy.deepcopy(scene)), tmp_path / "full", progress=False,
+                               pictures=False)
+    runner.run_scene(validate_scene(copy.deepcopy(scene)), tmp_path / "cut", progress=False, pictures=False,
+                     stop_after_chunks=3)
+    resumed, _ = runner.resume(tmp_path / "cut", progress=False, pictures=False)
+    np.testing.assert_array_equal(np.asarray(resumed), np.asarray(full))
+    assert (tmp_path / "full" / "history.csv").read_bytes() == (tmp_path / "cut" / "history.csv").read_bytes()
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda s: s["sintering"]["params"].update(Q=100.0), r"unknown key sintering\.params\.Q"),
+    (lambda s: s["sintering"]["params"].update(A=-1.0), r"sintering\.params\.A must be a number in \(0, 1e\+06\]"),
+    (lambda s: s["sintering"].update(every=0), r"sintering\.every must be an integer in \[1, 1e\+06\]"),
+    (lambda s: s["sintering"].update(law="surface"), r"sintering\.law must be one of"),
+    (lambda s: s["sintering"].update(evry=3), r"unknown key sintering\.evry \(did you mean 'every'\?\)"),
+    (lambda s: s["conduction"].update(neck_model="coble"), r"conduction\.neck_model must be \"volume_conserving\""),
+    (lambda s: s["sintering"]["params"].update(K0=1.0), r"unknown key sintering\.params\.K0"),
+])
+def test_bad_sintering_keys_are_named_before_anything_is_built(mutate, message):
+    scene = copy.deepcopy(CELL)
+    mutate(scene)
+    with pytest.raises(SceneError, match=message):
+        validate_scene(scene)
+
+
+def test_a_touching_lattice_without_sintering_is_still_refused():
+    scene = copy.deepcopy(CELL)
+    del scene["sintering"]
+    with pytest.raises(SceneError, match=r"packing\.radius must be > packing\.spacing/2"):
+        validate_scene(scene)
+
+
+def test_the_sintering_keys_reach_the_model():
+    scene = copy.deepcopy(CELL)
+    scene["sintering"] = {"law": "power_law", "every": 7, "params": {"K0": 2e-30, "exponent": 5.0}}
+    model = runner.build_model(validate_scene(scene))
+    assert model.physics.sintering == neck_growth.Sintering(law="power_law", every=7)
+    assert model.physics.conduction.conductance == "lifted" and model.physics.neck == "volume_conserving"
+    assert {k: float(v) for k, v in model.params.sintering.items()} == {"K0": 2e-30, "exponent": 5.0}
+
+
+def test_the_built_in_sintering_scene_is_valid():
+    scene = load_scene("sintering_hot_floor")
+    assert scene["sintering"]["law"] == "grain_boundary" and scene["packing"]["radius"] * 2 == \
+        scene["packing"]["spacing"]
