@@ -53,13 +53,16 @@ class Sintering:
       law: a key of :data:`sintercond.sintering.KINETIC_LAWS` (``"grain_boundary"``, ``"power_law"``,
         ``"viscous"``); its parameters are ``Params.sintering``.
       every: thermal steps between two neck updates (>= 1); each update grows the necks over those steps.
-      quadrature_nodes, newton_iterations: of :func:`sintercond.sintering.grow_neck` (>= 1).
+      quadrature_nodes, newton_iterations: of :func:`sintercond.sintering.grow_neck` (>= 1). An update
+        interval grows a neck by a small fraction of itself, so fewer than the law tier's defaults (8, 4)
+        reach round-off: 4 and 2 agree with them to 1e-12 on the pulsed chain of ``benchmarks/sintering_step.py``
+        (its table gives the error of each choice).
     """
 
     law: str = "grain_boundary"
     every: int = 1
-    quadrature_nodes: int = 8
-    newton_iterations: int = 4
+    quadrature_nodes: int = 4
+    newton_iterations: int = 2
 
     def __post_init__(self):
         if self.law not in sintering.KINETIC_LAWS:
@@ -72,24 +75,47 @@ class Sintering:
 
 @pytree_dataclass
 class NeckState:
-    """What the sintering step carries besides the necks (which live in the contacts).
+    """What the sintering step carries besides the necks (which live in the contacts' table, both rows of a pair).
+
+    Each contact is grown once, on its pair ``(i, j)``, ``i < j``, and its neck gathered back to the two slots of
+    the table that hold it.
 
     Attributes:
       start_overlap: ``[n, m]`` the approach of each contact at the start of the run (m), for the shrinkage.
       interval_temperature: ``[n]`` particle temperatures at the last neck update (K): the start of the
         current growth interval.
       unstable: bool scalar, set when grown necks made the time step exceed the explicit limit.
+      pairs: ``[c, 2]`` int32 the contacts ``(i, j)``, ``i < j``.
+      pair_slot: ``[c]`` int32 the flat index of each pair's slot in row ``i`` of the table.
+      slot_pair: ``[n, m]`` int32 the pair each slot of the table holds; ``c`` in padding.
     """
 
     start_overlap: Any
     interval_temperature: Any
     unstable: Any
+    pairs: Any
+    pair_slot: Any
+    slot_pair: Any
 
 
 def neck_state(contacts: LiftedContacts, temperature) -> NeckState:
     """The :class:`NeckState` at the start of a run on ``contacts`` with particle ``temperature`` ``[n]`` (K)."""
+    neighbors = np.asarray(contacts.neighbors)
+    n, m = neighbors.shape
+    rows = np.broadcast_to(np.arange(n)[:, None], (n, m))
+    valid = (neighbors != rows) & (neighbors < n)
+    lower = valid & (rows < neighbors)
+    pairs = np.stack([rows[lower], neighbors[lower]], axis=1)  # row-major: sorted by (i, j)
+    slot_pair = np.full((n, m), len(pairs), np.int64)
+    slot_pair[lower] = np.arange(len(pairs))
+    # the upper slots: pair (j, i) seen from row i > j, found by its rank among the sorted pairs
+    upper = valid & (rows > neighbors)
+    keys = pairs[:, 0].astype(np.int64) * n + pairs[:, 1]
+    slot_pair[upper] = np.searchsorted(keys, neighbors[upper].astype(np.int64) * n + rows[upper])
     return NeckState(start_overlap=jnp.asarray(contacts.overlap), interval_temperature=jnp.asarray(temperature),
-                     unstable=jnp.zeros((), bool))
+                     unstable=jnp.zeros((), bool), pairs=jnp.asarray(pairs, jnp.int32),
+                     pair_slot=jnp.asarray(np.flatnonzero(lower), jnp.int32),
+                     slot_pair=jnp.asarray(slot_pair, jnp.int32))
 
 
 def law_params(spec: Sintering, params) -> dict:
@@ -140,27 +166,26 @@ def _pairs(neighbors, n):
     return jnp.minimum(rows, j), jnp.maximum(rows, j), valid
 
 
-def grow_table_necks(spec: Sintering, params: dict, neighbors, neck, radii, start_temperature, end_temperature,
-                     duration):
+def grow_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, radii, end_temperature, duration):
     """Necks and approaches ``[n, m]`` (m) of a padded table after one growth interval of ``duration`` (s).
 
-    The pair temperature is the mean of its value at the start (``start_temperature`` ``[n]``, K) and at the end
-    (``end_temperature``) of the interval (module docstring). Each slot grows its pair in index order, so both
-    rows of a pair hold bitwise the same neck (the conductances stay symmetric, heat is conserved). Padding
-    slots stay 0.
+    The pair temperature is the mean of its value at the start (``carried.interval_temperature``, K) and at the
+    end (``end_temperature`` ``[n]``) of the interval (module docstring). Each contact grows once, on its pair,
+    and both slots of the table take its neck: the conductances stay exactly symmetric, heat is conserved.
+    Padding slots stay 0.
     """
-    lo, hi, valid = _pairs(neighbors, radii.shape[0])
-    r_lo, r_hi = radii[lo], radii[hi]
-    pair_start = sintering.pair_temperature(start_temperature[lo], start_temperature[hi])
-    pair_end = sintering.pair_temperature(end_temperature[lo], end_temperature[hi])
-    temperature = 0.5 * (pair_start + pair_end)
+    i, j = carried.pairs[:, 0], carried.pairs[:, 1]
+    r_i, r_j = radii[i], radii[j]
+    start = carried.interval_temperature
+    temperature = 0.5 * (sintering.pair_temperature(start[i], start[j])
+                         + sintering.pair_temperature(end_temperature[i], end_temperature[j]))
     dtype = neck.dtype
-    a = sintering._grow_neck(sintering.kinetic_law(spec.law), jnp.where(valid, neck, 0.0), r_lo, r_hi,
+    a = sintering._grow_neck(sintering.kinetic_law(spec.law), neck.reshape(-1)[carried.pair_slot], r_i, r_j,
                              temperature[None], jnp.reshape(jnp.asarray(duration, dtype), (1,)), params,
                              spec.quadrature_nodes, spec.newton_iterations)[0]
-    a = jnp.where(valid, a, 0.0)
-    h = jnp.where(valid, sintering.neck_overlap(a, r_lo, r_hi), 0.0)
-    return a, h
+    h = sintering.neck_overlap(a, r_i, r_j)
+    padded = lambda x: jnp.concatenate([x, jnp.zeros((1,), x.dtype)])[carried.slot_pair]  # noqa: E731
+    return padded(a), padded(h)
 
 
 def neck_statistics(state) -> dict:

@@ -697,9 +697,8 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         law = neck_growth.law_params(spec, prep.params.sintering)
 
         def grow(contacts, carried):
-            neck, overlap = neck_growth.grow_table_necks(spec, law, contacts.neighbors, contacts.neck, particles.radii,
-                                                         carried.interval_temperature, particles.temperature,
-                                                         spec.every * state.dt)
+            neck, overlap = neck_growth.grow_table_necks(spec, law, carried, contacts.neck, particles.radii,
+                                                         particles.temperature, spec.every * state.dt)
             contacts = dataclasses.replace(contacts, neck=neck, overlap=overlap)
             conductance = neck_conductance(physics, dataclasses.replace(state, contacts=contacts), prep.params)
             total = jnp.sum(conductance, axis=1)
@@ -709,7 +708,8 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             if physics.conduction.held:
                 limit = jnp.where(particles.fixed, jnp.inf, limit)
             unstable = carried.unstable | jnp.any(state.dt > limit)
-            return contacts, NeckState(carried.start_overlap, particles.temperature, unstable)
+            return contacts, dataclasses.replace(carried, interval_temperature=particles.temperature,
+                                                 unstable=unstable)
 
         if spec.every == 1:
             contacts, carried = grow(state.contacts, carried)

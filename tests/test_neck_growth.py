@@ -57,7 +57,10 @@ def test_each_contact_grows_as_the_law_tier_does_along_its_own_temperature_histo
         starts = pair[0:-every:every]
         history = 0.5 * (starts + ends)  # the trapezoid of each growth interval (neck_growth's docstring)
         durations = np.full(len(history), every * float(state.dt))
-        expected = sintering.grow_neck("grain_boundary", 0.0, radii[i], radii[j], history, durations, KINETICS)[-1]
+        spec = sim.physics.sintering  # the same integration as the law tier's, with the spec's nodes and steps
+        expected = sintering.grow_neck("grain_boundary", 0.0, radii[i], radii[j], history, durations, KINETICS,
+                                       quadrature_nodes=spec.quadrature_nodes,
+                                       newton_iterations=spec.newton_iterations)[-1]
         got = float(end.contacts.neck[i, slot])
         assert float(expected) > 0.1 * min(radii[i], radii[j])  # the necks did grow
         np.testing.assert_allclose(got, float(expected), rtol=1e-12)

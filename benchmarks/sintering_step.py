@@ -1,0 +1,136 @@
+"""Sintering in the simulator: the cost of a step with growing necks, and the error of updating them every N steps.
+
+Usage: python benchmarks/sintering_step.py [--sizes 10648,97336] [--steps 100] [--no-write]
+
+* Step cost: 100 steps of a simple cubic lattice of 40 um Ti6Al4V spheres (a small initial overlap, so necks
+  exist), jitted ``rollout``, on the same state: conduction with a table (the fast thermal path), conduction
+  with lifted conductances (the law applied once per rollout), and sintering with the necks grown every step
+  and every 10 steps (the grain-boundary law; the conductance law applied to the grown necks at every step).
+  The obvious alternative to the in-scan update, a host loop that grows the necks between jitted conduction
+  chunks, pays a dispatch and a copy per update and cannot be differentiated through: not timed.
+* Error against N: the neck of each contact of a pulsed three-sphere chain (the test's history, far from
+  isothermal) after 0.24 s, updated every N steps, against N = 1 at the same thermal step.
+
+Prints the tables and rewrites the ``sintering_step`` section of benchmarks/RESULTS.md.
+"""
+
+import argparse
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from _common import best_time, command_line, markdown_table, write_section
+
+from sintercond import neck_growth, simulate
+from sintercond.state import particle_state
+
+KINETICS = {"A": 1.2e-20, "activation_energy": 37.0}  # docs/laws.md: about Rizza & Galati's 80-58.6 couple
+FAST = {"A": 1e-16, "activation_energy": 100.0}  # the tests' chain: necks of a few um in a fraction of a second
+
+
+def lattice(n, dtype=np.float64):
+    side = round(n ** (1 / 3))
+    r, spacing = 40e-6, 79.6e-6
+    grid = np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    centres = (grid * spacing + r).astype(dtype)
+    radii = np.full(len(centres), r, dtype)
+    temperature = np.linspace(845.0, 1273.0, len(centres)).astype(dtype)
+    return centres, radii, temperature
+
+
+def models(n):
+    centres, radii, temperature = lattice(n)
+    particles = particle_state(centres, radii, temperature, 4430.0)
+    out = {}
+    specs = {
+        "conduction, table": simulate.Physics.create(law="rojek"),
+        "conduction, lifted": simulate.Physics.create(law="rojek", conductance="lifted"),
+        "sintering, every step": simulate.Physics.create(law="rojek", conductance="lifted",
+                                                         sintering=neck_growth.Sintering(every=1)),
+        "sintering, every 10 steps": simulate.Physics.create(law="rojek", conductance="lifted",
+                                                             sintering=neck_growth.Sintering(every=10)),
+    }
+    for name, physics in specs.items():
+        if physics.conduction.conductance == "table":
+            from sintercond.network import contact_table
+            contacts = simulate.table_contacts(contact_table(centres, radii, 1.0, "rojek"))
+        else:
+            contacts = simulate.lifted_contacts(physics, centres, radii)
+        necks = None if physics.sintering is None else neck_growth.neck_state(contacts, particles.temperature)
+        state = simulate.init_state(particles, contacts, 2e-4, sintering=necks)
+        params = simulate.Params(conductivity=[7.0], specific_heat=[560.0],
+                                 sintering=None if necks is None else dict(KINETICS))
+        out[name] = (simulate.simulator(physics), state, params)
+    return out
+
+
+def step_costs(sizes, steps):
+    rows = []
+    for n in sizes:
+        base = None
+        for name, (sim, state, params) in models(n).items():
+            run = jax.jit(lambda s, p, sim=sim: simulate.rollout(sim, s, p, steps, simulate.SaveAt(steps, lambda s: ()),
+                                                                 checkpoint=False)[0])
+            seconds = best_time(run, state, params, repeats=5, max_seconds=20.0)
+            base = seconds if base is None else base
+            rows.append([f"{len(state.particles.radii):,}", name, f"{seconds * 1e3 / steps:.3g}",
+                         f"{len(state.particles.radii) * steps / seconds:.3g}", f"{seconds / base:.2f}"])
+    return rows
+
+
+def chain_necks(spec):
+    """The two necks (m) of the pulsed three-sphere chain (tests/test_neck_growth.py) after 240 steps of 1 ms."""
+    radii = np.array([40e-6, 30e-6, 35e-6])
+    x = np.zeros((3, 3))
+    x[1:, 0] = np.cumsum(radii[:-1] + radii[1:])
+    pulse = simulate.PulseParams(power=jnp.array([2e-3, 0.0, 0.0]), duration=0.15)
+    particles = particle_state(x, radii, np.array([1000.0, 1100.0, 1050.0]), 4430.0)
+    physics = simulate.Physics.create(law="rojek", conductance="lifted", pulse=True, sintering=spec)
+    contacts = simulate.lifted_contacts(physics, x, radii)
+    state = simulate.init_state(particles, contacts, 1e-3, sintering=neck_growth.neck_state(contacts,
+                                                                                          particles.temperature))
+    params = simulate.Params(conductivity=[7.0], specific_heat=[560.0], sintering=dict(FAST), pulse=pulse)
+    sim = simulate.simulator(physics)
+    end, _ = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 240))(state, params)
+    return np.asarray(end.contacts.neck[[0, 1], [0, 1]])
+
+
+def every_error():
+    """Rows of the error against N (every) and against the integration's nodes and Newton steps."""
+    reference = chain_necks(neck_growth.Sintering(every=1, quadrature_nodes=8, newton_iterations=4))
+    rows = []
+    for every in (1, 2, 5, 10, 20, 40):
+        for nodes, newton in ((8, 4), (4, 2), (3, 1), (2, 1)):
+            if every not in (1, 10) and (nodes, newton) != (4, 2):
+                continue
+            a = chain_necks(neck_growth.Sintering(every=every, quadrature_nodes=nodes, newton_iterations=newton))
+            error = np.max(np.abs(a / reference - 1))
+            rows.append([every, f"{every * 1e-3:g}", f"{nodes}, {newton}", f"{a[0] * 1e6:.6g}", f"{a[1] * 1e6:.6g}",
+                         "reference" if (every, nodes, newton) == (1, 8, 4) else f"{error:.2e}"])
+    return rows
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", default="10648,97336")
+    parser.add_argument("--steps", type=int, default=100)
+    parser.add_argument("--no-write", action="store_true")
+    args = parser.parse_args()
+    cost = markdown_table(["particles", "step", "ms per step", "particle-steps/s", "time / table step"],
+                          step_costs([int(s) for s in args.sizes.split(",")], args.steps))
+    error = markdown_table(["N (steps per update)", "interval (s)", "nodes, Newton steps", "neck 0-1 (um)",
+                            "neck 1-2 (um)", "largest relative error"], every_error())
+    print(cost, "\n\n", error)
+    if not args.no_write:
+        write_section("sintering_step", command_line(), "## Sintering step: cost against conduction, error against N\n\n"
+                      f"{args.steps} steps of a simple cubic lattice, jitted rollout, minimum of 5 (each row timed "
+                      "in the same run; compare ratios). Sintering: grain-boundary necks grown by the law tier's "
+                      "exact interval integration (8 nodes, 4 Newton steps) on both rows of each contact, then the "
+                      "conductance law on the grown necks at every step.\n\n" + cost + "\n\nThe necks of a pulsed "
+                      "three-sphere chain after 0.24 s (dt = 1 ms), updated every N steps with the trapezoid pair "
+                      "temperature of each interval, against N = 1 with the law tier's 8 nodes and 4 Newton steps "
+                      "(the simulator's default is 4 and 2):\n\n" + error)
+
+
+if __name__ == "__main__":
+    main()
