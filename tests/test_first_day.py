@@ -139,8 +139,11 @@ def test_a_lattice_summary_has_its_packing_fraction_and_coordination():
                                                  / a**3, rel=1e-14)
     bonds = 3 * 36 - (3 * 3 + 4 * 3 + 4 * 3)  # the bonds across the missing faces excluded
     assert bed.coordination == pytest.approx(2 * bonds / 36, rel=1e-15)
+    # touching spheres are point contacts (a [sintering] lattice grows necks from them): 12 bonds of 8 spheres
     touching = packing.from_scene({"kind": "simple_cubic", "counts": [2, 2, 2], "spacing": 1e-4, "radius": 0.5e-4})
-    assert touching.packing_fraction == pytest.approx(math.pi / 6, rel=1e-14) and touching.coordination == 0.0
+    assert touching.packing_fraction == pytest.approx(math.pi / 6, rel=1e-14) and touching.coordination == 3.0
+    apart = packing.from_scene({"kind": "simple_cubic", "counts": [2, 2, 2], "spacing": 1e-4, "radius": 0.49e-4})
+    assert apart.coordination == 0.0
 
 
 @pytest.mark.parametrize("mode", ["stop", "warn"])
