@@ -25,8 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import (forces, guards, heat_sources, mechanics, neck_growth, network, packing, plots, simulate, thermal,
-                        walls)
+from sintercond import (forces, guards, heat_sources, mechanics, neck_growth, network, packing, plots, simulate, steady,
+                        thermal, walls)
 from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
@@ -49,6 +49,7 @@ class Model:
     wall_heat: tuple = ()  # (column, index of the scene wall, mode, held mask) of each held or conducting wall
     limits: dict = dataclasses.field(default_factory=dict)  # {"thermal", "mechanical", "wall", "beam": s} bounds
     sized_speed: float | None = None  # with mechanics: the approach speed (m/s) the mechanical step is sized for
+    k_star_axis: int | None = None  # with [sintering] k_star_axis: the axis of k* at each output
 
     @property
     def physics(self) -> simulate.Physics:
@@ -102,14 +103,15 @@ def _nusselt(convection):
 
 def scene_physics(scene, walls=0) -> simulate.Physics:
     """The static physics spec of a validated scene."""
-    c, s = scene["conduction"], scene.get("sintering")
+    c, s, ramp = scene["conduction"], scene.get("sintering"), scene.get("preheating")
     beam = scene.get("beam")
+    held = any(w["mode"] == "held" for w in _walls(scene)) or (ramp is not None and ramp["hold"] == "all")
     # a contact resistance makes the law nonlinear in the conductivity, and growing necks change it: lift it
     lifted = c.get("params", {}).get("contact_resistance", 0.0) or s is not None
     return simulate.Physics(
         conduction=simulate.Conduction(
             law=c["law"], neck_model=c.get("neck_model"), conductance="lifted" if lifted else "table",
-            held=any(w["mode"] == "held" for w in _walls(scene)), conducting_walls=walls),
+            held=held, conducting_walls=walls, held_ramp=ramp is not None),
         sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
                                  radiation="radiation" in scene),
         sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"]))
@@ -181,6 +183,9 @@ def scene_params(scene) -> simulate.Params:
         law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
         sintering=None if "sintering" not in scene else {k: f(v) for k, v in
                                                          scene["sintering"].get("params", {}).items()},
+        held_ramp=None if "preheating" not in scene else simulate.HeldRampParams(
+            f(scene["preheating"]["end_temperature"]), f(scene["preheating"]["duration"]),
+            f(float(scene["preheating"]["steps"]))),
         beam=None if beam is None else simulate.BeamParams(
             intensity=f(beam["intensity"]), reach=f(beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"]),
             spot_radius=f(beam["spot_radius"]), absorptance=f(beam["absorptance"]), speed=f(beam["speed"]),
@@ -226,6 +231,9 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     except ValueError as err:
         raise SceneError(f"the packing does not fit the conduction model: {err}") from None
     fixed_mask, fixed_temperature, conducting = _apply_walls(scene, centres, radii)
+    if "preheating" in scene and scene["preheating"]["hold"] == "all":  # an isothermal cell on the ramp
+        fixed_mask = np.ones(len(radii), bool)
+        fixed_temperature = np.full(len(radii), scene["initial"]["temperature"])
     touching_walls = wall_contacts(scene, centres, radii, log)
     lifted = physics.conduction.conductance == "lifted"
     physics = dataclasses.replace(physics, conduction=dataclasses.replace(
@@ -249,11 +257,17 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     state = simulate.init_state(particles, limiting, 1.0, sintering=necks)
     run = scene["run"]
     sources = thermal.source_conductance(physics.sources, particles.radii, params, _highest_temperature(scene))
-    thermal_limit = float(simulate.thermal_time_step(sim, state, params, sources))
+    # every particle held (an isothermal cell on a ramp): no conduction to keep stable
+    thermal_limit = np.inf if fixed_mask.all() else float(simulate.thermal_time_step(sim, state, params, sources))
     at_cap = " on the necks at the kinetic law's cap" if necks is not None else ""
     bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
                                          f"{thermal_limit:.6g} s{at_cap} (G_i: linearised convection and "
                                          "radiation)")}
+    if "preheating" in scene:
+        ramp = scene["preheating"]
+        step = RAMP_STEP_FRACTION * ramp["duration"] / ramp["steps"]
+        bounds["preheating"] = (step, f"{step:.6g} s, {RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
+                                      "(preheating.duration / preheating.steps)")
     reallocate = None
     motion = None
     if mechanics_on(scene):
@@ -299,7 +313,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
     return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
                  _wall_heat_specs(scene, centres, radii),
-                 {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None)
+                 {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None,
+                 scene["sintering"].get("k_star_axis") if "sintering" in scene else None)
 
 
 def _fastest_wall(scene) -> tuple[float, int | None]:
@@ -315,6 +330,7 @@ def _highest_temperature(scene) -> float:
     """The highest temperature a scene names (initial, walls, environment): where radiation is stiffest."""
     temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in _walls(scene) if "temperature" in w]
     temperatures += [scene[k]["environment_temperature"] for k in ("convection", "radiation") if k in scene]
+    temperatures += [scene["preheating"]["end_temperature"]] if "preheating" in scene else []
     return float(max(temperatures))
 
 
@@ -450,7 +466,8 @@ MAX_TEMPERATURE = 1e5
 
 
 def physical_range_check(scene):
-    """``check(state)`` for :func:`advance`: temperatures finite, > 0 K and <= :data:`MAX_TEMPERATURE`.
+    """``check(state)`` for :func:`advance`: temperatures finite, > 0 K and <= :data:`MAX_TEMPERATURE`, and
+    growing necks still within the time step's stability (:func:`sintercond.neck_growth.check_stable`).
 
     The error names the step and the scene keys that can drive a run there.
     """
@@ -461,6 +478,7 @@ def physical_range_check(scene):
     warned = []
 
     def check(state):
+        neck_growth.check_stable(state)
         t = state.particles.temperature
         bad = ~jnp.isfinite(t) | (t <= 0) | (t > MAX_TEMPERATURE)
         if bool(jnp.any(bad)):
@@ -506,6 +524,11 @@ def run_check(scene, model, state):
     return check
 
 
+RAMP_STEP_FRACTION = 0.1
+"""The largest time step is this fraction of a step of a ``[preheating]`` ramp: each level of the ramp is resolved
+in ten steps (necks grow over an interval at the mean of its start and end temperatures, so the interval that
+straddles a level's edge takes the mean of two levels)."""
+
 HISTORY_COLUMNS = ("step", "time_s", "T_mean_K", "T_min_K", "T_max_K")
 """The columns of ``history.csv`` every run has, one row per output step (the LAMMPS "thermo" analogue)."""
 MECHANICS_COLUMNS = ("kinetic_energy_J", "contacts", "wall_contacts", "max_overlap_m")
@@ -524,7 +547,23 @@ def history_columns(model) -> tuple:
     through scene wall ``k``, W) for each held or conducting wall."""
     return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics is not None else ())
             + (SINTERING_COLUMNS if model.physics.sintering is not None else ())
+            + (("k_star_W_mK",) if model.k_star_axis is not None else ())
             + tuple(spec[0] for spec in model.wall_heat))
+
+
+def sintered_conductivity(model, state) -> float:
+    """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
+    (:func:`sintercond.steady.steady_state_network_conductivity`, the packing's face layers held hot and cold),
+    0 while no contact conducts."""
+    carried, radii = state.sintering, model.radii
+    slot = np.asarray(carried.pair_slot)
+    pair_k = np.asarray(simulate.neck_conductance(model.physics, state, model.params)).reshape(-1)[slot]
+    if not np.any(pair_k > 0):
+        return 0.0
+    i, j = np.asarray(carried.pairs, np.int64).T
+    pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap).reshape(-1)[slot], radii[i], radii[j],
+                                 len(radii))
+    return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=model.k_star_axis))
 
 
 class Observation(NamedTuple):
@@ -637,6 +676,8 @@ def _history_row(model, state, obs: Observation) -> str:
     if model.physics.sintering is not None:
         stats = neck_growth.neck_statistics(state)
         values += [float(stats[name]) for name in SINTERING_COLUMNS]
+    if model.k_star_axis is not None:
+        values.append(sintered_conductivity(model, state))
     values += list(obs.wall_heat)
     return f"{int(state.step)}," + ",".join(repr(v) if isinstance(v, float) else str(v) for v in values) + "\n"
 

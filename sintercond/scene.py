@@ -222,6 +222,21 @@ _SCHEMA = {
                          "mean of the pair temperatures at their start and end"),
         "params": Key(dict, None, False, default="the law's",
                       doc="the kinetic law's parameters, see [sintering.params]"),
+        "k_star_axis": Key(int, _choice(0, 1, 2), False,
+                           doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
+                               "steady solve on the grown necks at each output (sintercond.steady, the face "
+                               "layers of the packing held hot and cold), at material.conductivity"),
+    },
+    "preheating": {
+        "end_temperature": Key(float, TEMPERATURE, True, "K", doc="the temperature the held particles reach"),
+        "duration": Key(float, _within(0.0, 1e6, "s", low_open=True), True, "s", doc="the ramp's duration"),
+        "steps": Key(int, _within(1, 1e6), False, default=25,
+                     doc="equal steps of the ramp (25: Rizza & Galati 2024's Eq. 6), each held at the temperature "
+                         "it ends at"),
+        "hold": Key(str, _choice("walls", "all"), False, default="walls",
+                    doc="walls: the particles of the held walls follow the ramp from the wall's temperature; all: "
+                        "every particle is held and follows it from initial.temperature (an isothermal cell, as "
+                        "Rizza & Galati's REVs)"),
     },
     "run": {
         "duration": Key(float, _within(0.0, 1e6, "s", low_open=True), True, "s",
@@ -353,7 +368,7 @@ _SINTERING_PARAMS = {
                      doc="eta0 of viscous flow, eta = eta0 exp(Q / (R T))"),
 }
 _SECTIONS = ("packing", "material", "conduction", "initial", "boundary", "walls", "beam", "convection", "radiation",
-             "physics", "mechanics", "softening", "sintering", "run")
+             "physics", "mechanics", "softening", "sintering", "preheating", "run")
 _REQUIRED_SECTIONS = ("packing", "material", "conduction", "initial", "run")
 
 
@@ -667,7 +682,14 @@ def _largest_lattice_radius(model, spacing):
 
 
 def _check_sintering(scene):
-    """``[sintering]``: its law's parameters, and the physics the first stage grows necks on."""
+    """``[sintering]``: its law's parameters, and the physics the first stage grows necks on; ``[preheating]``."""
+    if "preheating" in scene:
+        ramp = scene["preheating"]
+        if ramp["hold"] == "walls" and not any(w["mode"] == "held" for w in scene["walls"]):
+            raise SceneError("[preheating] with preheating.hold = \"walls\" ramps the held walls: give a held "
+                             "[[walls]] (or boundary.floor_temperature), or preheating.hold = \"all\"")
+        if scene["physics"]["mechanics"]:
+            raise SceneError("[preheating] needs physics.mechanics = false in this version")
     if "sintering" not in scene:
         return
     s, conduction = scene["sintering"], scene["conduction"]
@@ -967,6 +989,10 @@ def scene_reference() -> str:
           "cap (they only grow).")
     table("[sintering.params]", _SINTERING_PARAMS, "Keys the chosen law takes: " + "; ".join(
         f"`{name}`: {', '.join(law.default_params)}" for name, law in sorted(KINETIC_LAWS.items())))
+    table("[preheating]", _SCHEMA["preheating"],
+          "A stepped temperature ramp of the held particles (Rizza & Galati 2024, Eq. 6, with the step count inside "
+          "its int(): `T(t) = T_0 + (T_end - T_0) min(ceil(steps t / duration), steps) / steps`), e.g. the plate "
+          "of a PBF-EB bed along its preheating, or an isothermal cell (`hold = \"all\"`).")
     table("[run]", _SCHEMA["run"])
     lines.extend(["## Limits", "",
                   f"- at most {MAX_LATTICE_PARTICLES} lattice particles and 20000 powder-bed particles, "

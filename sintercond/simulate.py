@@ -113,6 +113,9 @@ class Conduction:
         and held particles only).
       implicit_tol: relative residual of the implicit CG solve.
       held: some particles are held at fixed temperatures.
+      held_ramp: the held particles follow a stepped ramp (``Params.held_ramp``,
+        :class:`HeldRampParams`: Rizza & Galati 2024's Eq. 6 preheating) from their
+        ``fixed_temperature``; needs ``held``.
       conducting_walls: number of conducting plane walls of a thermal step
         (0: none traced); a mechanical step takes its walls as ``Mechanics.walls``.
     """
@@ -124,6 +127,7 @@ class Conduction:
     implicit_tol: float = 1e-13
     held: bool = False
     conducting_walls: int = 0
+    held_ramp: bool = False
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
@@ -136,6 +140,8 @@ class Conduction:
                              f"got {self.neck_model!r}")
         if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
             raise ValueError(f"Conduction.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
+        if self.held_ramp and not self.held:
+            raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
 
     @property
     def neck(self) -> str:
@@ -259,7 +265,7 @@ class Physics:
     @classmethod
     def create(cls, law="rojek", neck_model=None, conductance="table", contacts="static", integrator="explicit",
                held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
-               motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None,
+               motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None, held_ramp=False,
                **mechanical) -> Physics:
         """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
 
@@ -282,7 +288,7 @@ class Physics:
             spec = None
         return cls(conduction=Conduction(law=law, neck_model=neck_model, conductance=conductance,
                                          integrator=integrator, implicit_tol=implicit_tol, held=bool(held),
-                                         conducting_walls=conducting_walls),
+                                         conducting_walls=conducting_walls, held_ramp=bool(held_ramp)),
                    contacts=contacts, motion=motion,
                    sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
                                    pulse=bool(pulse), source=source),
@@ -345,6 +351,26 @@ class PulseParams:
 
 
 @pytree_dataclass
+class HeldRampParams:
+    """A stepped temperature ramp of the held particles (Rizza & Galati 2024, Eq. 6, with its erratum).
+
+    Each held particle rises from its ``fixed_temperature`` ``T_0`` to ``end_temperature`` in ``steps`` equal
+    steps of ``duration / steps``, each step held at the temperature it ends at (the reading that reproduces their
+    Table 1): ``T(t) = T_0 + (T_end - T_0) min(ceil(steps t / duration), steps) / steps`` (K, t in s).
+    """
+
+    end_temperature: Any
+    duration: Any
+    steps: Any
+
+
+def held_ramp_temperature(ramp: HeldRampParams, start, t):
+    """The held temperatures ``[n]`` (K) at time ``t`` (s) of a :class:`HeldRampParams` from ``start`` ``[n]``."""
+    fraction = jnp.minimum(jnp.ceil(ramp.steps * t / ramp.duration), ramp.steps) / ramp.steps
+    return start + (ramp.end_temperature - start) * jnp.maximum(fraction, 0.0)
+
+
+@pytree_dataclass
 class Params:
     """The differentiable inputs of a simulation (SI units).
 
@@ -360,6 +386,7 @@ class Params:
       sintering: the kinetic law's parameters in use (e.g. ``{"A": 1e-17, "activation_energy": 40.0}``),
         merged over the law's defaults (:data:`sintercond.sintering.KINETIC_LAWS`), with
         ``Physics.sintering``; else None.
+      held_ramp: :class:`HeldRampParams` with ``Conduction.held_ramp``, else None.
     """
 
     conductivity: Any
@@ -371,6 +398,7 @@ class Params:
     pulse: PulseParams | None = None
     mechanics: MechanicalParams | None = None
     sintering: dict | None = None
+    held_ramp: HeldRampParams | None = None
 
 
 @pytree_dataclass
@@ -653,12 +681,19 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         power = power + thermal.source_power(physics.sources, state, params)
         fixed = particles.fixed if physics.conduction.held else None
         temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
-                                              particles.fixed_temperature)
+                                              held_temperature(state, prep))
         positions, velocity, spin = mechanics.integrate(positions, loads.mechanics, loads.force, loads.torque, mass,
                                                         radii, state.dt)
         particles = dataclasses.replace(particles, positions=positions, temperature=temperature)
         motion = dataclasses.replace(loads.mechanics, velocity=velocity, spin=spin)
         return dataclasses.replace(state, particles=particles, mechanics=motion, step=state.step + 1)
+
+    def held_temperature(state: SimState, prep: Prepared):
+        """The held particles' temperatures at the end of the step (K): fixed, or on their ramp."""
+        fixed = state.particles.fixed_temperature
+        if not physics.conduction.held_ramp:
+            return fixed
+        return held_ramp_temperature(prep.params.held_ramp, fixed, state.time + state.dt)
 
     def advance_fn(state: SimState, prep: Prepared) -> SimState:
         if physics.mechanics is not None:
@@ -674,19 +709,19 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                 terms = [conduction_power(state, prep, particles.temperature, None, None)] + terms
             power = functools.reduce(jnp.add, terms) if terms else jnp.zeros((), particles.temperature.dtype)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
-                                                  particles.fixed_temperature, (prep.scale, conductance, neighbors),
+                                                  held_temperature(state, prep), (prep.scale, conductance, neighbors),
                                                   pulse, prep.rates)
         elif physics.conduction.integrator == "explicit":
             power = heat_power_fn(state, prep, conductance, neighbors)
             temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
-                                                  particles.fixed_temperature)
+                                                  held_temperature(state, prep))
         else:
             temperature = thermal.backward_euler_solve(
                 particles.temperature, lambda x: prep.scale * network_laplacian(conductance, neighbors, x),
                 None if prep.wall_conductance is None else prep.scale * jnp.sum(prep.wall_conductance, axis=0),
                 None if prep.wall_conductance is None else prep.scale * jnp.sum(
                     prep.wall_conductance * prep.wall_temperature, axis=0),
-                prep.capacity, state.dt, fixed, particles.fixed_temperature, physics.conduction.implicit_tol)
+                prep.capacity, state.dt, fixed, held_temperature(state, prep), physics.conduction.implicit_tol)
         state = dataclasses.replace(state, particles=dataclasses.replace(particles, temperature=temperature),
                                     step=state.step + 1)
         return state if physics.sintering is None else grow_necks(state, prep)
@@ -969,6 +1004,16 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     fail_where(~np.isfinite(np.asarray(p.positions)).all(axis=1),
                lambda i: f"particle positions must be finite; particle {i[0]} is not")
     require_positive("particle temperatures (K)", np.asarray(p.temperature, np.float64))
+    if sim.physics.conduction.held_ramp:
+        ramp = params.held_ramp
+        if ramp is None:
+            raise ValueError("Conduction.held_ramp needs Params.held_ramp (simulate.HeldRampParams)")
+        if all_concrete(ramp):
+            require_positive("Params.held_ramp.end_temperature (K)", np.asarray(ramp.end_temperature, np.float64))
+            require_positive("Params.held_ramp.duration (s)", np.asarray(ramp.duration, np.float64))
+            steps = np.asarray(ramp.steps, np.float64)
+            if not (steps.shape == () and steps >= 1 and steps == np.round(steps)):
+                raise ValueError(f"Params.held_ramp.steps must be a whole number >= 1; got {ramp.steps!r}")
     if sim.physics.sintering is not None:
         if state.sintering is None:
             raise ValueError("Physics.sintering needs SimState.sintering (simulate.init_state(..., "

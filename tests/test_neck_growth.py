@@ -189,3 +189,25 @@ def test_a_state_without_its_neck_state_is_refused():
     import dataclasses
     with pytest.raises(ValueError, match="SimState.sintering"):
         simulate.rollout(sim, dataclasses.replace(state, sintering=None), params, 4)
+
+
+def test_held_particles_on_a_ramp_take_each_level_at_its_end_and_bad_ramps_are_refused():
+    import dataclasses
+    radii = np.array([40e-6, 40e-6])
+    x = np.array([[0.0, 0.0, 0.0], [80e-6, 0.0, 0.0]])
+    physics = simulate.Physics.create(law="rojek", conductance="lifted", held=True, held_ramp=True)
+    particles = particle_state(x, radii, np.array([845.0, 900.0]), DENSITY, fixed=[True, False])
+    state = simulate.init_state(particles, simulate.lifted_contacts(physics, x, radii), 0.1)
+    ramp = simulate.HeldRampParams(1273.0, 9.5, 25.0)
+    params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT], held_ramp=ramp)
+    sim = simulate.simulator(physics)
+    _, held = simulate.rollout(sim, state, params, 95, simulate.SaveAt(1, lambda s: s.particles.temperature[0]))
+    times = 0.1 * np.arange(1, 96)
+    # Rizza & Galati's Table 1 (879 K at 0.5 s ... 1273 K at 9.5 s): T = 845 + ceil(t / 0.38) 17.12 K
+    np.testing.assert_allclose(np.asarray(held), 845.0 + np.ceil(times / 0.38 - 1e-9) * 17.12, rtol=1e-13)
+    for bad, match in ((None, "needs Params.held_ramp"), (dataclasses.replace(ramp, steps=2.5), "whole number"),
+                       (dataclasses.replace(ramp, duration=0.0), "duration")):
+        with pytest.raises(ValueError, match=match):
+            simulate.rollout(sim, state, dataclasses.replace(params, held_ramp=bad), 2)
+    with pytest.raises(ValueError, match="held_ramp.*needs held=True"):
+        simulate.Physics.create(held_ramp=True)

@@ -118,6 +118,9 @@ ELSEWHERE = {
     "run.override_limits": "test_bad_input.py: the limits refused and overridden",
     **{f"sintering.{key}": "test_sintering_scene.py: test_the_sintering_keys_reach_the_model (no mechanics)"
        for key in ("law", "every", "params")},
+    "sintering.k_star_axis": "test_sintering_scene.py: the SC cell's k_star_W_mK against K_pair / spacing",
+    **{f"preheating.{key}": "test_sintering_scene.py: the SC cell on the ramp, test_a_held_wall_follows_the_ramp"
+       for key in ("end_temperature", "duration", "steps", "hold")},
 }
 WALL_ROWS = [  # walls[0] with mechanics is physics.walls[0]
     ("axis", 1, lambda w: tuple(w.normal), (0.0, 1.0, 0.0)),

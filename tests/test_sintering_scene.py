@@ -112,3 +112,63 @@ def test_the_built_in_sintering_scene_is_valid():
     scene = load_scene("sintering_hot_floor")
     assert scene["sintering"]["law"] == "grain_boundary" and scene["packing"]["radius"] * 2 == \
         scene["packing"]["spacing"]
+
+
+def test_rizza_galatis_sc_cell_on_the_ramp_grows_as_the_law_tier_and_conducts_k_pair_over_spacing(tmp_path):
+    scene = load_scene("rizza2024_sc_cell", duration=1.0)  # two edges of the ramp's levels (0.38 and 0.76 s)
+    scene["run"].update(output_every=500, checkpoint_every=1000)
+    _, summary = runner.run_scene(scene, tmp_path, progress=False, pictures=False)
+    history = runner.read_history(tmp_path)
+    r, dt = 40e-6, scene["run"]["dt"]
+    # the history the held cell saw: each step's end temperature on the ramp, as the simulator computes it
+    ends = np.arange(1000) * dt + dt
+    levels = 845.0 + (1273.0 - 845.0) * np.minimum(np.ceil(25.0 * ends / 9.5), 25.0) / 25.0
+    history_seen = 0.5 * (np.concatenate([[845.0], levels[:-1]]) + levels)
+    spec = neck_growth.Sintering()
+    params = scene["sintering"]["params"]
+    law = {k: params[k] for k in ("A", "activation_energy", "dihedral_angle")}
+    expected = sintering.grow_neck("grain_boundary", 0.0, r, r, history_seen, np.full(1000, dt), law,
+                                   quadrature_nodes=spec.quadrature_nodes,
+                                   newton_iterations=spec.newton_iterations)[-1]
+    neck = summary["max_neck_ratio"] * r
+    np.testing.assert_allclose(neck, float(expected), rtol=1e-9)  # the cell's necks start at ~1e-12 m, not 0
+    # against the exact stepped ramp (the law tier's preheating history): the two steps straddling an edge of a
+    # level take the mean of two levels, 17 K apart, for 1 ms of 1 s
+    durations, temperatures, index = sintering.preheating_history([1.0])
+    ramp = sintering.grow_neck("grain_boundary", 0.0, r, r, temperatures, durations, law)[index[0]]
+    assert abs(neck / float(ramp) - 1) < 1e-3
+    # a simple cubic lattice conducts K_pair / spacing along an axis (steady.py)
+    from sintercond.conductance import conductance_from_neck
+    k_pair = conductance_from_neck("rojek", neck, r, r, float(sintering.neck_overlap(neck, r, r)), 16.72, 16.72)
+    np.testing.assert_allclose(history["k_star_W_mK"][-1], float(k_pair) / 80e-6, rtol=1e-9)
+    assert history["k_star_W_mK"][0] == 0.0  # point contacts do not conduct
+
+
+def test_a_held_wall_follows_the_ramp_and_the_bed_heats_from_it(tmp_path):
+    scene = copy.deepcopy(CELL)
+    scene["preheating"] = {"end_temperature": 1100.0, "duration": 0.02, "steps": 4}
+    scene["walls"][0]["temperature"] = 900.0
+    scene["run"].update(duration=0.02, output_every=10, checkpoint_every=10)
+    model = runner.build_model(validate_scene(scene))
+    assert model.dt <= 0.1 * 0.02 / 4 * (1 + 1e-12)  # each level resolved in ten steps (run.RAMP_STEP_FRACTION)
+    state, _ = runner.advance(model.sim, model.state, model.params, model.n_steps, 10)
+    held = np.asarray(state.particles.fixed)
+    assert held.sum() == 4
+    np.testing.assert_allclose(np.asarray(state.particles.temperature)[held], 1100.0, rtol=1e-14)
+    free = np.asarray(state.particles.temperature)[~held]
+    assert np.all(free > 845.0) and np.all(free < 1100.0)
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda s: (s.update(preheating={"end_temperature": 1273.0, "duration": 1.0}), s.pop("walls")),
+     r"preheating\.hold = \"walls\" ramps the held walls"),
+    (lambda s: s.update(preheating={"end_temperature": 1273.0, "duration": 1.0, "hold": "some"}),
+     r"preheating\.hold must be one of"),
+    (lambda s: s.update(preheating={"duration": 1.0}), r"missing key preheating\.end_temperature"),
+    (lambda s: s["sintering"].update(k_star_axis=3), r"sintering\.k_star_axis must be one of"),
+])
+def test_bad_preheating_keys_are_named(mutate, message):
+    scene = copy.deepcopy(CELL)
+    mutate(scene)
+    with pytest.raises(SceneError, match=message):
+        validate_scene(scene)
