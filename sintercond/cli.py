@@ -183,10 +183,9 @@ def effective_box(scene, bed, centres=None, radii=None, axis=2):
     if kind == "powder_bed":
         lo, hi = bed.container
         return lo, np.array([hi[0], hi[1], bed.height])
-    lo, hi = (centres - radii[:, None]).min(axis=0), (centres + radii[:, None]).max(axis=0)
-    lo[axis] += 0.5 * float(np.mean(radii))
-    hi[axis] -= 0.5 * float(np.mean(radii))
-    return lo, hi
+    from sintercond.steady import face_layer_box
+
+    return face_layer_box(centres, radii, axis)
 
 
 def _effective(args) -> int:

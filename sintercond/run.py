@@ -50,6 +50,7 @@ class Model:
     limits: dict = dataclasses.field(default_factory=dict)  # {"thermal", "mechanical", "wall", "beam": s} bounds
     sized_speed: float | None = None  # with mechanics: the approach speed (m/s) the mechanical step is sized for
     k_star_axis: int | None = None  # with [sintering] k_star_axis: the axis of k* at each output
+    lattice: bool = False  # a simple cubic packing (k* between its end layers)
 
     @property
     def physics(self) -> simulate.Physics:
@@ -314,7 +315,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
                  _wall_heat_specs(scene, centres, radii),
                  {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None,
-                 scene["sintering"].get("k_star_axis") if "sintering" in scene else None)
+                 scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
+                 scene["packing"]["kind"] == "simple_cubic")
 
 
 def _fastest_wall(scene) -> tuple[float, int | None]:
@@ -553,8 +555,8 @@ def history_columns(model) -> tuple:
 
 def sintered_conductivity(model, state) -> float:
     """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
-    (:func:`sintercond.steady.steady_state_network_conductivity`, the packing's face layers held hot and cold),
-    0 while no contact conducts."""
+    (:func:`sintercond.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
+    layers are held hot and cold; any other packing's face layers (:func:`sintercond.steady.face_layer_box`)."""
     carried, radii = state.sintering, model.radii
     slot = np.asarray(carried.pair_slot)
     pair_k = np.asarray(simulate.neck_conductance(model.physics, state, model.params)).reshape(-1)[slot]
@@ -563,7 +565,9 @@ def sintered_conductivity(model, state) -> float:
     i, j = np.asarray(carried.pairs, np.int64).T
     pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap).reshape(-1)[slot], radii[i], radii[j],
                                  len(radii))
-    return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=model.k_star_axis))
+    axis = model.k_star_axis
+    box = None if model.lattice else steady.face_layer_box(model.centres, radii, axis)
+    return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=axis, box=box))
 
 
 class Observation(NamedTuple):

@@ -154,6 +154,17 @@ def _hot_and_cold_faces(centres, radii, pairs, axis, box):
     return hot, cold, length, area
 
 
+def face_layer_box(centres, radii, axis):
+    """``(lo, hi)`` (m): the bounding box of the particles' surfaces with its two faces along ``axis`` moved half a
+    mean radius inward, so that each face layer (every particle whose surface comes within half a mean radius of the
+    outermost) reaches a face and is held by :func:`steady_state_conductivity`: the box of a random packing."""
+    centres, radii = np.asarray(centres, np.float64), np.asarray(radii, np.float64)
+    lo, hi = (centres - radii[:, None]).min(axis=0), (centres + radii[:, None]).max(axis=0)
+    lo[axis] += 0.5 * float(np.mean(radii))
+    hi[axis] -= 0.5 * float(np.mean(radii))
+    return lo, hi
+
+
 def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, axis=0, box=None, tol=1e-13):
     """``k*`` (W/(m K)) of a packing whose contacts' conductances are given, from one steady solve.
 

@@ -172,3 +172,16 @@ def test_bad_preheating_keys_are_named(mutate, message):
     mutate(scene)
     with pytest.raises(SceneError, match=message):
         validate_scene(scene)
+
+
+@pytest.mark.slow
+def test_the_preheating_bed_scene_heats_from_its_ramped_plate_and_measures_k_star_between_face_layers(tmp_path):
+    scene = load_scene("ti6al4v_preheating_bed", duration=0.01)
+    scene["packing"].update(lateral_size=300e-6, height=250e-6)  # a smaller bed of the same kind
+    scene["run"].update(output_every=100, checkpoint_every=100)
+    _, summary = runner.run_scene(scene, tmp_path, progress=False, pictures=False)
+    history = runner.read_history(tmp_path)
+    assert history["T_max_K"][-1] == pytest.approx(845.0 + 17.12, rel=1e-12)  # the plate on its first level
+    assert 845.0 < history["T_mean_K"][-1] < 862.12
+    assert np.all(np.diff(history["k_star_W_mK"]) > 0)  # the necks grow, the bed conducts better
+    assert summary["isolated_particles"] == 0
