@@ -404,6 +404,22 @@ MUTANTS = [
      "            if hottest > melting:", "            if hottest > 10 * melting:", [T + "test_first_day.py"]),
     ("the beam stays on after its path", "sintercond/heat_sources.py",
      "    done = (s > arc[-1]) & (arc[-1] > 0)", "    done = s < 0", [T + "test_first_day.py"]),
+    # sintering in the simulator (issue 26, session 15)
+    ("necks grow at the end temperature only", "sintercond/neck_growth.py", "    start = carried.interval_temperature\n",
+     "    start = end_temperature\n", [T + "test_neck_growth.py"]),
+    ("approach not the neck's", "sintercond/neck_growth.py", "    return padded(a), padded(h)",
+     "    return padded(a), padded(a) * 0.0 + padded(h) * 1.001", [T + "test_neck_growth.py"]),
+    ("grown necks never unstable", "sintercond/simulate.py",
+     "            unstable = carried.unstable | jnp.any(state.dt > limit)", "            unstable = carried.unstable",
+     [T + "test_neck_growth.py"]),
+    ("interval start not carried", "sintercond/simulate.py",
+     "            return contacts, dataclasses.replace(carried, interval_temperature=particles.temperature,",
+     "            return contacts, dataclasses.replace(carried, interval_temperature=carried.interval_temperature,",
+     [T + "test_neck_growth.py"]),
+    ("ramp level at its start", "sintercond/simulate.py", "jnp.minimum(jnp.ceil(ramp.steps * t / ramp.duration)",
+     "jnp.minimum(jnp.floor(ramp.steps * t / ramp.duration)", [T + "test_neck_growth.py"]),
+    ("step on the start necks", "sintercond/neck_growth.py", "jnp.where(valid, jnp.maximum(cap, contacts.neck), 0.0)",
+     "jnp.where(valid, contacts.neck, 0.0)", [T + "test_sintering_scene.py"]),
 ]
 
 
