@@ -25,8 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import (forces, guards, heat_sources, mechanics, neck_growth, network, packing, plots, simulate, steady,
-                        thermal, walls)
+from sintercond import (forces, guards, heat_sources, materials, mechanics, neck_growth, network, packing, plots,
+                        simulate, steady, thermal, walls)
 from sintercond.rollout import advance
 from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
@@ -107,12 +107,13 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
     c, s, ramp = scene["conduction"], scene.get("sintering"), scene.get("preheating")
     beam = scene.get("beam")
     held = any(w["mode"] == "held" for w in _walls(scene)) or (ramp is not None and ramp["hold"] == "all")
-    # a contact resistance makes the law nonlinear in the conductivity, and growing necks change it: lift it
-    lifted = c.get("params", {}).get("contact_resistance", 0.0) or s is not None
+    # a contact resistance makes the law nonlinear in the conductivity, growing necks and kappa(T) change it: lift it
+    table = "conductivity_table" in scene["material"]
+    lifted = c.get("params", {}).get("contact_resistance", 0.0) or s is not None or table
     return simulate.Physics(
         conduction=simulate.Conduction(
             law=c["law"], neck_model=c.get("neck_model"), conductance="lifted" if lifted else "table",
-            held=held, conducting_walls=walls, held_ramp=ramp is not None),
+            held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table),
         sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
                                  radiation="radiation" in scene),
         sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"]))
@@ -180,7 +181,8 @@ def scene_params(scene) -> simulate.Params:
     f = jnp.asarray
     return simulate.Params(
         mechanics=mechanical_params(scene),
-        conductivity=f([m["conductivity"]]), specific_heat=f([m["specific_heat"]]),
+        conductivity=f([m["conductivity"]]) if "conductivity_table" not in m else materials.tabulated(
+            *np.asarray(m["conductivity_table"], np.float64).T), specific_heat=f([m["specific_heat"]]),
         law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
         sintering=None if "sintering" not in scene else {k: f(v) for k, v in
                                                          scene["sintering"].get("params", {}).items()},
@@ -617,7 +619,8 @@ def observe(scene, model, state, probe) -> Observation:
     """
     p = state.particles
     positions, radii, temperature = (np.asarray(x) for x in (p.positions, p.radii, p.temperature))
-    kappa = np.asarray(model.params.conductivity)[np.asarray(p.material)]
+    index, conductivity = simulate.conductivity_lookup(model.physics, model.params, p)
+    kappa = np.asarray(conductivity)[np.asarray(index)]
     needs_power = (any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics is not None
                    or "vtp" in scene["run"]["formats"])
     power, after = probe(state, model.params) if needs_power else (None, None)

@@ -104,7 +104,15 @@ _SCHEMA = {
     "material": {
         "density": Key(float, _within(1.0, 1e5, "kg/m^3"), True, "kg/m^3", doc="solid density"),
         "specific_heat": Key(float, _within(1.0, 1e5, "J/(kg K)"), True, "J/(kg K)", doc="specific heat capacity"),
-        "conductivity": Key(float, _within(1e-6, 1e4, "W/(m K)"), True, "W/(m K)", doc="solid conductivity kappa"),
+        "conductivity": Key(float, _within(1e-6, 1e4, "W/(m K)"), True, "W/(m K)",
+                            doc="solid conductivity kappa (with conductivity_table: the one number sintercond "
+                                "effective and the run's estimate take)"),
+        "conductivity_table": Key(list, ("a list of at least 2 [T, kappa] pairs, T strictly increasing in (0, "
+                                         "1e5] K, kappa in [1e-06, 10000] W/(m K)", lambda v: True), False,
+                                  "K, W/(m K)",
+                                  doc="kappa(T): each particle conducts at its own temperature, piecewise linear "
+                                      "between the pairs and clamped beyond them (sintercond.materials.Table); the "
+                                      "run's conductances are then evaluated at every step"),
         "melting_point": Key(float, TEMPERATURE, False, "K",
                              doc="melting point (or solidus): the model has no melting, so a run whose hottest "
                                  "particle crosses it stops (or warns, material.on_melting), naming it"),
@@ -225,7 +233,8 @@ _SCHEMA = {
         "k_star_axis": Key(int, _choice(0, 1, 2), False,
                            doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
                                "steady solve on the grown necks at each output (sintercond.steady, the face "
-                               "layers of the packing held hot and cold), at material.conductivity"),
+                               "layers of the packing held hot and cold), each particle at its conductivity "
+                               "(material.conductivity_table at its temperature, or material.conductivity)"),
     },
     "preheating": {
         "end_temperature": Key(float, TEMPERATURE, True, "K", doc="the temperature the held particles reach"),
@@ -709,7 +718,24 @@ def _check_sintering(scene):
                          f"\"volume_conserving\" (conduction.law {conduction['law']!r} takes {model!r})")
 
 
+def _check_conductivity_table(material):
+    table = material.get("conductivity_table")
+    if table is None:
+        return
+    rule = _SCHEMA["material"]["conductivity_table"].rule[0]
+    if len(table) < 2:
+        raise SceneError(f"material.conductivity_table must be {rule}; got {table!r}")
+    rows = [_numbers(f"material.conductivity_table[{k}]", row, 2, ("a [T, kappa] pair of positive numbers",
+                                                                     lambda v: 0 < v <= 1e5)) for k, row in
+            enumerate(table)]
+    temperatures, values = zip(*rows)
+    if any(b <= a for a, b in zip(temperatures, temperatures[1:])) or not all(1e-6 <= v <= 1e4 for v in values):
+        raise SceneError(f"material.conductivity_table must be {rule}; got {table!r}")
+    material["conductivity_table"] = [list(r) for r in rows]
+
+
 def _check_details(scene):
+    _check_conductivity_table(scene["material"])
     conduction = scene["conduction"]
     law = CONDUCTANCE_LAWS[conduction["law"]]
     params = conduction.get("params", {})
@@ -817,7 +843,7 @@ def estimate_run(scene) -> RunEstimate:
         h, z = 2 * r - packing["spacing"], 7
     if "sintering" in scene:
         h = r  # the necks grow up to about the radius, a = sqrt(r h): the step is taken on them
-    kappa = material["conductivity"]
+    kappa = max([material["conductivity"]] + [k for _, k in material.get("conductivity_table", [])])
     law = scene["conduction"]["law"]
     k_pair = kappa * scene["conduction"].get("params", {}).get("thickness", 1.0) * math.pi if law == "feng" else (
         kappa * math.pi * math.sqrt(r * h))

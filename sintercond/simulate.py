@@ -74,7 +74,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import mechanics, neck_growth, thermal
+from sintercond import materials, mechanics, neck_growth, thermal
 from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.mechanics import MechanicalParams, MechanicalState, Mechanics
 from sintercond.neck_growth import NeckState, Sintering
@@ -113,6 +113,9 @@ class Conduction:
         and held particles only).
       implicit_tol: relative residual of the implicit CG solve.
       held: some particles are held at fixed temperatures.
+      conductivity_table: ``Params.conductivity`` is a :class:`sintercond.materials.Table`, the
+        conductivity against temperature (one material): each particle conducts at its own temperature,
+        and the conductances are evaluated at every step. Needs ``conductance="lifted"``.
       held_ramp: the held particles follow a stepped ramp (``Params.held_ramp``,
         :class:`HeldRampParams`: Rizza & Galati 2024's Eq. 6 preheating) from their
         ``fixed_temperature``; needs ``held``.
@@ -128,6 +131,7 @@ class Conduction:
     held: bool = False
     conducting_walls: int = 0
     held_ramp: bool = False
+    conductivity_table: bool = False
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
@@ -140,6 +144,9 @@ class Conduction:
                              f"got {self.neck_model!r}")
         if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
             raise ValueError(f"Conduction.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
+        if self.conductivity_table and self.conductance != "lifted":
+            raise ValueError("Conduction.conductivity_table evaluates the law at every step: it needs "
+                             "conductance='lifted'")
         if self.held_ramp and not self.held:
             raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
 
@@ -266,7 +273,7 @@ class Physics:
     def create(cls, law="rojek", neck_model=None, conductance="table", contacts="static", integrator="explicit",
                held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
                motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None, held_ramp=False,
-               **mechanical) -> Physics:
+               conductivity_table=False, **mechanical) -> Physics:
         """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
 
         ``mechanics=True`` turns the coupled step on, with ``walls`` and the
@@ -288,7 +295,8 @@ class Physics:
             spec = None
         return cls(conduction=Conduction(law=law, neck_model=neck_model, conductance=conductance,
                                          integrator=integrator, implicit_tol=implicit_tol, held=bool(held),
-                                         conducting_walls=conducting_walls, held_ramp=bool(held_ramp)),
+                                         conducting_walls=conducting_walls, held_ramp=bool(held_ramp),
+                                         conductivity_table=bool(conductivity_table)),
                    contacts=contacts, motion=motion,
                    sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
                                    pulse=bool(pulse), source=source),
@@ -498,18 +506,36 @@ def _law_on_pairs(physics, radii, material, lo, hi, valid, neck, overlap, conduc
     return jnp.where(valid, k, 0.0)
 
 
-def _wall_lift(physics, particles, contacts, conductivity, law_params):
+def _wall_lift(physics, particles, contacts, params, law_params):
     """``[n_walls, n]`` conductances to the conducting walls (a neighbour of infinite radius, :mod:`sintercond.walls`)."""
-    kappa = jnp.asarray(conductivity)[particles.material]
+    index, conductivity = conductivity_lookup(physics, params, particles)
+    kappa = conductivity[index]
     return wall_conductance_from_neck(physics.conduction.law, contacts.wall_neck, particles.radii, contacts.wall_overlap, kappa,
                                       kappa, law_params)
 
 
+def conductivity_lookup(physics: Physics, params: Params, particles: ParticleState):
+    """``(index [n], conductivity [k])``: particle ``i`` conducts at ``conductivity[index[i]]`` (W/(m K)).
+
+    The material table (``index`` the materials) or, with ``Conduction.conductivity_table``, each particle's
+    conductivity at its own temperature (``index`` the particles): the laws' lifts take either.
+    """
+    if physics.conduction.conductivity_table:
+        return jnp.arange(particles.radii.shape[0]), params.conductivity(particles.temperature)
+    return particles.material, jnp.atleast_1d(jnp.asarray(params.conductivity))
+
+
+def _per_step(physics: Physics) -> bool:
+    """Whether a static lifted table's conductances change during a rollout (growing necks, kappa(T))."""
+    return physics.sintering is not None or physics.conduction.conductivity_table
+
+
 def neck_conductance(physics: Physics, state: SimState, params: Params):
-    """Conductances ``[n, m]`` (W/K) of a static lifted state from the necks it holds now (growing necks)."""
+    """Conductances ``[n, m]`` (W/K) of a static lifted state from the necks and temperatures it holds now."""
     p, contacts = state.particles, state.contacts
-    return conductance_lift(physics, p.radii, p.material, contacts.neighbors, contacts.neck, contacts.overlap,
-                            jnp.atleast_1d(jnp.asarray(params.conductivity)), merged_law_params(physics, params))
+    index, kappa = conductivity_lookup(physics, params, p)
+    return conductance_lift(physics, p.radii, index, contacts.neighbors, contacts.neck, contacts.overlap, kappa,
+                            merged_law_params(physics, params))
 
 
 def pair_conductance(physics: Physics, radii, material, geometry, conductivity, law_params):
@@ -581,21 +607,19 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
     def prepare_fn(state: SimState, params: Params) -> Prepared:
         particles, contacts = state.particles, state.contacts
         capacity = heat_capacity(particles, params.specific_heat)
-        kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
         wall_k = wall_t = None
         if physics.conduction.conductance == "table":
-            conductance, scale = contacts.conductance, kappa[0]
+            conductance, scale = contacts.conductance, jnp.atleast_1d(jnp.asarray(params.conductivity))[0]
             if physics.conduction.conducting_walls:
                 wall_k, wall_t = contacts.wall_conductance[None], contacts.wall_temperature[None]
         else:
             law_params = merged_law_params(physics, params)
             scale = jnp.ones((), capacity.dtype)
             conductance = None
-            if physics.contacts == "static" and physics.sintering is None:  # growing necks: at every step
-                conductance = conductance_lift(physics, particles.radii, particles.material, contacts.neighbors,
-                                               contacts.neck, contacts.overlap, kappa, law_params)
+            if physics.contacts == "static" and not _per_step(physics):
+                conductance = neck_conductance(physics, state, params)
             if physics.conduction.conducting_walls:
-                wall_k = _wall_lift(physics, particles, contacts, kappa, law_params)
+                wall_k = _wall_lift(physics, particles, contacts, params, law_params)
                 wall_t = contacts.wall_temperature[:, None]
         rates = None
         if physics.conduction.integrator == "explicit" and physics.contacts == "static" and physics.mechanics is None:
@@ -614,13 +638,17 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         elif conductance is not None:
             power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
         if physics.conduction.conducting_walls:
-            power = power + prep.scale * jnp.sum(prep.wall_conductance * (prep.wall_temperature - temperature), axis=0)
+            wall_k = prep.wall_conductance
+            if physics.conduction.conductivity_table:  # at the particles' temperatures now
+                wall_k = _wall_lift(physics, state.particles, state.contacts, prep.params,
+                                    merged_law_params(physics, prep.params))
+            power = power + prep.scale * jnp.sum(wall_k * (prep.wall_temperature - temperature), axis=0)
         return power
 
     def current_network(state: SimState, prep: Prepared):
         """``(state, conductance, neighbors)`` at this step: static tables, or the dynamic list updated."""
         if physics.contacts == "static":
-            conductance = prep.conductance if physics.sintering is None else neck_conductance(physics, state, prep.params)
+            conductance = neck_conductance(physics, state, prep.params) if _per_step(physics) else prep.conductance
             return state, conductance, state.contacts.neighbors
         particles, contacts = state.particles, state.contacts
         if physics.motion is not None:
@@ -628,8 +656,8 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             particles = dataclasses.replace(particles, positions=positions)
         contacts, _, overflow = follow_contacts(neighbor_fn, particles.positions, particles.radii, contacts)
         geometry = mechanics.pair_geometry(particles.positions, particles.radii, contacts.pairs.pairs)
-        kappa = jnp.atleast_1d(jnp.asarray(prep.params.conductivity))
-        conductance = pair_conductance(physics, particles.radii, particles.material, geometry, kappa,
+        index, kappa = conductivity_lookup(physics, prep.params, particles)
+        conductance = pair_conductance(physics, particles.radii, index, geometry, kappa,
                                        merged_law_params(physics, prep.params))
         state = dataclasses.replace(state, particles=particles, overflow=state.overflow | overflow, contacts=contacts)
         return state, conductance, contacts.pairs.pairs
@@ -651,7 +679,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         state = dataclasses.replace(state, overflow=state.overflow | overflow, contacts=contacts)
         modulus = mechanics.particle_modulus(physics.mechanics, mp, particles.temperature, particles.material)
         nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, positions.dtype))[particles.material], radii.shape)
-        kappa = jnp.atleast_1d(jnp.asarray(params.conductivity))
+        index, kappa = conductivity_lookup(physics, params, particles)
         law_params = merged_law_params(physics, params)
         temperature = particles.temperature
 
@@ -661,7 +689,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                                                                 motion.velocity, motion.spin, spring, rolling,
                                                                 state.dt, positions.dtype)
             # heat through the contacts of this geometry (Eqs. 32-36)
-            conductance = pair_conductance(physics, radii, particles.material, geometry, kappa, law_params)
+            conductance = pair_conductance(physics, radii, index, geometry, kappa, law_params)
             return f, t_i, t_j, spring, rolling, pair_heat_flow(conductance, geometry.i, geometry.j, temperature)
 
         pairs = contacts.pairs.pairs
@@ -674,7 +702,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         for w, wall in enumerate(physics.mechanics.walls):
             if wall.mode == "conducting":
                 h = loads.wall_penetration[w]
-                k = kappa[particles.material]
+                k = kappa[index]
                 k_w = wall_conductance_from_neck(physics.conduction.law, wall_neck_radius(physics.neck, radii, h), radii, h, k, k,
                                                  law_params)
                 power = power + k_w * (jnp.asarray(wall.temperature, power.dtype) - particles.temperature)
@@ -768,9 +796,13 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
     no conductance. At or below it every new temperature is a convex
     combination of old ones and the sources' reference temperatures.
     """
+    if sim.physics.conduction.conductivity_table:  # the table's largest conductivity bounds it at every temperature
+        conduction = dataclasses.replace(sim.physics.conduction, conductivity_table=False)
+        sim = simulator(dataclasses.replace(sim.physics, conduction=conduction))
+        params = dataclasses.replace(params, conductivity=jnp.max(jnp.asarray(params.conductivity.values))[None])
     prep = sim.prepare_fn(state, params)
     conductance = prep.conductance
-    if sim.physics.sintering is not None:
+    if _per_step(sim.physics):
         conductance = neck_conductance(sim.physics, state, params)
     if conductance is None:
         raise ValueError("thermal_time_step needs static contacts")
@@ -989,7 +1021,22 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     dt = np.asarray(state.dt, np.float64)
     if not (dt.shape == () and np.isfinite(dt) and dt > 0):
         raise ValueError(f"SimState.dt (the time step) must be finite and > 0 s; got {state.dt!r}")
-    kappa = np.atleast_1d(np.asarray(params.conductivity, np.float64))
+    table = params.conductivity
+    if sim.physics.conduction.conductivity_table:
+        if not isinstance(table, materials.Table):
+            raise ValueError("Conduction.conductivity_table needs Params.conductivity as a "
+                             f"sintercond.materials.Table (materials.tabulated(T, kappa)); got {table!r}")
+        nodes, values = np.asarray(table.temperatures, np.float64), np.asarray(table.values, np.float64)
+        if nodes.ndim != 1 or nodes.shape != values.shape or len(nodes) < 2 or not np.all(np.diff(nodes) > 0):
+            raise ValueError("Params.conductivity (a table) needs >= 2 strictly increasing temperatures (K) and as "
+                             f"many conductivities; got {nodes.tolist()} and {values.tolist()}")
+        require_positive("Params.conductivity table's conductivities (W/(m K))", values)
+        kappa = values[:1]  # one material
+    elif isinstance(table, materials.Table):
+        raise ValueError("Params.conductivity is a table: set Conduction.conductivity_table=True (with "
+                         "conductance='lifted')")
+    else:
+        kappa = np.atleast_1d(np.asarray(params.conductivity, np.float64))
     heat = np.atleast_1d(np.asarray(params.specific_heat, np.float64))
     if kappa.ndim != 1 or heat.shape != kappa.shape:
         raise ValueError(f"Params.conductivity and Params.specific_heat must be [n_materials] each; got shapes "

@@ -137,9 +137,13 @@ def test_rizza_galatis_sc_cell_on_the_ramp_grows_as_the_law_tier_and_conducts_k_
     durations, temperatures, index = sintering.preheating_history([1.0])
     ramp = sintering.grow_neck("grain_boundary", 0.0, r, r, temperatures, durations, law)[index[0]]
     assert abs(neck / float(ramp) - 1) < 1e-3
-    # a simple cubic lattice conducts K_pair / spacing along an axis (steady.py)
+    # a simple cubic lattice conducts K_pair / spacing along an axis (steady.py), at Table 1's lambda_0 of the
+    # cell's temperature (material.conductivity_table)
+    from sintercond import materials
     from sintercond.conductance import conductance_from_neck
-    k_pair = conductance_from_neck("rojek", neck, r, r, float(sintering.neck_overlap(neck, r, r)), 16.72, 16.72)
+    kappa = float(materials.tabulated(*np.asarray(scene["material"]["conductivity_table"]).T)(levels[-1]))
+    assert 11.52 < kappa < 11.97  # 896.36 K: between Table 1's 879 and 913 K rows
+    k_pair = conductance_from_neck("rojek", neck, r, r, float(sintering.neck_overlap(neck, r, r)), kappa, kappa)
     np.testing.assert_allclose(history["k_star_W_mK"][-1], float(k_pair) / 80e-6, rtol=1e-9)
     assert history["k_star_W_mK"][0] == 0.0  # point contacts do not conduct
 
