@@ -137,8 +137,12 @@ MUTANTS = [
      "return 0.5 * (x * np.sqrt(np.maximum(r * r - 0.99 * x * x, 0.0))", [T + "test_geometry.py"]),
     ("coordination", "sintercond/geometry.py", "np.bincount(pairs.ravel(), minlength=len(radii))",
      "np.bincount(pairs[:, 0], minlength=len(radii))", [T + "test_geometry.py"]),
-    ("bed gravity", "sintercond/packing.py", "return force.at[:, 2].add(-mass)", "return force.at[:, 2].add(mass)",
+    ("bed gravity", "sintercond/packing.py", "return force.at[:, 2].add(-weight)", "return force.at[:, 2].add(weight)",
      [T + "test_packing.py"]),
+    ("deposit misses the bins to the left", "sintercond/packing.py", "around = np.arange(-1, 2)",
+     "around = np.arange(0, 2)", [T + "test_packing.py::test_the_deposit_grid_finds_what_the_full_search_finds"]),
+    ("deposit keeps the highest drop", "sintercond/packing.py", "best = int(np.argmin(z))", "best = int(np.argmax(z))",
+     [T + "test_packing.py::test_the_deposit_grid_finds_what_the_full_search_finds"]),
     # --- sintercond/heat_sources.py
     ("nozzle linear", "sintercond/heat_sources.py", "radius**2 * (1.0 - depth / max_depth), 0.0)",
      "radius**2 * (1.0 - 0.5 * depth / max_depth), 0.0)", [T + "test_heat_sources.py"]),

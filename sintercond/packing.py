@@ -3,9 +3,12 @@
 A powder bed is built in two steps:
 
 1. :func:`deposit_spheres` drops spheres one by one at random lateral
-   positions onto the floor or the pile (ballistic deposition, NumPy): no
-   overlaps, every sphere resting on one support. The pile is loose (solid
-   fraction ~0.1), several times the asked height.
+   positions onto the floor or the pile (ballistic deposition, NumPy, on a
+   lateral bin grid): no overlaps, every sphere resting on one support.
+   :func:`powder_bed` keeps the lowest of :data:`DEPOSIT_TRIES` drops of each
+   sphere, which fills the pile's hollows: solid fraction ~0.45, about 1.4
+   times the asked height (a single drop: ~0.17, 3.6 times), so the pile
+   has less to fall and settles in ~2.5 times fewer steps.
 2. :func:`relax_under_gravity` lets the pile settle: damped dynamics of
    gravity plus stiff harmonic repulsion between overlapping spheres and with
    the floor and side walls (frictionless, so the pile collapses to a dense
@@ -56,6 +59,10 @@ import numpy as np
 
 FILL_FRACTION = 0.62
 """Solid fraction assumed to size a bed: ``n = FILL_FRACTION L^2 H / mean volume`` spheres."""
+
+DEPOSIT_TRIES = 16
+"""Lateral positions :func:`powder_bed` tries for each sphere of its deposit (:func:`deposit_spheres`): the lowest is
+kept (a 3,290-sphere bed: solid fraction 0.44 instead of 0.17, 167k relax steps instead of 437k)."""
 
 MAX_PARTICLES = 20_000
 """Largest bed :func:`powder_bed` builds (memory and settling time grow with it; a scene refuses beyond)."""
@@ -189,21 +196,45 @@ def check_bed(lateral_size, height, diameter_range, max_particles=MAX_PARTICLES,
     return n
 
 
-def deposit_spheres(radii, lateral_size, rng):
-    """Ballistic deposition without rolling; returns centres ``[n, 3]``."""
+def deposit_spheres(radii, lateral_size, rng, tries=1):
+    """Ballistic deposition without rolling; returns centres ``[n, 3]``.
+
+    Each sphere in turn falls vertically at ``tries`` random lateral positions and stays at the lowest place
+    where it first touches the floor or a sphere already down (``tries=1``: plain ballistic deposition, a pile of
+    solid fraction ~0.17; more tries fill the pile's hollows: ~0.44 with 16). The spheres it may touch come from
+    a lateral bin grid (bins at least a largest diameter wide, so the 3 x 3 bins around a position hold every
+    sphere within reach): O(n), and the same centres as the search over all spheres down.
+    """
     radii = np.asarray(radii, dtype=np.float64)
-    centres = np.zeros((len(radii), 3))
+    n = len(radii)
+    centres = np.zeros((n + 1, 3))
+    centres[n, :2] = np.inf  # the padding sphere: never within reach
+    r_ext = np.append(radii, 0.0)
+    bins = max(1, int(lateral_size // (2.0 * float(np.max(radii, initial=0.0)) * (1.0 + 1e-9))))
+    width = lateral_size / bins
+    members = np.full((bins * bins, 16), n)
+    counts = np.zeros(bins * bins, np.int64)
+    around = np.arange(-1, 2)
     for k, r in enumerate(radii):
-        x, y = rng.uniform(r, lateral_size - r, 2)
-        z = r
-        if k:
-            lateral = np.hypot(centres[:k, 0] - x, centres[:k, 1] - y)
-            reach = radii[:k] + r
-            hit = lateral < reach
-            if hit.any():
-                z = max(z, float(np.max(centres[:k][hit, 2] + np.sqrt(reach[hit] ** 2 - lateral[hit] ** 2))))
-        centres[k] = (x, y, z)
-    return centres
+        xy = rng.uniform(r, lateral_size - r, (tries, 2))
+        cell = np.minimum((xy / width).astype(np.int64), bins - 1)
+        bx = np.clip(cell[:, 0, None] + around, 0, bins - 1)
+        by = np.clip(cell[:, 1, None] + around, 0, bins - 1)
+        near = members[(bx[:, :, None] * bins + by[:, None, :]).reshape(tries, 9), :int(counts.max())]
+        near = near.reshape(tries, -1)
+        lateral = np.hypot(centres[near, 0] - xy[:, 0, None], centres[near, 1] - xy[:, 1, None])
+        reach = r_ext[near] + r
+        hit = lateral < reach
+        rest = np.where(hit, centres[near, 2] + np.sqrt(np.where(hit, reach**2 - lateral**2, 0.0)), -np.inf)
+        z = np.maximum(r, rest.max(axis=1, initial=-np.inf))
+        best = int(np.argmin(z))
+        centres[k] = (xy[best, 0], xy[best, 1], z[best])
+        home = cell[best, 0] * bins + cell[best, 1]
+        if counts[home] == members.shape[1]:
+            members = np.concatenate([members, np.full_like(members, n)], axis=1)
+        members[home, counts[home]] = k
+        counts[home] += 1
+    return centres[:n]
 
 
 def _pair_list(x, r, skin, capacity=0):
@@ -224,7 +255,7 @@ def _pair_list(x, r, skin, capacity=0):
     return np.concatenate([i, np.zeros(pad, int)]), np.concatenate([j, np.zeros(pad, int)]), mask
 
 
-def _net_force(x, v, r, mass, i, j, mask, size, stiffness, contact_damping):
+def _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_damping):
     """Gravity (g = 1) plus damped harmonic repulsion of overlapping pairs, floor and side walls, ``[n, 3]``.
 
     Each contact is a spring ``stiffness * overlap`` and a normal dashpot
@@ -247,20 +278,20 @@ def _net_force(x, v, r, mass, i, j, mask, size, stiffness, contact_damping):
     lo = r[:, None] - x  # > 0: overlaps the floor (z) or the x = 0, y = 0 walls, pushed +
     hi = (x + r[:, None] - size).at[:, 2].set(-1.0)  # > 0: overlaps a far wall, pushed -; no lid
     force = force + jnp.where(lo > 0, stiffness * lo - gamma * v, 0.0) - jnp.where(hi > 0, stiffness * hi + gamma * v, 0.0)
-    return force.at[:, 2].add(-mass)
+    return force.at[:, 2].add(-weight)
 
 
 @jax.jit
-def _damped_chunk(x, v, r, mass, i, j, mask, size, stiffness, damping, contact_damping, dt, steps):
+def _damped_chunk(x, v, r, mass, weight, i, j, mask, size, stiffness, damping, contact_damping, dt, steps):
     def step(_, carry):
         x, v = carry
-        force = _net_force(x, v, r, mass, i, j, mask, size, stiffness, contact_damping)
+        force = _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_damping)
         v = v + dt * (force / mass[:, None] - damping * v)
         return x + dt * v, v
 
     x_new, v_new = jax.lax.fori_loop(0, steps, step, (x, v))  # steps traced: one compilation per capacity
-    static = _net_force(x_new, jnp.zeros_like(v_new), r, mass, i, j, mask, size, stiffness, contact_damping)
-    residual = jnp.max(jnp.linalg.norm(static, axis=1) / mass)
+    static = _net_force(x_new, jnp.zeros_like(v_new), r, mass, weight, i, j, mask, size, stiffness, contact_damping)
+    residual = jnp.max(jnp.linalg.norm(static, axis=1) / weight)
     moved = jnp.max(jnp.linalg.norm(x_new - x, axis=1))
     return x_new, v_new, residual, moved
 
@@ -272,7 +303,8 @@ def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=
     Damped dynamics (semi-implicit Euler, viscous damping ``damping`` per unit
     time) of gravity plus damped harmonic contacts (:func:`_net_force`) with
     the other spheres, the floor and the side walls, in float64 whatever the JAX default. Lengths are scaled by
-    the mean radius inside, masses by the cube of the radius, gravity is 1;
+    the mean radius inside, weights by the cube of the radius, gravity is 1; the inertia of a sphere is its
+    weight, or a mean sphere's if larger (the settled packing does not depend on it; the step does);
     ``stiffness`` is the contact stiffness over the weight of a mean sphere per
     radius (default ``1e4`` per ten layers of the pile), so overlaps are about
     (layers above) / stiffness radii. The pair list holds pairs within
@@ -292,13 +324,16 @@ def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=
     top = float(np.max(x_np[:, 2] + r_np))
     if stiffness is None:
         stiffness = 1e4 * max(1.0, top / 20.0)
-    # stable for the lightest sphere with 12 contacts: springs need dt sqrt(12 k / m) < 2, dashpots
+    # the static packing does not depend on the inertia: spheres lighter than a mean one move as a mean one,
+    # so the smallest spheres no longer set the step (20-60 um: 1.8 times larger)
+    inertia = np.maximum(r_np**3, 1.0)
+    # stable for the lightest inertia with 12 contacts: springs need dt sqrt(12 k / m) < 2, dashpots
     # dt 12 (2 zeta sqrt(k m / 2)) / m < 2; dt = sqrt(m_min / k) / 4 keeps both below 1.3
-    dt = 0.25 * float(np.sqrt(np.min(r_np**3) / stiffness))
+    dt = 0.25 * float(np.sqrt(np.min(inertia) / stiffness))
     if max_steps is None:  # terminal speed g / damping: fall the pile's height three times, then 200 damping times
         max_steps = int((3 * top / (1.0 / damping) + 200.0 / damping) / dt)
     with jax.enable_x64(True):
-        r, mass = jnp.asarray(r_np), jnp.asarray(r_np**3)
+        r, mass, weight = jnp.asarray(r_np), jnp.asarray(inertia), jnp.asarray(r_np**3)
         x, v = jnp.asarray(x_np), jnp.zeros((len(r_np), 3), jnp.float64)
         args = tuple(jnp.float64(a) for a in (size, stiffness, damping, contact_damping, dt))
         done, capacity, residual = 0, 0, math.inf
@@ -306,7 +341,7 @@ def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=
         while done < max_steps:
             i, j, mask = _pair_list(np.asarray(x), r_np, skin, capacity)
             capacity = len(i)
-            x_new, v_new, residual, moved = _damped_chunk(x, v, r, mass, jnp.asarray(i), jnp.asarray(j),
+            x_new, v_new, residual, moved = _damped_chunk(x, v, r, mass, weight, jnp.asarray(i), jnp.asarray(j),
                                                           jnp.asarray(mask), *args, jnp.int32(chunk))
             if float(moved) > 0.5 * skin and chunk > 1:  # a pair may have been missed: redo it shorter
                 chunk //= 2
@@ -757,7 +792,8 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
     if method == "dem":
         bed = pour(radii, lateral_size, DemMaterial() if material is None else material, seed=rng, **settle)
     else:
-        centres, residual = relax_under_gravity(deposit_spheres(radii, lateral_size, rng), radii, lateral_size)
+        centres, residual = relax_under_gravity(deposit_spheres(radii, lateral_size, rng, DEPOSIT_TRIES), radii,
+                                                lateral_size)
         bed = dataclasses.replace(_bed(centres, radii, lateral_size), residual_force=residual)
     if bed.isolated or abs(bed.height / height - 1.0) > height_tolerance:
         raise PackingError(f"the bed settled to a mean height {bed.height:.4g} for height {height:.4g} "
