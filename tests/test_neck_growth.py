@@ -211,3 +211,40 @@ def test_held_particles_on_a_ramp_take_each_level_at_its_end_and_bad_ramps_are_r
             simulate.rollout(sim, state, dataclasses.replace(params, held_ramp=bad), 2)
     with pytest.raises(ValueError, match="held_ramp.*needs held=True"):
         simulate.Physics.create(held_ramp=True)
+
+
+@pytest.mark.slow
+def test_the_gradient_of_k_star_at_the_end_by_the_kinetic_parameters_equals_central_differences():
+    from sintercond.network import contact_pairs
+    from sintercond.steady import steady_state_network_conductivity
+
+    r = 40e-6
+    grid = np.stack(np.meshgrid(*(np.arange(2),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    x = r + 2 * r * grid  # a touching 2 x 2 x 2 cell, held on the ramp
+    physics = simulate.Physics.create(law="rojek", conductance="lifted", held=True, held_ramp=True,
+                                      sintering=neck_growth.Sintering(every=5))
+    particles = particle_state(x, np.full(8, r), np.full(8, 845.0), DENSITY, fixed=True)
+    contacts = simulate.lifted_contacts(physics, x, np.full(8, r))
+    necks = neck_growth.neck_state(contacts, particles.temperature)
+    state = simulate.init_state(particles, contacts, 1e-2, sintering=necks)
+    sim = simulate.simulator(physics)
+    pairs = contact_pairs(x, np.full(8, r))
+    np.testing.assert_array_equal(np.stack([pairs.i, pairs.j], 1), np.asarray(necks.pairs))
+
+    def k_star(log_a, q):
+        params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],
+                                 sintering={"A": jnp.exp(log_a), "activation_energy": q},
+                                 held_ramp=simulate.HeldRampParams(1273.0, 9.5, 25.0))
+        end, _ = simulate.rollout(sim, state, params, 100)
+        k = simulate.neck_conductance(physics, end, params).reshape(-1)[necks.pair_slot]
+        return steady_state_network_conductivity(x, np.full(8, r), pairs, k, axis=2)
+
+    log_a, q = jnp.log(1.2e-20), 37.0
+    grad = jax.jit(jax.grad(k_star, argnums=(0, 1)))(log_a, q)
+    value = jax.jit(k_star)
+    for k, h in enumerate((1e-4, 1e-3)):
+        up, down = [log_a, q], [log_a, q]
+        up[k], down[k] = up[k] + h, down[k] - h
+        central = (value(*up) - value(*down)) / (2 * h)
+        np.testing.assert_allclose(float(grad[k]), float(central), rtol=1e-6)
+    assert float(grad[0]) > 0 > float(grad[1])  # faster kinetics, a better conductor at 1 s
