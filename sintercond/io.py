@@ -37,7 +37,7 @@ def _number(value) -> str:
 
 
 def _extra_fields(fields, n):
-    """``{name: [n] or [n, k] array}`` checked; integer arrays stay integers."""
+    """``{name: [n] or [n, k] array}`` checked (``n`` points or cells); integer arrays stay integers."""
     out = {}
     for name, values in (fields or {}).items():
         values = np.asarray(values)
@@ -60,46 +60,82 @@ def write_vtp(path, centres, radii, temperature, step, t, fields=None, encoding=
     zlib-compressed block behind a UInt64 header, as VTK writes it) or
     ``"ascii"`` (shortest round-trip text). Both hold the exact float64 values.
     """
-    if encoding not in VTP_ENCODINGS:
-        raise ValueError(f"encoding must be one of {list(VTP_ENCODINGS)}; got {encoding!r}")
     n = len(radii)
     fields = _extra_fields(fields, n)
-    blocks, offset = [], 0
+    out = _ArrayWriter(encoding)
+    array = out.array
+    body = (
+        f'<Piece NumberOfPoints="{n}" NumberOfVerts="{n}" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">\n'
+        f'<Points>{array("position", centres, components=3)}</Points>\n'
+        f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
+        f'<PointData Scalars="temperature">{array("temperature", temperature)}{array("radius", radii)}'
+        f'{array("id", np.arange(n), "Int64")}' + out.arrays(fields) + '</PointData>\n</Piece>\n'
+    )
+    out.write(path, step, t, body)
 
-    def array(name, values, kind="Float64", components=1, tuples=None, inline=False):
-        nonlocal offset
+
+def write_network_vtp(path, centres, pairs, step, t, fields=None, encoding="binary"):
+    """The contact network as VTK XML PolyData: one line per contact between the two particle centres.
+
+    ``pairs`` ``[p, 2]`` particle indices; ``fields``: cell data, one value (or ``k``) per contact,
+    ``{name: [p] or [p, k]}`` (e.g. ``neck_radius`` m, ``conductance`` W/K, ``heat_flow`` W); TIME and STEP
+    as :func:`write_vtp`, so a ``.pvd`` of these frames plays beside the particles' in ParaView.
+    """
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    p, n = len(pairs), len(centres)
+    fields = _extra_fields(fields, p)
+    out = _ArrayWriter(encoding)
+    array = out.array
+    body = (
+        f'<Piece NumberOfPoints="{n}" NumberOfVerts="0" NumberOfLines="{p}" NumberOfStrips="0" NumberOfPolys="0">\n'
+        f'<Points>{array("position", centres, components=3)}</Points>\n'
+        f'<Lines>{array("connectivity", pairs, "Int64")}{array("offsets", 2 * np.arange(1, p + 1), "Int64")}</Lines>\n'
+        f'<CellData>' + out.arrays(fields) + '</CellData>\n</Piece>\n'
+    )
+    out.write(path, step, t, body)
+
+
+class _ArrayWriter:
+    """The DataArrays of one VTP file in ``encoding``: inline text, or appended zlib blocks (VTK's layout)."""
+
+    def __init__(self, encoding):
+        if encoding not in VTP_ENCODINGS:
+            raise ValueError(f"encoding must be one of {list(VTP_ENCODINGS)}; got {encoding!r}")
+        self.binary = encoding == "binary"
+        self.blocks, self.offset = [], 0
+
+    def array(self, name, values, kind="Float64", components=1, tuples=None, inline=False):
         count = "" if tuples is None else f' NumberOfTuples="{tuples}"'
         head = f'<DataArray type="{kind}" Name="{name}" NumberOfComponents="{components}"{count}'
-        if encoding == "ascii" or inline:
+        if not self.binary or inline:
             body = " ".join(_number(v) if kind == "Float64" else str(int(v)) for v in np.ravel(values))
             return f'{head} format="ascii">{body}</DataArray>'
         raw = np.ascontiguousarray(np.ravel(values), "<f8" if kind == "Float64" else "<i8").tobytes()
         packed = zlib.compress(raw, 6)
         block = np.asarray([1, len(raw), len(raw), len(packed)], "<u8").tobytes() + packed
-        blocks.append(block)
-        offset, at = offset + len(block), offset
+        self.blocks.append(block)
+        self.offset, at = self.offset + len(block), self.offset
         return f'{head} format="appended" offset="{at}"/>'
 
-    binary = encoding == "binary"
-    xml = (
-        '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian"'
-        + (' header_type="UInt64" compressor="vtkZLibDataCompressor"' if binary else "") + '>\n<PolyData>\n'
-        f'<FieldData>{array("TIME", [t], tuples=1, inline=True)}{array("TimeValue", [t], tuples=1, inline=True)}'
-        f'{array("STEP", [step], "Int64", tuples=1, inline=True)}</FieldData>\n'
-        f'<Piece NumberOfPoints="{n}" NumberOfVerts="{n}" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">\n'
-        f'<Points>{array("position", centres, components=3)}</Points>\n'
-        f'<Verts>{array("connectivity", np.arange(n), "Int64")}{array("offsets", np.arange(1, n + 1), "Int64")}</Verts>\n'
-        f'<PointData Scalars="temperature">{array("temperature", temperature)}{array("radius", radii)}'
-        f'{array("id", np.arange(n), "Int64")}'
-        + "".join(array(name, v, "Int64" if np.issubdtype(v.dtype, np.integer) else "Float64",
-                        1 if v.ndim == 1 else v.shape[1]) for name, v in fields.items())
-        + '</PointData>\n</Piece>\n</PolyData>\n'
-    )
-    if binary:
-        atomic_write_bytes(path, xml.encode() + b'<AppendedData encoding="raw">\n_' + b"".join(blocks)
-                           + b"\n</AppendedData>\n</VTKFile>\n")
-    else:
-        atomic_write_text(path, xml + "</VTKFile>\n")
+    def arrays(self, fields):
+        """Float64 (or Int64 for integer arrays) DataArrays of ``{name: [m] or [m, k]}``."""
+        return "".join(self.array(name, v, "Int64" if np.issubdtype(v.dtype, np.integer) else "Float64",
+                                  1 if v.ndim == 1 else v.shape[1]) for name, v in fields.items())
+
+    def write(self, path, step, t, piece):
+        """The file: header, TIME/TimeValue/STEP field data, ``piece``, and the appended blocks."""
+        array = self.array
+        xml = (
+            '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian"'
+            + (' header_type="UInt64" compressor="vtkZLibDataCompressor"' if self.binary else "") + '>\n<PolyData>\n'
+            f'<FieldData>{array("TIME", [t], tuples=1, inline=True)}{array("TimeValue", [t], tuples=1, inline=True)}'
+            f'{array("STEP", [step], "Int64", tuples=1, inline=True)}</FieldData>\n' + piece + '</PolyData>\n'
+        )
+        if self.binary:
+            atomic_write_bytes(path, xml.encode() + b'<AppendedData encoding="raw">\n_' + b"".join(self.blocks)
+                               + b"\n</AppendedData>\n</VTKFile>\n")
+        else:
+            atomic_write_text(path, xml + "</VTKFile>\n")
 
 
 def read_vtp(path) -> dict:

@@ -28,7 +28,9 @@ from tqdm import tqdm
 from sintercond import (forces, guards, heat_sources, materials, mechanics, neck_growth, network, packing, plots,
                         simulate, steady, thermal, walls)
 from sintercond.rollout import advance
-from sintercond.io import append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_pvd, write_vtp
+from sintercond.io import (append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_network_vtp, write_pvd,
+                           write_vtp)
+from sintercond.neck import NECK_MODELS
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, restitution_damping_ratio, validate_scene)
 from sintercond.state import particle_state
@@ -701,9 +703,9 @@ def _log(message):
 
 def _clear_outputs(out):
     """A new run into ``out`` first removes the outputs an earlier run left there."""
-    for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
+    for f in _frames(out, "step") + _frames(out, "network"):
         f.unlink()
-    for name in ("dump.lammpstrj", "checkpoint.npz", "history.csv", "summary.json", "frames.pvd",
+    for name in ("dump.lammpstrj", "checkpoint.npz", "history.csv", "summary.json", "frames.pvd", "network.pvd",
                  plots.STATE_PICTURE, plots.HISTORY_PLOT):
         if (out / name).exists():
             (out / name).unlink()
@@ -791,10 +793,48 @@ def written_outputs(out) -> str:
     """What a finished run left in ``out``, for the closing line of ``sintercond run``."""
     out = Path(out)
     listed = [(plots.STATE_PICTURE, "a picture of the last state"), (plots.HISTORY_PLOT, "the history plotted"),
-              ("frames.pvd", "the frames as a time series for ParaView"), ("vtp", "one VTP frame per output"),
+              ("frames.pvd", "the frames as a time series for ParaView"),
+              ("network.pvd", "the contact network's frames for ParaView"), ("vtp", "one VTP frame per output"),
               ("dump.lammpstrj", "for OVITO"), ("history.csv", "one row per output"),
               ("summary.json", "the summary"), ("checkpoint.npz", "for --resume")]
     return "; ".join(f"{name}{'/' if name == 'vtp' else ''}: {what}" for name, what in listed if (out / name).exists())
+
+
+def contact_network(model, state) -> tuple:
+    """The contacts of ``state`` and what each carries: ``(pairs [p, 2], fields)``, pairs ``i < j``.
+
+    ``fields``: ``neck_radius`` (m, the neck the conductance law takes), ``conductance`` (W/K) and ``heat_flow``
+    (W, ``K (T_i - T_j)``: from ``i`` to ``j``); the contacts the static table lists (touching within the
+    packing's tolerance, point contacts of a sintering lattice included), or the touching pairs of a moving
+    packing's list.
+    """
+    physics, p = model.physics, state.particles
+    radii, temperature = np.asarray(p.radii), np.asarray(p.temperature)
+    index, kappa = simulate.conductivity_lookup(physics, model.params, p)
+    law = simulate.merged_law_params(physics, model.params)
+    if physics.contacts == "dynamic":
+        geometry = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
+        keep = np.asarray(geometry.touching & geometry.valid)
+        pairs = np.stack([np.asarray(geometry.i), np.asarray(geometry.j)], axis=1)[keep]
+        k = np.asarray(simulate.pair_conductance(physics, p.radii, index, geometry, kappa, law))[keep]
+        overlap = np.asarray(geometry.overlap)[keep]
+        neck = np.asarray(NECK_MODELS[physics.neck](radii[pairs[:, 0]], radii[pairs[:, 1]], overlap))
+    else:
+        neighbors = np.asarray(state.contacts.neighbors)
+        rows = np.broadcast_to(np.arange(len(radii))[:, None], neighbors.shape)
+        lower = (rows < neighbors) & (neighbors < len(radii))
+        pairs = np.stack([rows[lower], neighbors[lower]], axis=1)
+        if physics.conduction.conductance == "table":
+            k = np.asarray(state.contacts.conductance)[lower] * float(np.asarray(kappa)[0])
+            centres = np.asarray(p.positions)
+            overlap = np.maximum(radii[pairs[:, 0]] + radii[pairs[:, 1]]
+                                 - np.linalg.norm(centres[pairs[:, 0]] - centres[pairs[:, 1]], axis=1), 0.0)
+            neck = np.asarray(NECK_MODELS[physics.neck](radii[pairs[:, 0]], radii[pairs[:, 1]], overlap))
+        else:
+            k = np.asarray(simulate.neck_conductance(physics, state, model.params))[lower]
+            neck = np.asarray(state.contacts.neck)[lower]
+    flow = k * (temperature[pairs[:, 0]] - temperature[pairs[:, 1]])
+    return pairs, {"neck_radius": neck, "conductance": k, "heat_flow": flow}
 
 
 def _write_outputs(scene, out, model, state, obs: Observation):
@@ -822,13 +862,25 @@ def _write_outputs(scene, out, model, state, obs: Observation):
         (out / "vtp").mkdir(exist_ok=True)
         write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields,
                   encoding=scene["run"]["vtp_encoding"])
+        if scene["run"]["contact_network"]:
+            pairs, per_contact = contact_network(model, state)
+            write_network_vtp(out / "vtp" / f"network_{step:08d}.vtp", positions, pairs, step, t, per_contact,
+                              encoding=scene["run"]["vtp_encoding"])
         write_frames_pvd(out, model.dt)
 
 
+def _frames(out, kind):
+    """The VTP frames ``out/vtp/{kind}_*.vtp`` (``step``: particles, ``network``: contacts), in step order."""
+    return sorted((out / "vtp").glob(f"{kind}_*.vtp")) if (out / "vtp").exists() else []
+
+
 def write_frames_pvd(out, dt):
-    """``out/frames.pvd``: every frame in ``out/vtp`` at its physical time ``step * dt`` (ParaView's time series)."""
-    frames = sorted((out / "vtp").glob("step_*.vtp"))
-    write_pvd(out / "frames.pvd", [(float(np.float64(int(f.stem.split("_")[1])) * dt), f"vtp/{f.name}")
+    """``out/frames.pvd`` (and ``out/network.pvd`` with contact-network frames): every frame in ``out/vtp`` at its
+    physical time ``step * dt`` (ParaView's time series)."""
+    for kind, name in (("step", "frames.pvd"), ("network", "network.pvd")):
+        frames = _frames(out, kind)
+        if frames or kind == "step":
+            write_pvd(out / name, [(float(np.float64(int(f.stem.split("_")[1])) * dt), f"vtp/{f.name}")
                                    for f in frames])
 
 
@@ -874,7 +926,7 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
             if (out / name).exists():
                 (out / name).unlink()
     # outputs written after the checkpoint by the interrupted run are redone
-    for f in (out / "vtp").glob("step_*.vtp") if (out / "vtp").exists() else []:
+    for f in _frames(out, "step") + _frames(out, "network"):
         if int(f.stem.split("_")[1]) > step:
             f.unlink()
     if (out / "vtp").exists():

@@ -259,6 +259,10 @@ _SCHEMA = {
         "formats": Key(list, ("a non-empty list of distinct names from ['lammps', 'vtp']", lambda v: True), False,
                        default=["vtp"],
                        doc='non-empty list of distinct "vtp" (ParaView) and "lammps" (OVITO)'),
+        "contact_network": Key(bool, None, False, default=False,
+                               doc="true: with vtp, each output also writes the contact network, vtp/network_*.vtp "
+                                   "(network.pvd): a line per contact carrying its neck_radius (m), conductance "
+                                   "(W/K) and heat_flow (W, from its lower to its higher index)"),
         "vtp_encoding": Key(str, _choice("binary", "ascii"), False, default="binary",
                             doc="binary: point data appended and zlib-compressed (VTK's own layout); ascii: text"),
         "override_limits": Key(bool, None, False, default=False,

@@ -88,7 +88,8 @@ PILE = {
     "mechanics": {"young_modulus": 1e6, "poisson_ratio": 0.3, "friction": 0.4, "rolling_friction": 0.1,
                   "rolling_damping": 0.2, "restitution": 0.5},
     "softening": {"onset_temperature": 350.0},
-    "run": {"duration": 2e-2, "output_every": 100, "checkpoint_every": 200, "formats": ["vtp", "lammps"]},
+    "run": {"duration": 2e-2, "output_every": 100, "checkpoint_every": 200, "formats": ["vtp", "lammps"],
+            "contact_network": True},
 }
 
 
@@ -100,6 +101,8 @@ def test_mechanics_run_resumes_bitwise_springs_included(tmp_path):
     built = runner.build_model(validate_scene(copy.deepcopy(PILE))).state.contacts.neighbors.shape[1]
     full, summary = runner.run_scene(validate_scene(copy.deepcopy(PILE)), tmp_path / "full", progress=False)
     assert summary["steps"] > 900 and summary["final_contacts"] == 4
+    from tests.test_contact_network import check_network_of_a_moving_packing
+    check_network_of_a_moving_packing(tmp_path / "full")
     saved = np.load(tmp_path / "full" / "checkpoint.npz")
     springs = [k for k in saved.files if "spring" in k or "rolling" in k]
     assert {".mechanics.velocity", ".mechanics.spin"} <= set(saved.files) and len(springs) == 4

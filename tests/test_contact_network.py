@@ -1,0 +1,91 @@
+"""The contact network as VTP lines (issue 27): one line per contact with its neck radius, conductance and heat flow.
+
+References: the heat each particle receives through its lines equals the heat power the particle frame reports
+(two code paths: the network's pair flows and the simulator's Laplacian or pair exchange), the conductance of a
+simple cubic lattice's contact from the law on its overlap, and VTK's own reader (lines and times).
+"""
+
+import copy
+
+import numpy as np
+import pytest
+
+from sintercond import io
+from sintercond import run as runner
+from sintercond.conductance import pair_conductance
+from sintercond.scene import validate_scene
+
+vtk = pytest.importorskip("vtk")
+
+LATTICE = {
+    "packing": {"kind": "simple_cubic", "counts": [3, 2, 2], "spacing": 1e-4, "radius": 0.52e-4},
+    "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 12.6},
+    "conduction": {"law": "rojek"},
+    "initial": {"temperature": 300.0},
+    "walls": [{"axis": 0, "side": "min", "mode": "held", "temperature": 400.0}],
+    "run": {"duration": 2e-3, "output_every": 5, "checkpoint_every": 10, "contact_network": True},
+}
+
+
+def _inflow(pairs, flow, n):
+    """Heat into each particle through its contacts, flow ``K (T_i - T_j)`` leaving ``i`` for ``j``."""
+    into = np.zeros(n)
+    np.add.at(into, pairs[:, 1], flow)
+    np.add.at(into, pairs[:, 0], -flow)
+    return into
+
+
+@pytest.mark.parametrize("sintering", [False, True])
+def test_the_networks_lines_carry_the_heat_the_particles_receive(tmp_path, sintering):
+    scene = copy.deepcopy(LATTICE)
+    if sintering:  # lifted conductances, necks that grow
+        scene["sintering"] = {"params": {"A": 1e-16, "activation_energy": 100.0}}
+    runner.run_scene(validate_scene(scene), tmp_path, progress=False, pictures=False)
+    particles, network = (sorted((tmp_path / "vtp").glob(f"{kind}_*.vtp")) for kind in ("step", "network"))
+    assert [f.stem.split("_")[1] for f in particles] == [f.stem.split("_")[1] for f in network]
+    frame, lines = io.read_vtp(particles[-1]), io.read_vtp(network[-1])
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(network[-1]))
+    reader.Update()
+    data = reader.GetOutput()
+    n = len(frame["radius"])
+    assert data.GetNumberOfLines() == 2 * 2 * 2 + 3 * 2 + 3 * 2 and data.GetNumberOfPoints() == n  # the bonds
+    cells = data.GetLines().GetConnectivityArray()
+    pairs = np.array([cells.GetValue(k) for k in range(cells.GetNumberOfValues())]).reshape(-1, 2)
+    flow = np.array([data.GetCellData().GetArray("heat_flow").GetValue(k) for k in range(len(pairs))])
+    held = frame["held"].astype(bool)
+    np.testing.assert_allclose(_inflow(pairs, flow, n)[~held], frame["heat_power"][~held],
+                               rtol=1e-12, atol=1e-12 * np.abs(frame["heat_power"]).max())
+    if not sintering:  # every bond of the lattice: the law on its overlap 2 r - spacing
+        expected = pair_conductance("rojek", 0.52e-4, 0.52e-4, 0.04e-4, 12.6, 12.6)
+        np.testing.assert_allclose(lines["conductance"], float(expected), rtol=1e-12)
+    else:
+        assert np.all(lines["neck_radius"] > 0) and np.all(np.diff(np.sort(lines["neck_radius"])) >= 0)
+    time = float(data.GetFieldData().GetArray("TimeValue").GetValue(0))
+    assert f'timestep="{time!r}" group="" part="0" file="vtp/{network[-1].name}"' in (tmp_path / "network.pvd").read_text()
+
+
+def check_network_of_a_moving_packing(out):
+    """The last contact-network frame of a run with mechanics in ``out`` lists exactly the pairs that touch in the
+    particle frame of the same step (brute force on its positions), each with a neck and a conductance.
+    Called by tests/test_scene_mechanics.py's resume test, which runs such a scene (and resumes its network
+    frames bitwise)."""
+    last = sorted((out / "vtp").glob("network_*.vtp"))[-1]
+    frame, lines = io.read_vtp(out / "vtp" / last.name.replace("network", "step")), io.read_vtp(last)
+    x, r = frame["position"], frame["radius"]
+    n = len(r)
+    touching = {(i, j) for i in range(n) for j in range(i + 1, n) if r[i] + r[j] > np.linalg.norm(x[i] - x[j])}
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(last))
+    reader.Update()
+    cells = reader.GetOutput().GetLines().GetConnectivityArray()
+    pairs = {tuple(int(cells.GetValue(k + m)) for m in (0, 1)) for k in range(0, cells.GetNumberOfValues(), 2)}
+    assert pairs == touching and touching
+    assert np.all(lines["conductance"] > 0) and np.all(lines["neck_radius"] > 0)
+
+
+def test_no_network_unless_asked(tmp_path):
+    scene = copy.deepcopy(LATTICE)
+    scene["run"].update(contact_network=False)
+    runner.run_scene(validate_scene(scene), tmp_path, progress=False, pictures=False)
+    assert not list((tmp_path / "vtp").glob("network_*.vtp")) and not (tmp_path / "network.pvd").exists()
