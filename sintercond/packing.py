@@ -297,7 +297,7 @@ def _damped_chunk(x, v, r, mass, weight, i, j, mask, size, stiffness, damping, c
 
 
 def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=None, damping=0.3, contact_damping=0.3,
-                        force_tol=2e-3, skin=1.0):
+                        force_tol=2e-3, skin=1.0, progress=None):
     """Let spheres settle under gravity; returns ``(settled centres, residual force over weight)``.
 
     Damped dynamics (semi-implicit Euler, viscous damping ``damping`` per unit
@@ -310,7 +310,8 @@ def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=
     (layers above) / stiffness radii. The pair list holds pairs within
     ``skin`` mean radii of contact and is rebuilt whenever a sphere may have
     moved half of it. Stops when the net force on every sphere is below
-    ``force_tol`` of its weight.
+    ``force_tol`` of its weight. ``progress(phase, steps, max_steps, figure, target)`` is called after every
+    chunk with the largest net force over a weight (``figure``) and ``force_tol`` (``target``).
 
     Raises:
       PackingError: the pile did not settle within ``max_steps`` (default:
@@ -348,6 +349,8 @@ def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=
                 continue
             x, v, done = x_new, v_new, done + chunk
             residual = float(residual)
+            if progress is not None:
+                progress("relaxing", done, max_steps, residual, force_tol)
             if residual < force_tol:
                 break
             chunk = min(2 * chunk, 4096) if float(moved) < 0.2 * skin else chunk
@@ -530,7 +533,7 @@ def _overlaps(centres, radii, walls):
 
 def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0, softening=False, *,
                kinetic_tol=KINETIC_TOL, force_tol=FORCE_TOL, max_time=2.0, check_every=1000, skin_fraction=0.1,
-               v_rel=None) -> DemSettled:
+               v_rel=None, progress=None) -> DemSettled:
     """Let spheres fall and settle under gravity with the real contact laws; returns a :class:`DemSettled`.
 
     The coupled step of :mod:`sintercond.simulate` (``Physics(mechanics=Mechanics(...))``,
@@ -556,7 +559,8 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     Settled means, checked every ``check_every`` steps: kinetic energy
     (translation and rotation) below ``kinetic_tol * sum_i m_i g r_i`` and
     every net force below ``force_tol`` of that sphere's weight (the net
-    force is read off one probe step, ``m dv/dt``).
+    force is read off one probe step, ``m dv/dt``). ``progress(phase, steps, max_steps, figure, 1.0)``, if
+    given, is called at every check with the larger of the two figures over its threshold.
 
     Args:
       centres: ``[n, 3]`` start positions (m), at rest, no sphere below the floor.
@@ -620,6 +624,9 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         def settled(s, measured):
             kinetic, force = measured
             figures.update(kinetic=float(kinetic) / energy_scale, force=float(force))
+            if progress is not None:  # settled when both are below their thresholds: the larger ratio below 1
+                progress("settling (DEM)", int(s.step), max_steps,
+                         max(figures["kinetic"] / kinetic_tol, figures["force"] / force_tol), 1.0)
             return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
 
         try:
@@ -681,7 +688,7 @@ STARTS = ("relaxed", "deposit")
 
 
 def pour(radii, lateral_size, material=DemMaterial(), seed=0, start="relaxed", temperature=300.0, walls=None,
-         **settle) -> Packing:
+         progress=None, **settle) -> Packing:
     """Pour spheres into an open square box ``[0, L]^2`` and settle them with the DEM (:func:`dem_settle`).
 
     The spheres are first dropped one by one (:func:`deposit_spheres`, a loose
@@ -702,6 +709,8 @@ def pour(radii, lateral_size, material=DemMaterial(), seed=0, start="relaxed", t
       start: one of :data:`STARTS`.
       temperature: K, while settling (no heat moves).
       walls: the box's :class:`~sintercond.walls.PlaneWall` s (default :func:`box_walls`).
+      progress: ``progress(phase, steps, max_steps, figure, target)`` after every chunk of the relaxed start and
+        of the DEM settle (:func:`relax_under_gravity`, :func:`dem_settle`), or None.
       settle: keyword arguments of :func:`dem_settle` (``kinetic_tol``, ``force_tol``, ``max_time``, ...).
 
     Returns:
@@ -710,10 +719,10 @@ def pour(radii, lateral_size, material=DemMaterial(), seed=0, start="relaxed", t
     Raises:
       PackingError: bad input, or a bed that did not settle (naming what missed its threshold).
     """
-    return _pour(radii, lateral_size, material, seed, start, temperature, walls, **settle)[0]
+    return _pour(radii, lateral_size, material, seed, start, temperature, walls, progress, **settle)[0]
 
 
-def _pour(radii, lateral_size, material, seed, start, temperature, walls, **settle):
+def _pour(radii, lateral_size, material, seed, start, temperature, walls, progress=None, **settle):
     """:func:`pour`, also returning the :class:`DemSettled` state."""
     if start not in STARTS:
         raise PackingError(f"start must be one of {list(STARTS)}; got {start!r}")
@@ -725,13 +734,13 @@ def _pour(radii, lateral_size, material, seed, start, temperature, walls, **sett
     rng = np.random.default_rng(seed)
     centres = deposit_spheres(radii, lateral_size, rng)
     if start == "relaxed":
-        centres, _ = relax_under_gravity(centres, radii, lateral_size)
+        centres, _ = relax_under_gravity(centres, radii, lateral_size, progress=progress)
         centres[:, 2] = np.maximum(centres[:, 2], radii)  # start off the floor: no sphere inside a wall
         centres[:, :2] = np.clip(centres[:, :2], radii[:, None], lateral_size - radii[:, None])
     walls = box_walls(lateral_size) if walls is None else tuple(walls)
     if start == "relaxed" and "v_rel" not in settle:  # a sphere may drop into a gap: one mean diameter
         settle = {**settle, "v_rel": math.sqrt(2.0 * GRAVITY * 2.0 * float(np.mean(radii)))}
-    settled = dem_settle(centres, radii, walls, material, temperature, **settle)
+    settled = dem_settle(centres, radii, walls, material, temperature, progress=progress, **settle)
     bed = _bed(settled.centres, radii, lateral_size)
     return dataclasses.replace(bed, residual_force=settled.report.force_ratio, settle=settled.report), settled
 
@@ -757,7 +766,7 @@ def _bed(centres, radii, lateral_size) -> Packing:
 
 
 def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_particles=MAX_PARTICLES,
-               height_tolerance=0.25, method="relax", material=None, **settle):
+               height_tolerance=0.25, method="relax", material=None, progress=None, **settle):
     """A settled random bed of polydisperse spheres filling a square container to about ``height``.
 
     Args:
@@ -772,6 +781,7 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
       method: ``"relax"`` (:func:`relax_under_gravity`, any unit of length) or
         ``"dem"`` (:func:`pour` with ``material``, SI units: metres).
       material: :class:`DemMaterial` for ``method="dem"`` (default: Example 5.3's).
+      progress: ``progress(phase, steps, max_steps, figure, target)`` as the bed settles (:func:`pour`), or None.
       settle: keyword arguments of :func:`pour` for ``method="dem"`` (``start``, ``kinetic_tol``, ...).
 
     Returns:
@@ -790,10 +800,11 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
     rng = np.random.default_rng(seed)
     radii = sample_diameters(n, low, high, rng) / 2
     if method == "dem":
-        bed = pour(radii, lateral_size, DemMaterial() if material is None else material, seed=rng, **settle)
+        bed = pour(radii, lateral_size, DemMaterial() if material is None else material, seed=rng, progress=progress,
+                   **settle)
     else:
         centres, residual = relax_under_gravity(deposit_spheres(radii, lateral_size, rng, DEPOSIT_TRIES), radii,
-                                                lateral_size)
+                                                lateral_size, progress=progress)
         bed = dataclasses.replace(_bed(centres, radii, lateral_size), residual_force=residual)
     if bed.isolated or abs(bed.height / height - 1.0) > height_tolerance:
         raise PackingError(f"the bed settled to a mean height {bed.height:.4g} for height {height:.4g} "
@@ -801,7 +812,7 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
     return bed
 
 
-def from_scene(p) -> Packing:
+def from_scene(p, progress=None) -> Packing:
     """The packing of a validated scene's ``[packing]`` table (radii after ``sinter_swelling``).
 
     ``powder_bed``: :func:`powder_bed` with ``method`` (``"relax"`` by default,
@@ -827,7 +838,7 @@ def from_scene(p) -> Packing:
     method = p.get("method", "relax")
     material = DemMaterial(**p["dem"]) if method == "dem" and "dem" in p else None
     bed = powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0), method=method,
-                     material=material)
+                     material=material, progress=progress)
     return dataclasses.replace(bed, radii=bed.radii * (1.0 + p.get("sinter_swelling", 0.0)))
 
 

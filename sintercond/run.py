@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import sys
 import time
 import warnings
@@ -71,9 +72,40 @@ class Model:
         return np.asarray(self.state.particles.radii)
 
 
-def build_packing(scene):
+PROGRESS_EVERY_S = 5.0
+"""Seconds between two progress lines of a bed that settles (relaxation or DEM)."""
+
+
+class SettlingProgress:
+    """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.packing`: a line through ``log``
+    at most every :data:`PROGRESS_EVERY_S` seconds with the steps taken, the settling figure against its target
+    and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially)."""
+
+    def __init__(self, log, particles):
+        self.log, self.particles = log, particles
+        self.start = self.last = time.perf_counter()
+        self.points = []  # (seconds, ln figure) at the lines written
+
+    def __call__(self, phase, steps, max_steps, figure, target):
+        now = time.perf_counter()
+        if now - self.last < PROGRESS_EVERY_S:
+            return
+        self.last = now
+        self.points.append((now - self.start, math.log(max(figure, 1e-300))))
+        left = ""
+        if len(self.points) >= 2:
+            (t0, y0), (t1, y1) = self.points[max(0, len(self.points) - 4)], self.points[-1]
+            rate = (y0 - y1) / (t1 - t0)  # decay of ln figure per second
+            if rate > 0 and figure > target:
+                left = f", about {(y1 - math.log(target)) / rate:.0f} s left at this rate"
+        self.log(f"packing: {phase} {self.particles:,} spheres: {steps:,} steps (at most {max_steps:,}), figure "
+                 f"{figure:.3g} (settled below {target:g}), {now - self.start:.0f} s{left}")
+
+
+def build_packing(scene, log=None):
     """``(centres, radii, bed)`` of a validated scene: listed spheres as given, else
-    :func:`sintercond.packing.from_scene`.
+    :func:`sintercond.packing.from_scene`; a bed that settles reports its progress through ``log``
+    (:class:`SettlingProgress`).
 
     ``bed``: the bed's figures for the summary (empty for listed spheres).
     """
@@ -88,13 +120,18 @@ def build_packing(scene):
         radii = packing.truncated_normal_radii(p["particles"], p["radius_mean"], p["radius_std"],
                                                p["truncation"], rng)
         packed = packing.pour(radii, p["lateral_size"], dem_material(scene), seed=rng, start=p["start"],
-                              temperature=scene["initial"]["temperature"])
-    elif p.get("method") == "dem":
-        packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],
-                                    method="dem", material=dem_material(scene))
-        packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p["sinter_swelling"]))
+                              temperature=scene["initial"]["temperature"],
+                              progress=SettlingProgress(log, len(radii)) if log else None)
     else:
-        packed = packing.from_scene(p)
+        count = packing.bed_particle_count(p["lateral_size"], p["height"], p["diameter_range"]) \
+            if p["kind"] == "powder_bed" else 0
+        progress = SettlingProgress(log, count) if log and count else None
+        if p.get("method") == "dem":
+            packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],
+                                        method="dem", material=dem_material(scene), progress=progress)
+            packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p["sinter_swelling"]))
+        else:
+            packed = packing.from_scene(p, progress=progress)
     return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}
 
 
@@ -225,7 +262,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     bed = {}
     if centres is None:
         log("packing: building the scene's packing")
-        centres, radii, bed = build_packing(scene)
+        centres, radii, bed = build_packing(scene, log)
     m, c = scene["material"], scene["conduction"]
     physics = scene_physics(scene)
     log(f"network: contacts and conductances of {len(radii)} particles")

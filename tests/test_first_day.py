@@ -214,3 +214,26 @@ def test_an_interrupted_extension_resumes_with_the_runs_own_step(tmp_path):
     listed = ElementTree.parse(tmp_path / "cut" / "frames.pvd").getroot()
     times = [float(d.get("timestep")) for d in listed.iter("DataSet")]
     assert times == sorted(times) and times[-1] == pytest.approx(summary["simulated_s"], rel=1e-12)
+
+
+def test_a_bed_that_settles_reports_its_progress_with_an_estimate(monkeypatch):
+    """Issue 27: a bed of thousands was "building the scene's packing" for 13 minutes with nothing printed."""
+    from sintercond import packing
+
+    monkeypatch.setattr(runner, "PROGRESS_EVERY_S", 0.0)
+    lines = []
+    p = {"kind": "powder_bed", "lateral_size": 4e-4, "height": 2e-4, "diameter_range": [40e-6, 60e-6], "seed": 0,
+         "method": "relax", "sinter_swelling": 0.0}
+    calls = []
+    bed = packing.from_scene(p, progress=lambda *a: calls.append(a))
+    assert calls and calls[-1][3] < calls[-1][4] == 2e-3  # the last report is the settled one
+    assert [c[1] for c in calls] == sorted(c[1] for c in calls) and all(c[0] == "relaxing" for c in calls)
+    np.testing.assert_array_equal(packing.from_scene(p).centres, bed.centres)  # reporting changes nothing
+    scene = {"packing": p, "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 7.0},
+             "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
+             "run": {"duration": 1e-4, "output_every": 1, "checkpoint_every": 1}}
+    runner.build_packing(validate_scene(scene), lines.append)
+    relaxing = [line for line in lines if line.startswith("packing: relaxing")]
+    assert len(relaxing) == len(calls)
+    assert "settled below 0.002" in relaxing[-1] and "steps (at most" in relaxing[-1]
+    assert any("s left at this rate" in line for line in relaxing)
