@@ -52,10 +52,10 @@ from sintercond.neck import (  # noqa: E402
 __version__ = "0.1.0"
 
 _SUBMODULES = frozenset({
-    "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "guards", "heat_sources", "io",
-    "materials", "mechanics", "neck", "neck_growth", "neighbors", "network", "packing", "packing_files", "pair_list", "plots",
-    "run", "scene",
-    "rollout", "simulate", "sintering", "state", "steady", "sweep", "thermal", "tortuosity", "walls",
+    "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "guards", "heat_sources",
+    "io", "materials", "mechanics", "neck", "neck_growth", "neighbors", "network", "observe", "packing",
+    "packing_files", "pair_list", "plots", "rollout", "run", "scene", "simulate", "sintering", "state", "steady",
+    "sweep", "thermal", "tortuosity", "walls",
 })
 
 

@@ -190,8 +190,8 @@ def effective_box(scene, bed, centres=None, radii=None, axis=2):
 
 def _effective(args) -> int:
     from sintercond import packing, steady
-    from sintercond import run as runner
     from sintercond.scene import load_scene
+    from sintercond.scene.build import build_packing
 
     scene = load_scene(args.scene)
     bed = None
@@ -199,7 +199,7 @@ def _effective(args) -> int:
         bed = packing.from_scene(scene["packing"])
         centres, radii = bed.centres, bed.radii
     else:
-        centres, radii, _ = runner.build_packing(scene)
+        centres, radii, _ = build_packing(scene)
     box = effective_box(scene, bed, centres, radii, args.axis)
     c = scene["conduction"]
     kappa = scene["material"]["conductivity"]

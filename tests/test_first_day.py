@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from sintercond import run as runner
+from sintercond.scene import build
 from sintercond.scene import load_scene, validate_scene
 
 
@@ -102,7 +103,7 @@ def test_walls_say_how_many_particles_they_hold_and_warn_on_a_handful():
 
     scene = load_scene(None)  # the built-in powder bed on a held floor
     with warnings.catch_warnings():
-        warnings.simplefilter("error", runner.WallContactWarning)  # the default reaches its face layer
+        warnings.simplefilter("error", build.WallContactWarning)  # the default reaches its face layer
         model = runner.build_model(validate_scene(copy.deepcopy(scene)))
     centres, radii = model.centres, model.radii
     bottom = centres[:, 2] - radii
@@ -115,13 +116,13 @@ def test_walls_say_how_many_particles_they_hold_and_warn_on_a_handful():
              "material": scene["material"], "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
              "boundary": {"floor_temperature": 400.0},
              "run": {"duration": 1e-3, "output_every": 5, "checkpoint_every": 10, "formats": ["vtp"]}}
-    with pytest.warns(runner.WallContactWarning, match=r"boundary\.floor_temperature \(held, axis 2 min\) touches 1 "
+    with pytest.warns(build.WallContactWarning, match=r"boundary\.floor_temperature \(held, axis 2 min\) touches 1 "
                                                        r"of the 10 .*replace boundary\.floor_temperature by a held"):
-        runner.wall_contacts(validate_scene(rough), np.asarray(rough["packing"]["centres"]), np.full(10, r))
+        build.wall_contacts(validate_scene(rough), np.asarray(rough["packing"]["centres"]), np.full(10, r))
     shallow = copy.deepcopy(scene)
     shallow.pop("boundary")
     shallow["walls"] = [{"axis": 2, "side": "min", "mode": "held", "temperature": 300.0, "penetration": 0.0}]
-    with pytest.warns(runner.WallContactWarning, match=r"walls\[0\] \(held, axis 2 min\) touches 1 of the \d+ "
+    with pytest.warns(build.WallContactWarning, match=r"walls\[0\] \(held, axis 2 min\) touches 1 of the \d+ "
                                                        r"particles facing it; only a handful: raise walls\[0\]"):
         runner.build_model(validate_scene(shallow))
 
@@ -220,7 +221,7 @@ def test_a_bed_that_settles_reports_its_progress_with_an_estimate(monkeypatch):
     """Issue 27: a bed of thousands was "building the scene's packing" for 13 minutes with nothing printed."""
     from sintercond import packing
 
-    monkeypatch.setattr(runner, "PROGRESS_EVERY_S", 0.0)
+    monkeypatch.setattr(build, "PROGRESS_EVERY_S", 0.0)
     lines = []
     p = {"kind": "powder_bed", "lateral_size": 4e-4, "height": 2e-4, "diameter_range": [40e-6, 60e-6], "seed": 0,
          "method": "relax", "sinter_swelling": 0.0}
@@ -232,7 +233,7 @@ def test_a_bed_that_settles_reports_its_progress_with_an_estimate(monkeypatch):
     scene = {"packing": p, "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 7.0},
              "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
              "run": {"duration": 1e-4, "output_every": 1, "checkpoint_every": 1}}
-    runner.build_packing(validate_scene(scene), lines.append)
+    build.build_packing(validate_scene(scene), lines.append)
     relaxing = [line for line in lines if line.startswith("packing: relaxing")]
     assert len(relaxing) == len(calls)
     assert "settled below 0.002" in relaxing[-1] and "steps (at most" in relaxing[-1]

@@ -23,13 +23,21 @@ LAYERS = {
     "space": ["neighbors", "pair_list"],
     "lifts": ["network", "mechanics", "thermal", "neck_growth"],
     "drive": ["simulate", "steady", "rollout", "guards"],
-    "use": ["scene", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
+    "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.build", "observe",
+            "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
 }
 RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}
 
 
 def _modules():
-    return {f"sintercond.{p.stem}": p for p in (ROOT / "sintercond").glob("*.py") if p.stem != "__init__"}
+    """Every module of the package by dotted name; a subpackage's ``__init__`` is the subpackage itself."""
+    modules = {}
+    for p in (ROOT / "sintercond").rglob("*.py"):
+        parts = p.relative_to(ROOT).with_suffix("").parts
+        if parts[-1] == "__main__" or parts == ("sintercond", "__init__") or parts[1] == "data":  # data: files only
+            continue
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = p
+    return modules
 
 
 def _imports(path):
@@ -89,8 +97,12 @@ def test_import_sintercond_as_sc_gives_every_submodule():
 
     for module in _modules():
         name = module.split(".")[1]
-        if not name.startswith("_"):
-            assert getattr(sc, name) is importlib.import_module(module), name
+        if not name.startswith("_"):  # a subpackage's modules through it: sc.scene.build
+            top = importlib.import_module(f"sintercond.{name}")
+            assert getattr(sc, name) is top, name
+            for part in module.split(".")[2:]:
+                top = getattr(top, part) if hasattr(top, part) else importlib.import_module(f"{top.__name__}.{part}")
+            assert top is importlib.import_module(module), module
     with pytest.raises(AttributeError, match="no attribute 'nonexistent'"):
         sc.nonexistent  # noqa: B018
 
@@ -128,3 +140,21 @@ def test_renamed_time_steps_still_resolve_with_a_deprecation_warning(module, old
         warnings.simplefilter("error")
         with pytest.raises(AttributeError, match="has no attribute 'no_such_function'"):
             mod.no_such_function  # noqa: B018
+
+
+@pytest.mark.parametrize("old, new", [("build_packing", "sintercond.scene.build"),
+                                      ("scene_physics", "sintercond.scene.build"),
+                                      ("WallContactWarning", "sintercond.scene.build"),
+                                      ("SINTERING_COLUMNS", "sintercond.observe"),
+                                      ("HISTORY_COLUMNS", "sintercond.observe")])
+def test_the_model_build_and_history_moved_out_of_run_resolve_with_a_deprecation_warning(old, new):
+    """The model build moved to ``sintercond.scene.build`` and the history rows to ``sintercond.observe``; what
+    ``run`` itself uses (``build_model``, ``history_columns``, ``read_history``) it imports, without a warning."""
+    from sintercond import run
+
+    with pytest.warns(DeprecationWarning, match=f"sintercond.run.{old} moved to {new}.{old}"):
+        assert getattr(run, old) is getattr(importlib.import_module(new), old)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert run.build_model is importlib.import_module("sintercond.scene.build").build_model
+        assert run.read_history is importlib.import_module("sintercond.observe").read_history

@@ -91,7 +91,8 @@ def test_the_run_restates_no_declared_default():
     """No ``.get("key", ...)`` of a key whose default the schema declares, in the code that reads a validated scene."""
     declared = {key for schema in [*_SCHEMA.values(), *_PACKING.values(), _WALL] for key, spec in schema.items()
                 if _literal(spec)}
-    for module in ("run.py",):
-        source = (Path(sc_scene.__file__).parent / module).read_text()
+    package = Path(sc_scene.__file__).parents[1]
+    for module in ("run.py", "observe.py", "scene/build.py"):
+        source = (package / module).read_text()
         restated = sorted(set(re.findall(r'\.get\("(\w+)", ', source)) & declared)
         assert restated == [], f"{module} restates the defaults of {restated}"

@@ -13,6 +13,7 @@ import pytest
 
 from sintercond import cli, examples, io
 from sintercond import run as runner
+from sintercond.scene import build
 from sintercond.scene import SceneError, builtin_scenes, load_scene, restitution_damping_ratio, validate_scene
 
 G = 9.81
@@ -135,7 +136,7 @@ def test_restitution_gives_the_tsuji_damping_ratio():
     # e = exp(-pi): beta = pi / sqrt(2 pi^2) = 1/sqrt(2), xi = sqrt(5/6) / sqrt(2) = sqrt(5/12)
     assert restitution_damping_ratio(math.exp(-math.pi)) == pytest.approx(math.sqrt(5 / 12), rel=1e-15)
     assert restitution_damping_ratio(1.0) == 0.0
-    model_xi = runner.mechanical_params(validate_scene(copy.deepcopy(PILE))).xi_con
+    model_xi = build.mechanical_params(validate_scene(copy.deepcopy(PILE))).xi_con
     assert float(model_xi) == pytest.approx(math.sqrt(5 / 6) * math.log(2) / math.sqrt(math.pi**2 + math.log(2) ** 2))
 
 
@@ -200,10 +201,10 @@ def test_the_5_3_scene_pours_with_its_mechanics_section():
     sampler and seed), the pour uses the scene's contact material and meets its settled thresholds, and the
     bed's summary carries the settle report."""
     scene = validate_scene(_poured_scene(particles=12, lateral_size=0.02))
-    material = runner.dem_material(scene)
+    material = build.dem_material(scene)
     assert (material.E, material.nu, material.mu, material.mu_r, material.mu_wall, material.xi_rol) == \
         (1e6, 0.3, 0.05, 0.2, 0.0, 0.2)
-    centres, radii, bed = runner.build_packing(scene)
+    centres, radii, bed = build.build_packing(scene)
     np.testing.assert_array_equal(np.sort(radii), np.sort(examples.example_5_3_radii(12, np.random.default_rng(0))))
     assert bed["settle_kinetic_ratio"] <= bed["settle_kinetic_tol"] and bed["settle_force_ratio"] <= bed["settle_force_tol"]
     assert np.all(centres[:, :2] - radii[:, None] >= -0.05 * radii[:, None])  # inside the box, up to Hertz overlap

@@ -7,6 +7,7 @@ import pytest
 
 from sintercond import io, neck_growth, sintering
 from sintercond import run as runner
+from sintercond.observe import SINTERING_COLUMNS
 from sintercond.scene import SceneError, load_scene, validate_scene
 
 # a small touching lattice on a hot floor, necks from point contacts (the built-in sintering_hot_floor, shrunk)
@@ -25,7 +26,7 @@ def test_a_sintering_scene_grows_necks_from_point_contacts_and_reports_them(tmp_
     scene = validate_scene(copy.deepcopy(CELL))
     _, summary = runner.run_scene(scene, tmp_path, progress=False, pictures=False)
     history = runner.read_history(tmp_path)
-    for name in runner.SINTERING_COLUMNS:
+    for name in SINTERING_COLUMNS:
         assert np.all(np.diff(history[name]) >= 0), name  # necks only grow
     assert history["mean_neck_ratio"][0] < 1e-6 < history["mean_neck_ratio"][-1]
     assert 0 < history["shrinkage"][-1] and history["max_neck_ratio"][-1] < np.sin(np.deg2rad(75.0))

@@ -20,7 +20,7 @@ from fitting import inverse
 from sintercond import simulate, network
 from sintercond.simulate import simulate_table
 from sintercond import run as runner
-from sintercond.scene import validate_scene
+from sintercond.scene import build, validate_scene
 from test_scene_run import SMALL as _SMALL
 from _helpers import find_contacts
 
@@ -265,7 +265,7 @@ def test_sinter_swelling_grows_the_settled_radii():
     """``sinter_swelling = s`` multiplies the settled bed's radii by 1 + s and leaves the centres (so settled
     contacts become necks). Mutant "swelling ignored" passed: no test built a powder bed scene."""
     packing = {"kind": "powder_bed", "lateral_size": 2.5e-4, "height": 1.5e-4, "diameter_range": [45e-6, 60e-6]}
-    plain = runner.build_packing({"packing": packing})
-    swollen = runner.build_packing({"packing": {**packing, "sinter_swelling": 0.03}})
+    plain = build.build_packing({"packing": packing})
+    swollen = build.build_packing({"packing": {**packing, "sinter_swelling": 0.03}})
     np.testing.assert_array_equal(swollen[0], plain[0])
     np.testing.assert_allclose(swollen[1], 1.03 * plain[1], rtol=1e-15)

@@ -1,0 +1,218 @@
+"""What a run reports of a state: the rows of ``history.csv`` (:func:`history_columns`, :func:`observe`), the
+heat through each wall, with mechanics the motion and contacts, with sintering the necks and k*, and the contact
+network (:func:`contact_network`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+
+from sintercond import forces, mechanics, neck_growth, network, simulate, steady, walls
+from sintercond.neck import NECK_MODELS
+
+from sintercond.scene.build import _walls, scene_walls
+
+
+HISTORY_COLUMNS = ("step", "time_s", "T_mean_K", "T_min_K", "T_max_K")
+"""The columns of ``history.csv`` every run has, one row per output step (the LAMMPS "thermo" analogue)."""
+
+
+MECHANICS_COLUMNS = ("kinetic_energy_J", "contacts", "wall_contacts", "max_overlap_m")
+"""Columns a run with mechanics adds: translational plus rotational kinetic energy, touching particle pairs,
+particles touching a wall, and the largest overlap of a pair or a wall contact."""
+
+
+SINTERING_COLUMNS = ("mean_neck_ratio", "max_neck_ratio", "shrinkage")
+"""Columns a run with ``[sintering]`` adds (:func:`sintercond.neck_growth.neck_statistics`): the mean and largest
+neck ratio ``a / min(r_i, r_j)`` over the contacts and the mean linear shrinkage of their approaches."""
+
+
+def history_columns(model) -> tuple:
+    """The columns of ``history.csv`` of ``model``: :data:`HISTORY_COLUMNS`, :data:`MECHANICS_COLUMNS` with
+    mechanics, :data:`SINTERING_COLUMNS` with sintering, and ``heat_wall{k}_W`` (the heat power into the packing
+    through scene wall ``k``, W) for each held or conducting wall."""
+    return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics is not None else ())
+            + (SINTERING_COLUMNS if model.physics.sintering is not None else ())
+            + (("k_star_W_mK",) if model.k_star_axis is not None else ())
+            + tuple(spec[0] for spec in model.wall_heat))
+
+
+def sintered_conductivity(model, state) -> float:
+    """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
+    (:func:`sintercond.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
+    layers are held hot and cold; any other packing's face layers (:func:`sintercond.steady.face_layer_box`)."""
+    carried, radii = state.sintering, model.radii
+    slot = np.asarray(carried.pair_slot)
+    pair_k = np.asarray(simulate.neck_conductance(model.physics, state, model.params)).reshape(-1)[slot]
+    if not np.any(pair_k > 0):
+        return 0.0
+    i, j = np.asarray(carried.pairs, np.int64).T
+    pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap).reshape(-1)[slot], radii[i], radii[j],
+                                 len(radii))
+    axis = model.k_star_axis
+    box = None if model.lattice else steady.face_layer_box(model.centres, radii, axis)
+    return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=axis, box=box))
+
+
+class Observation(NamedTuple):
+    """What a run reports of a state besides temperatures (host arrays): see :func:`observe`."""
+
+    wall_heat: tuple  # W per held or conducting wall, in model.wall_heat order
+    kinetic_energy: float = float("nan")
+    pairs: Any = None  # [p, 2] touching particle pairs
+    pair_overlap: Any = None  # [p] (m)
+    wall_overlap: Any = None  # [n_walls, n] (m), > 0 touching
+    velocity: Any = None  # [n, 3] (m/s)
+    force: Any = None  # [n, 3] contact force (N), gravity excluded
+    power: Any = None  # [n] net heat power into each particle from its contacts, walls and sources (W)
+
+
+def _probe_fn(model):
+    """A jitted ``(state, params) -> (heat power [n] W, velocity after one step or None)`` for :func:`observe`."""
+    sim = model.sim
+
+    def probe(state, params):
+        prep = sim.prepare_fn(state, params)
+        power = sim.heat_power_fn(state, prep)
+        after = sim.advance_fn(state, prep).mechanics.velocity if model.physics.mechanics is not None else None
+        return power, after
+
+    return jax.jit(probe)
+
+
+def _plane_penetration(plane, positions, radii, t):
+    """``r - (x - p(t)) . n`` (m) of each particle on a plane wall whose point moves at its velocity."""
+    point = np.asarray(plane.point) + t * np.asarray(plane.velocity)
+    return radii - (positions - point) @ np.asarray(plane.normal)
+
+
+def observe(scene, model, state, probe) -> Observation:
+    """Heat through each held or conducting wall, and with mechanics the motion and the contacts, of ``state``.
+
+    Heat into the packing through a conducting wall: ``sum_i K_iw (T_w - T_i)``
+    with ``K_iw`` the wall conductance of the scene's law at the current
+    penetration (:func:`sintercond.walls.wall_conductance`); through a held
+    wall: the power its held particles lose to the rest,
+    ``-sum_i P_i`` over them (what holds them at their temperature).
+    With mechanics: the contact force ``m (v(t + dt) - v(t)) / dt - m g``
+    (one symplectic-Euler step of the simulator, Eq. 43), kinetic energy
+    ``sum m v^2/2 + I omega^2/2`` (``I = (2/5) m r^2``), touching pairs and
+    wall contacts.
+    """
+    p = state.particles
+    positions, radii, temperature = (np.asarray(x) for x in (p.positions, p.radii, p.temperature))
+    index, conductivity = simulate.conductivity_lookup(model.physics, model.params, p)
+    kappa = np.asarray(conductivity)[np.asarray(index)]
+    needs_power = (any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics is not None
+                   or "vtp" in scene["run"]["formats"])
+    power, after = probe(state, model.params) if needs_power else (None, None)
+    planes = scene_walls(scene, np.asarray(model.state.particles.positions), radii)
+    if model.physics.mechanics is not None:
+        planes = list(model.physics.mechanics.walls)
+    t = float(state.time)
+    conducting_power = np.zeros(len(radii))
+    wall_h = [_plane_penetration(plane, positions, radii, t) for plane in planes]
+    flows = {}
+    c = scene["conduction"]
+    for k, wall in enumerate(_walls(scene)):
+        if wall["mode"] == "conducting":
+            k_w = np.asarray(walls.wall_conductance(c["law"], radii, wall_h[k], kappa, params=c.get("params"),
+                                                    neck_model=c.get("neck_model")))
+            q = k_w * (wall["temperature"] - temperature)
+            conducting_power += q if model.physics.mechanics is not None else 0.0  # the thermal simulator's P_i holds it
+            flows[k] = float(np.sum(q))
+    for _, k, mode, mask in model.wall_heat:
+        if mode == "held":
+            flows[k] = -float(np.sum((np.asarray(power) + conducting_power)[mask]))
+    heat = tuple(flows[spec[1]] for spec in model.wall_heat)
+    total = None if power is None else np.asarray(power) + conducting_power
+    if model.physics.mechanics is None:
+        return Observation(heat, power=total)
+    m = np.asarray(p.mass)
+    v, omega = np.asarray(state.mechanics.velocity), np.asarray(state.mechanics.spin)
+    inertia = forces.SOLID_SPHERE_INERTIA * m * radii**2
+    kinetic = float(0.5 * np.sum(m * np.sum(v * v, axis=1)) + 0.5 * np.sum(inertia * np.sum(omega * omega, axis=1)))
+    force = m[:, None] * ((np.asarray(after) - v) / float(state.dt) - np.asarray(model.physics.mechanics.gravity))
+    pairs, overlap = _touching_pairs(positions, radii, np.asarray(state.contacts.neighbors))
+    return Observation(heat, kinetic, pairs, overlap, np.stack(wall_h) if wall_h else np.zeros((0, len(radii))),
+                       v, force, total)
+
+
+def _touching_pairs(positions, radii, neighbors):
+    """Touching pairs ``[p, 2]`` (each once, ``i < j``) among the listed candidates, and their overlaps (m)."""
+    n = len(radii)
+    rows = np.broadcast_to(np.arange(n)[:, None], neighbors.shape)
+    listed = (neighbors < n) & (neighbors != rows)
+    i, j = rows[listed], neighbors[listed]
+    lo, hi = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1), axis=0).T if len(i) else (i, j)
+    overlap = radii[lo] + radii[hi] - np.linalg.norm(positions[hi] - positions[lo], axis=1)
+    touching = overlap > 0
+    return np.stack([lo[touching], hi[touching]], axis=1), overlap[touching]
+
+
+def coordination(n, pairs):
+    """Contacts per particle ``[n]`` (particle pairs only, walls not counted)."""
+    return np.bincount(np.ravel(pairs), minlength=n)
+
+
+def _history_row(model, state, obs: Observation) -> str:
+    t = np.asarray(state.particles.temperature)
+    values = [float(state.time), float(t.mean()), float(t.min()), float(t.max())]  # Python floats: plain repr
+    if model.physics.mechanics is not None:
+        touching_walls = int(np.sum(np.any(obs.wall_overlap > 0, axis=0))) if len(obs.wall_overlap) else 0
+        largest = float(max(np.max(obs.pair_overlap, initial=0.0), np.max(obs.wall_overlap, initial=0.0)))
+        values += [obs.kinetic_energy, len(obs.pairs), touching_walls, largest]
+    if model.physics.sintering is not None:
+        stats = neck_growth.neck_statistics(state)
+        values += [float(stats[name]) for name in SINTERING_COLUMNS]
+    if model.k_star_axis is not None:
+        values.append(sintered_conductivity(model, state))
+    values += list(obs.wall_heat)
+    return f"{int(state.step)}," + ",".join(repr(v) if isinstance(v, float) else str(v) for v in values) + "\n"
+
+
+def read_history(out) -> dict:
+    """``history.csv`` of a run as a dict of arrays: ``time`` (s) and every other column by its name (for the plot)."""
+    data = np.genfromtxt(Path(out) / "history.csv", delimiter=",", names=True, ndmin=1)
+    return {"time": data["time_s"], **{name: data[name] for name in data.dtype.names if name not in ("step", "time_s")}}
+
+
+def contact_network(model, state) -> tuple:
+    """The contacts of ``state`` and what each carries: ``(pairs [p, 2], fields)``, pairs ``i < j``.
+
+    ``fields``: ``neck_radius`` (m, the neck the conductance law takes), ``conductance`` (W/K) and ``heat_flow``
+    (W, ``K (T_i - T_j)``: from ``i`` to ``j``); the contacts the static table lists (touching within the
+    packing's tolerance, point contacts of a sintering lattice included), or the touching pairs of a moving
+    packing's list.
+    """
+    physics, p = model.physics, state.particles
+    radii, temperature = np.asarray(p.radii), np.asarray(p.temperature)
+    index, kappa = simulate.conductivity_lookup(physics, model.params, p)
+    law = simulate.merged_law_params(physics, model.params)
+    if physics.contacts == "dynamic":
+        geometry = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
+        keep = np.asarray(geometry.touching & geometry.valid)
+        pairs = np.stack([np.asarray(geometry.i), np.asarray(geometry.j)], axis=1)[keep]
+        k = np.asarray(simulate.pair_conductance(physics, p.radii, index, geometry, kappa, law))[keep]
+        overlap = np.asarray(geometry.overlap)[keep]
+        neck = np.asarray(NECK_MODELS[physics.neck](radii[pairs[:, 0]], radii[pairs[:, 1]], overlap))
+    else:
+        neighbors = np.asarray(state.contacts.neighbors)
+        rows = np.broadcast_to(np.arange(len(radii))[:, None], neighbors.shape)
+        lower = (rows < neighbors) & (neighbors < len(radii))
+        pairs = np.stack([rows[lower], neighbors[lower]], axis=1)
+        if physics.conduction.conductance == "table":
+            k = np.asarray(state.contacts.conductance)[lower] * float(np.asarray(kappa)[0])
+            centres = np.asarray(p.positions)
+            overlap = np.maximum(radii[pairs[:, 0]] + radii[pairs[:, 1]]
+                                 - np.linalg.norm(centres[pairs[:, 0]] - centres[pairs[:, 1]], axis=1), 0.0)
+            neck = np.asarray(NECK_MODELS[physics.neck](radii[pairs[:, 0]], radii[pairs[:, 1]], overlap))
+        else:
+            k = np.asarray(simulate.neck_conductance(physics, state, model.params))[lower]
+            neck = np.asarray(state.contacts.neck)[lower]
+    flow = k * (temperature[pairs[:, 0]] - temperature[pairs[:, 1]])
+    return pairs, {"neck_radius": neck, "conductance": k, "heat_flow": flow}
+

@@ -1,0 +1,494 @@
+"""A validated scene to the model a run steps: packing, contacts, walls, sources, time step, simulator, parameters
+and initial state (:func:`build_model`), built once; the scene's walls as planes and the particles they hold."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, simulate, thermal, walls
+from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
+                              default_penetration, file_packing, restitution_damping_ratio)
+from sintercond.state import particle_state
+
+
+
+@dataclasses.dataclass(frozen=True)
+class Model:
+    """Everything a run needs, built from a scene: the simulator, its parameters and initial state."""
+
+    sim: simulate.Simulator
+    params: simulate.Params
+    state: simulate.SimState
+    n_steps: int
+    contacts: int
+    stable_step: float = float("inf")
+    bed: dict = dataclasses.field(default_factory=dict)
+    reallocate: Any = None  # simulate.reallocate_neighbors of a dynamic contact list, for advance
+    wall_heat: tuple = ()  # (column, index of the scene wall, mode, held mask) of each held or conducting wall
+    limits: dict = dataclasses.field(default_factory=dict)  # {"thermal", "mechanical", "wall", "beam": s} bounds
+    sized_speed: float | None = None  # with mechanics: the approach speed (m/s) the mechanical step is sized for
+    k_star_axis: int | None = None  # with [sintering] k_star_axis: the axis of k* at each output
+    lattice: bool = False  # a simple cubic packing (k* between its end layers)
+
+    @property
+    def physics(self) -> simulate.Physics:
+        return self.sim.physics
+
+    @property
+    def dt(self) -> float:
+        return float(self.state.dt)
+
+    @property
+    def centres(self) -> np.ndarray:
+        return np.asarray(self.state.particles.positions)
+
+    @property
+    def radii(self) -> np.ndarray:
+        return np.asarray(self.state.particles.radii)
+
+
+PROGRESS_EVERY_S = 5.0
+"""Seconds between two progress lines of a bed that settles (relaxation or DEM)."""
+
+
+class SettlingProgress:
+    """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.packing`: a line through ``log``
+    at most every :data:`PROGRESS_EVERY_S` seconds with the steps taken, the settling figure against its target
+    and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially)."""
+
+    def __init__(self, log, particles):
+        self.log, self.particles = log, particles
+        self.start = self.last = time.perf_counter()
+        self.points = []  # (seconds, ln figure) at the lines written
+
+    def __call__(self, phase, steps, max_steps, figure, target):
+        now = time.perf_counter()
+        if now - self.last < PROGRESS_EVERY_S:
+            return
+        self.last = now
+        self.points.append((now - self.start, math.log(max(figure, 1e-300))))
+        left = ""
+        if len(self.points) >= 2:
+            (t0, y0), (t1, y1) = self.points[max(0, len(self.points) - 4)], self.points[-1]
+            rate = (y0 - y1) / (t1 - t0)  # decay of ln figure per second
+            if rate > 0 and figure > target:
+                left = f", about {(y1 - math.log(target)) / rate:.0f} s left at this rate"
+        self.log(f"packing: {phase} {self.particles:,} spheres: {steps:,} steps (at most {max_steps:,}), figure "
+                 f"{figure:.3g} (settled below {target:g}), {now - self.start:.0f} s{left}")
+
+
+def build_packing(scene, log=None):
+    """``(centres, radii, bed)`` of a validated scene: listed spheres as given, else
+    :func:`sintercond.packing.from_scene`; a bed that settles reports its progress through ``log``
+    (:class:`SettlingProgress`).
+
+    ``bed``: the bed's figures for the summary (empty for listed spheres).
+    """
+    p = scene["packing"]
+    if p["kind"] == "spheres":
+        return np.asarray(p["centres"], np.float64), np.asarray(p["radii"], np.float64), {}
+    if p["kind"] == "file":
+        centres, radii = file_packing(p)
+        return np.array(centres), np.array(radii), {}
+    if p["kind"] == "poured":
+        rng = np.random.default_rng(p["seed"])
+        radii = packing.truncated_normal_radii(p["particles"], p["radius_mean"], p["radius_std"],
+                                               p["truncation"], rng)
+        packed = packing.pour(radii, p["lateral_size"], dem_material(scene), seed=rng, start=p["start"],
+                              temperature=scene["initial"]["temperature"],
+                              progress=SettlingProgress(log, len(radii)) if log else None)
+    else:
+        count = packing.bed_particle_count(p["lateral_size"], p["height"], p["diameter_range"]) \
+            if p["kind"] == "powder_bed" else 0
+        progress = SettlingProgress(log, count) if log and count else None
+        if p.get("method") == "dem":
+            packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],
+                                        method="dem", material=dem_material(scene), progress=progress)
+            packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p["sinter_swelling"]))
+        else:
+            packed = packing.from_scene(p, progress=progress)
+    return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}
+
+
+def _nusselt(convection):
+    if "reynolds" in convection:
+        return float(heat_sources.whitaker_nusselt(convection["reynolds"], convection["prandtl"]))
+    return convection["nusselt"]
+
+
+def scene_physics(scene, walls=0) -> simulate.Physics:
+    """The static physics spec of a validated scene."""
+    c, s, ramp = scene["conduction"], scene.get("sintering"), scene.get("preheating")
+    beam = scene.get("beam")
+    held = any(w["mode"] == "held" for w in _walls(scene)) or (ramp is not None and ramp["hold"] == "all")
+    # a contact resistance makes the law nonlinear in the conductivity, growing necks and kappa(T) change it: lift it
+    table = "conductivity_table" in scene["material"]
+    lifted = c.get("params", {}).get("contact_resistance", 0.0) or s is not None or table
+    return simulate.Physics(
+        conduction=simulate.Conduction(
+            law=c["law"], neck_model=c.get("neck_model"), conductance="lifted" if lifted else "table",
+            held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table),
+        sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
+                                 radiation="radiation" in scene),
+        sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"]))
+
+
+def mechanics_on(scene) -> bool:
+    """Whether a validated scene runs the coupled thermo-mechanical step."""
+    return scene["physics"]["mechanics"]
+
+
+def contact_material(scene) -> dict:
+    """The ``[mechanics]`` section as :class:`~sintercond.mechanics.MechanicalParams` names (floats, SI).
+
+    ``mechanics.restitution`` e becomes ``xi_con``
+    (:func:`sintercond.scene.restitution_damping_ratio`); wall coefficients
+    default to the particles'.
+    """
+    m = scene["mechanics"]
+    xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m["damping"]
+    return dict(E0=m["young_modulus"], nu=m["poisson_ratio"], xi_con=xi_con, xi_fric=m["tangential_damping"],
+                xi_rol=m["rolling_damping"], mu=m["friction"], mu_r=m["rolling_friction"], mu_wall=m["wall_friction"],
+                mu_r_wall=m["wall_rolling_friction"])
+
+
+def mechanical_params(scene) -> mechanics.MechanicalParams | None:
+    """The contact material of a validated scene (:func:`contact_material`, ``[softening]``), or None without mechanics."""
+    if not mechanics_on(scene):
+        return None
+    soft = scene.get("softening")
+    f = lambda x: jnp.asarray(float(x))  # noqa: E731
+    return mechanics.MechanicalParams(
+        **{k: f(v) for k, v in contact_material(scene).items()}, theta_star=f(soft["onset_temperature"] if soft else 400.0),
+        rate=f(soft["rate"] if soft else 1.0), E_min=f(soft["min_modulus"] if soft else 0.0))
+
+
+def dem_material(scene) -> packing.DemMaterial:
+    """The contact material a poured packing settles with: :func:`contact_material` and ``material.density``."""
+    c = contact_material(scene)
+    return packing.DemMaterial(density=scene["material"]["density"], **{("E" if k == "E0" else k): float(v)
+                                                                        for k, v in c.items()})
+
+
+def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
+    """The coupled spec of a validated scene with mechanics: ``thermal_physics`` made dynamic, the walls pushing.
+
+    Every wall of the scene is a :class:`~sintercond.walls.PlaneWall` of
+    ``Mechanics.walls``; a held wall pushes as an insulated one (its
+    particles are held by ``Conduction.held``, :func:`_apply_walls`).
+    """
+    p, c = scene["physics"], contact_material(scene)
+    walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
+                   for w in planes)
+    spec = mechanics.Mechanics.create(
+        walls_, gravity=p["gravity"], shear=p["shear"], slip_direction=p["slip_direction"],
+        rolling_projection=p["rolling_projection"], damping_clamp=p["damping_clamp"], softening="softening" in scene,
+        friction=c["mu"] > 0 or c["mu_wall"] > 0, rolling=c["mu_r"] > 0 or c["mu_r_wall"] > 0,
+        wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
+    conduction = dataclasses.replace(thermal_physics.conduction, conductance="lifted", conducting_walls=0)
+    return dataclasses.replace(thermal_physics, conduction=conduction, contacts="dynamic", mechanics=spec)
+
+
+def scene_params(scene) -> simulate.Params:
+    """The differentiable parameters of a validated scene."""
+    m, beam, conv, rad = scene["material"], scene.get("beam"), scene.get("convection"), scene.get("radiation")
+    f = jnp.asarray
+    return simulate.Params(
+        mechanics=mechanical_params(scene),
+        conductivity=f([m["conductivity"]]) if "conductivity_table" not in m else materials.tabulated(
+            *np.asarray(m["conductivity_table"], np.float64).T), specific_heat=f([m["specific_heat"]]),
+        law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
+        sintering=None if "sintering" not in scene else {k: f(v) for k, v in
+                                                         scene["sintering"].get("params", {}).items()},
+        held_ramp=None if "preheating" not in scene else simulate.HeldRampParams(
+            f(scene["preheating"]["end_temperature"]), f(scene["preheating"]["duration"]),
+            f(float(scene["preheating"]["steps"]))),
+        beam=None if beam is None else simulate.BeamParams(
+            intensity=f(beam["intensity"]), reach=f(beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"]),
+            spot_radius=f(beam["spot_radius"]), absorptance=f(beam["absorptance"]), speed=f(beam["speed"]),
+            path=f(beam["path"], dtype=float),
+            segments_on=None if "segments_on" not in beam else f(beam["segments_on"], dtype=float),
+            after_path=f(1.0 if beam["after_path"] == "stay" else 0.0)),
+        convection=None if conv is None else simulate.ConvectionParams(
+            f(conv["environment_temperature"]), f(conv["environment_conductivity"]), f(_nusselt(conv))),
+        radiation=None if rad is None else simulate.RadiationParams(f(rad["environment_temperature"]),
+                                                                    f(rad["emissivity"])))
+
+
+def build_model(scene, centres=None, radii=None, log=None) -> Model:
+    """Packing, network, held particles, sources, time step and simulator of a validated scene.
+
+    The time step: ``run.dt`` or, for ``"auto"``, 0.9 of the stable step
+    ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` where ``G_i`` linearises
+    convection and radiation (:func:`sintercond.thermal.source_conductance`);
+    with mechanics, of the smaller of that (at the initial contacts) and the
+    mechanical step (:func:`sintercond.mechanics.mechanical_time_step`: Eq. 47
+    and the tangential and rotational bounds of MECHANICS.md erratum 8, at
+    the approach speed ``physics.impact_velocity`` plus the fastest wall's
+    normal speed, at the unsoftened modulus: ``E_min <= E0``, so no state
+    the run reaches is stiffer); with moving walls, the step in which the
+    fastest moves :data:`sintercond.scene.WALL_STEP_FRACTION` of the smallest radius; with a
+    beam, the step in which its spot moves :data:`sintercond.scene.BEAM_STEP_FRACTION` of
+    its radius. A ``run.dt`` above any of them is refused, naming it and
+    the key that sets it. Then the step is shortened to ``duration / n_steps`` so that
+    the run ends exactly at ``run.duration``. ``log(message)`` reports each phase.
+    """
+    log = log or (lambda message: None)
+    bed = {}
+    if centres is None:
+        log("packing: building the scene's packing")
+        centres, radii, bed = build_packing(scene, log)
+    m, c = scene["material"], scene["conduction"]
+    physics = scene_physics(scene)
+    log(f"network: contacts and conductances of {len(radii)} particles")
+    try:
+        unit = physics.conduction.conductance == "table"
+        table = network.contact_table(centres, radii, 1.0 if unit else m["conductivity"],
+                                      c["law"], c.get("params"), c.get("neck_model"))
+    except ValueError as err:
+        raise SceneError(f"the packing does not fit the conduction model: {err}") from None
+    fixed_mask, fixed_temperature, conducting = _apply_walls(scene, centres, radii)
+    if "preheating" in scene and scene["preheating"]["hold"] == "all":  # an isothermal cell on the ramp
+        fixed_mask = np.ones(len(radii), bool)
+        fixed_temperature = np.full(len(radii), scene["initial"]["temperature"])
+    touching_walls = wall_contacts(scene, centres, radii, log)
+    lifted = physics.conduction.conductance == "lifted"
+    physics = dataclasses.replace(physics, conduction=dataclasses.replace(
+        physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
+    particles = particle_state(centres, radii, scene["initial"]["temperature"], m["density"], m["specific_heat"],
+                               fixed=fixed_mask, fixed_temperature=fixed_temperature)
+    if not lifted:
+        k_wall, t_wall = _merged_wall_conductance(scene, centres, radii, conducting)
+        contacts = simulate.table_contacts(table, k_wall, t_wall)
+    else:
+        contacts = simulate.lifted_contacts(physics, centres, radii,
+                                            [(penetration, wall.temperature) for _, wall, penetration in conducting])
+    params = scene_params(scene)
+    sim = simulate.simulator(physics)
+    necks = None
+    if physics.sintering is not None:
+        necks = neck_growth.neck_state(contacts, particles.temperature)
+    # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
+    limiting = contacts if necks is None else neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts,
+                                                                      particles.radii)
+    state = simulate.init_state(particles, limiting, 1.0, sintering=necks)
+    run = scene["run"]
+    sources = thermal.source_conductance(physics.sources, particles.radii, params, _highest_temperature(scene))
+    # every particle held (an isothermal cell on a ramp): no conduction to keep stable
+    thermal_limit = np.inf if fixed_mask.all() else float(simulate.thermal_time_step(sim, state, params, sources))
+    at_cap = " on the necks at the kinetic law's cap" if necks is not None else ""
+    bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
+                                         f"{thermal_limit:.6g} s{at_cap} (G_i: linearised convection and "
+                                         "radiation)")}
+    if "preheating" in scene:
+        ramp = scene["preheating"]
+        step = RAMP_STEP_FRACTION * ramp["duration"] / ramp["steps"]
+        bounds["preheating"] = (step, f"{step:.6g} s, {RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
+                                      "(preheating.duration / preheating.steps)")
+    reallocate = None
+    motion = None
+    if mechanics_on(scene):
+        log("mechanics: contact list and the mechanical time step")
+        planes = scene_walls(scene, centres, radii)
+        physics = mechanical_physics(scene, physics, planes)
+        skin = scene["physics"]["skin"] * float(np.max(radii))
+        contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
+        sim = simulate.simulator(physics, fns)
+        reallocate = simulate.reallocate_neighbors(fns)
+        impact = scene["physics"]["impact_velocity"]
+        wall_speed, fastest = _fastest_wall(scene)
+        v_rel = impact + wall_speed
+        mechanical_limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors,
+                                                            params.mechanics, v_rel))
+        speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
+            f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")
+        bounds["mechanical"] = (mechanical_limit, f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and "
+                                                  f"the symplectic-Euler bounds of the stiffest contact, unsoftened, "
+                                                  f"at the approach speed {v_rel:g} m/s: {speed_source})")
+        if wall_speed > 0:
+            step = WALL_STEP_FRACTION * float(np.min(radii)) / wall_speed
+            bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
+                                    f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
+        motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
+    beam = scene.get("beam")
+    if beam is not None and beam_step(beam) is not None:
+        step = beam_step(beam)
+        bounds["beam"] = (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam['speed']:g} m/s) moves "
+                                f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam['spot_radius']:g} m")
+    limit = min(bound for bound, _ in bounds.values())
+    if run["dt"] == "auto":
+        dt = 0.9 * limit if np.isfinite(limit) else run["duration"]
+    else:
+        dt = run["dt"]
+        for kind, (bound, name) in bounds.items():
+            if dt > bound:
+                raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds {name}; use dt <= {limit:.6g} s"
+                                 + (" or the implicit integrator" if kind == "thermal" and motion is None else ""))
+    n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
+    dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
+    state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
+    bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
+    return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
+                 _wall_heat_specs(scene, centres, radii),
+                 {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None,
+                 scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
+                 scene["packing"]["kind"] == "simple_cubic")
+
+
+def _fastest_wall(scene) -> tuple[float, int | None]:
+    """The largest speed (m/s) at which a scene's wall advances into the packing (:func:`sintercond.scene.advance_speed`),
+    and that wall (None if none does)."""
+    speeds = [advance_speed(w) for w in _walls(scene)]
+    if not speeds or max(speeds) == 0:
+        return 0.0, None
+    return max(speeds), int(np.argmax(speeds))
+
+
+def _highest_temperature(scene) -> float:
+    """The highest temperature a scene names (initial, walls, environment): where radiation is stiffest."""
+    temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in _walls(scene) if "temperature" in w]
+    temperatures += [scene[k]["environment_temperature"] for k in ("convection", "radiation") if k in scene]
+    temperatures += [scene["preheating"]["end_temperature"]] if "preheating" in scene else []
+    return float(max(temperatures))
+
+
+def _walls(scene):
+    walls = list(scene["walls"])
+    if "floor_temperature" in scene.get("boundary", {}):
+        walls.append({"axis": 2, "side": "min", "mode": "held", "temperature": scene["boundary"]["floor_temperature"],
+                      "penetration": default_penetration(scene), "velocity": [0.0, 0.0, 0.0]})
+    return walls
+
+
+def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
+    """The scene's walls as :class:`~sintercond.walls.PlaneWall` (insulated ones included).
+
+    A wall plane lies at the packing's extreme along its axis, moved
+    ``penetration`` mean radii into it; its normal points into the packing.
+    """
+    planes = []
+    for wall in _walls(scene):
+        axis, depth = wall["axis"], wall["penetration"] * float(np.mean(radii))
+        normal = np.zeros(3)
+        if wall["side"] == "min":
+            normal[axis] = 1.0
+            position = float(np.min(centres[:, axis] - radii)) + depth
+        else:
+            normal[axis] = -1.0
+            position = float(np.max(centres[:, axis] + radii)) - depth
+        point = np.zeros(3)
+        point[axis] = position
+        planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall["mode"], wall.get("temperature"),
+                                      tuple(float(v) for v in wall["velocity"])))
+    return planes
+
+
+def _wall_heat_specs(scene, centres, radii):
+    """``(column, index of the scene wall, mode, held mask or None)`` of each held or conducting wall of a scene.
+
+    A particle held by several walls counts for the first (as in
+    :func:`_apply_walls`, where the last one sets its temperature, they are
+    only ever equal on an edge of two held faces).
+    """
+    specs, claimed = [], np.zeros(len(radii), bool)
+    for k, wall in enumerate(scene_walls(scene, centres, radii)):
+        if wall.mode == "held":
+            mask = (np.asarray(wall.penetration(centres, radii)) >= 0) & ~claimed
+            claimed |= mask
+            specs.append((f"heat_wall{k}_W", k, "held", mask))
+        elif wall.mode == "conducting":
+            specs.append((f"heat_wall{k}_W", k, "conducting", None))
+    return tuple(specs)
+
+
+FEW_WALL_CONTACTS = 0.5
+"""A held or conducting wall touching fewer than this fraction of the particles facing it is reported as a handful."""
+
+
+def wall_contacts(scene, centres, radii, log=None) -> dict:
+    """``{k: particles touching scene wall k}`` for each held or conducting wall, logged; warns on a handful.
+
+    The particles facing a wall are its face layer, those whose surface comes within half a mean radius of the
+    outermost one: on a rough bed the wall plane (the outermost particle moved ``walls[k].penetration`` mean
+    radii in) may touch only the few that stick out, and the boundary condition then acts through them alone.
+    With mechanics the count is the start's (the particles then settle onto the walls: ``history.csv``'s
+    ``wall_contacts``) and no warning is given.
+    """
+    counts = {}
+    for k, (wall, plane) in enumerate(zip(_walls(scene), scene_walls(scene, centres, radii))):
+        if plane.mode not in ("held", "conducting"):
+            continue
+        penetration = np.asarray(plane.penetration(centres, radii))
+        touching = int(np.count_nonzero(penetration >= 0 if plane.mode == "held" else penetration > 0))
+        facing = int(np.count_nonzero(penetration > float(np.max(penetration)) - 0.5 * float(np.mean(radii))))
+        counts[k] = touching
+        name = f"walls[{k}]" if k < len(scene["walls"]) else "boundary.floor_temperature"
+        message = (f"{name} ({plane.mode}, axis {wall['axis']} {wall['side']}) touches {touching} of the {facing} "
+                   "particles facing it")
+        if touching < FEW_WALL_CONTACTS * facing and not mechanics_on(scene):  # moving particles settle onto it
+            depth = f"{wall['penetration']:g} mean radii"
+            message += (f"; only a handful: raise walls[{k}].penetration (now {depth}) so that its plane reaches "
+                        "into the rough face" if k < len(scene["walls"]) else
+                        f"; only a handful: replace boundary.floor_temperature by a held [[walls]] floor (axis = 2, "
+                        f"side = \"min\") with a penetration above its {depth}, so that its plane reaches into the "
+                        "rough face")
+            warnings.warn(message, WallContactWarning, stacklevel=2)
+        if log is not None:
+            log(message)
+    return counts
+
+
+class WallContactWarning(UserWarning):
+    """A held or conducting wall touches only a handful of the particles facing it."""
+
+
+def _apply_walls(scene, centres, radii):
+    """Held walls become fixed particles; returns them and the conducting walls as ``(index, wall, penetration)``."""
+    held = np.zeros(len(radii), bool)
+    held_t = np.zeros(len(radii))
+    conducting = []
+    for index, wall in enumerate(scene_walls(scene, centres, radii)):
+        penetration = np.asarray(wall.penetration(centres, radii))
+        if wall.mode == "held":
+            touching = penetration >= 0
+            held |= touching
+            held_t = np.where(touching, wall.temperature, held_t)
+        elif wall.mode == "conducting":
+            conducting.append((index, wall, penetration))
+    return held, held_t, conducting
+
+
+def _merged_wall_conductance(scene, centres, radii, conducting):
+    """Per-particle wall conductance at unit conductivity and the conductance-weighted wall temperature."""
+    if not conducting:
+        return None, None
+    c = scene["conduction"]
+    k_wall = np.zeros(len(radii))
+    t_wall = np.zeros(len(radii))
+    for index, wall, penetration in conducting:
+        try:
+            k_w = np.asarray(walls.wall_conductance(c["law"], radii, penetration, 1.0, params=c.get("params"),
+                                                    neck_model=c.get("neck_model")))
+        except ValueError as err:
+            raise SceneError(f"walls[{index}]: {err}") from None
+        if not np.all(np.isfinite(k_w)):
+            raise SceneError(f"walls[{index}].penetration: the wall cuts a particle deeper than the neck model "
+                             f"allows for a plane (r/3 for the volume-conserving neck)")
+        t_wall = np.where(k_w > 0, (k_wall * t_wall + k_w * wall.temperature) / np.maximum(k_wall + k_w, 1e-300),
+                          t_wall)
+        k_wall = k_wall + k_w
+    return k_wall, t_wall
+
+
+RAMP_STEP_FRACTION = 0.1
+"""The largest time step is this fraction of a step of a ``[preheating]`` ramp: each level of the ramp is resolved
+in ten steps (necks grow over an interval at the mean of its start and end temperatures, so the interval that
+straddles a level's edge takes the mean of two levels)."""
+
