@@ -80,8 +80,10 @@ class SettlingProgress:
             rate = (y0 - y1) / (t1 - t0)  # decay of ln figure per second
             if rate > 0 and figure > target:
                 left = f", about {(y1 - math.log(target)) / rate:.0f} s left at this rate"
-        self.log(f"packing: {phase} {self.particles:,} spheres: {steps:,} steps (at most {max_steps:,}), figure "
-                 f"{figure:.3g} (settled below {target:g}), {now - self.start:.0f} s{left}")
+        what = (f"largest net force {figure:.3g} of a sphere's weight" if phase == "relaxing" else
+                f"kinetic energy and net force at {figure:.3g} times their thresholds")
+        self.log(f"packing: {phase} {self.particles:,} spheres: {steps:,} steps (at most {max_steps:,}), {what} "
+                 f"(settled below {target:g}), {now - self.start:.0f} s{left}")
 
 
 def build_packing(scene, log=None):
