@@ -542,7 +542,11 @@ def write_record(rows) -> None:
         + ("\n\nSurvivors:\n" + "\n".join(f"- {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}"
                                          for r in survivors) if survivors else "\n\nNo survivors.")
     )
-    write_section("mutation", command_line(), body)
+    command = command_line()
+    if "--only" in sys.argv:  # a merged record: the names of the rerun mutants are in the CSV, not the command
+        chosen = sys.argv[sys.argv.index("--only") + 1]
+        command = command.replace(chosen, f"'<{len(chosen.split('|'))} mutants>'")
+    write_section("mutation", command, body)
 
 
 if __name__ == "__main__":
