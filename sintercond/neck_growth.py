@@ -27,8 +27,14 @@ Stability
 ---------
 Growing necks raise the conductances, and with them lower the explicit step's limit
 (:func:`sintercond.thermal.explicit_stability_limit`). Every neck update checks ``dt <= C_i / sum_j K_ij`` on the
-grown necks and sets :attr:`NeckState.unstable` where it fails; :func:`sintercond.rollout.advance` refuses such a
-state on the host, naming the step and the limit.
+grown necks (held particles left out; convection and radiation, which the automatic step of a scene linearises,
+are not counted) and sets :attr:`NeckState.unstable` where it fails; :func:`sintercond.rollout.advance` and
+``sintercond run`` refuse such a state on the host, naming the step and the limit. :func:`sintercond.simulate.rollout`
+(a traced program: the fits) carries the flag and does not raise: call :func:`check_stable` on its end state.
+
+The necks grow at the end of each interval of ``every`` steps: a state read between two updates (an output at a
+step that is not a multiple of ``every``) shows the necks of the last update, and steps after the last update of a
+run have not grown them yet.
 """
 
 from __future__ import annotations
@@ -85,6 +91,7 @@ class NeckState:
       interval_temperature: ``[n]`` particle temperatures at the last neck update (K): the start of the
         current growth interval.
       unstable: bool scalar, set when grown necks made the time step exceed the explicit limit.
+      interval_start: int scalar, the step the current growth interval started at.
       pairs: ``[c, 2]`` int32 the contacts ``(i, j)``, ``i < j``.
       pair_slot: ``[c]`` int32 the flat index of each pair's slot in row ``i`` of the table.
       slot_pair: ``[n, m]`` int32 the pair each slot of the table holds; ``c`` in padding.
@@ -93,13 +100,16 @@ class NeckState:
     start_overlap: Any
     interval_temperature: Any
     unstable: Any
+    interval_start: Any
     pairs: Any
     pair_slot: Any
     slot_pair: Any
 
 
-def neck_state(contacts: LiftedContacts, temperature) -> NeckState:
-    """The :class:`NeckState` at the start of a run on ``contacts`` with particle ``temperature`` ``[n]`` (K)."""
+def neck_state(contacts: LiftedContacts, temperature, step=0) -> NeckState:
+    """The :class:`NeckState` at the start of a run on ``contacts`` with particle ``temperature`` ``[n]`` (K), at
+    ``step`` (the state's, :func:`sintercond.simulate.init_state`). The table must list each contact in both its
+    rows (as :func:`sintercond.simulate.lifted_contacts` does)."""
     neighbors = np.asarray(contacts.neighbors)
     n, m = neighbors.shape
     rows = np.broadcast_to(np.arange(n)[:, None], (n, m))
@@ -111,9 +121,16 @@ def neck_state(contacts: LiftedContacts, temperature) -> NeckState:
     # the upper slots: pair (j, i) seen from row i > j, found by its rank among the sorted pairs
     upper = valid & (rows > neighbors)
     keys = pairs[:, 0].astype(np.int64) * n + pairs[:, 1]
-    slot_pair[upper] = np.searchsorted(keys, neighbors[upper].astype(np.int64) * n + rows[upper])
+    wanted = neighbors[upper].astype(np.int64) * n + rows[upper]
+    found = np.minimum(np.searchsorted(keys, wanted), max(len(keys) - 1, 0))
+    if len(wanted) != len(keys) or (len(wanted) and np.any(keys[found] != wanted)):
+        raise ValueError("the contact table lists a contact in one of its rows only; each contact (i, j) must be in "
+                         "row i and row j (simulate.lifted_contacts builds such tables)")
+    slot_pair[upper] = found
+    step_type = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32  # as SimState.step
     return NeckState(start_overlap=jnp.asarray(contacts.overlap), interval_temperature=jnp.asarray(temperature),
-                     unstable=jnp.zeros((), bool), pairs=jnp.asarray(pairs, jnp.int32),
+                     unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type),
+                     pairs=jnp.asarray(pairs, jnp.int32),
                      pair_slot=jnp.asarray(np.flatnonzero(lower), jnp.int32),
                      slot_pair=jnp.asarray(slot_pair, jnp.int32))
 

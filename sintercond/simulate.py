@@ -85,6 +85,7 @@ from sintercond.pair_list import (allocate_half_pairs, half_pair_capacity, half_
 from sintercond._deprecation import old_names
 from sintercond._validation import all_concrete, fail_where, require_positive
 from sintercond.network import ContactTable, network_laplacian
+from sintercond.tortuosity import preheating_temperature
 from sintercond.state import (Contacts, DynamicContacts, LiftedContacts, ParticleState, TableContacts,  # noqa: F401
                               heat_capacity, pytree_dataclass)
 from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
@@ -144,9 +145,9 @@ class Conduction:
                              f"got {self.neck_model!r}")
         if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
             raise ValueError(f"Conduction.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
-        if self.conductivity_table and self.conductance != "lifted":
+        if self.conductivity_table and (self.conductance != "lifted" or self.integrator != "explicit"):
             raise ValueError("Conduction.conductivity_table evaluates the law at every step: it needs "
-                             "conductance='lifted'")
+                             "conductance='lifted' and the explicit integrator")
         if self.held_ramp and not self.held:
             raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
 
@@ -364,7 +365,8 @@ class HeldRampParams:
 
     Each held particle rises from its ``fixed_temperature`` ``T_0`` to ``end_temperature`` in ``steps`` equal
     steps of ``duration / steps``, each step held at the temperature it ends at (the reading that reproduces their
-    Table 1): ``T(t) = T_0 + (T_end - T_0) min(ceil(steps t / duration), steps) / steps`` (K, t in s).
+    Table 1): ``T(t) = T_0 + (T_end - T_0) min(ceil(steps t / duration), steps) / steps`` (K, t in s). ``steps`` is
+    a float holding a whole number; the ramp's ``duration`` and ``steps`` have zero gradient (a staircase).
     """
 
     end_temperature: Any
@@ -373,9 +375,10 @@ class HeldRampParams:
 
 
 def held_ramp_temperature(ramp: HeldRampParams, start, t):
-    """The held temperatures ``[n]`` (K) at time ``t`` (s) of a :class:`HeldRampParams` from ``start`` ``[n]``."""
-    fraction = jnp.minimum(jnp.ceil(ramp.steps * t / ramp.duration), ramp.steps) / ramp.steps
-    return start + (ramp.end_temperature - start) * jnp.maximum(fraction, 0.0)
+    """The held temperatures ``[n]`` (K) at time ``t`` (s) of a :class:`HeldRampParams` from ``start`` ``[n]``:
+    the level of :func:`sintercond.tortuosity.preheating_temperature` (its reading at the step's end)."""
+    level = preheating_temperature(t, 0.0, ramp.duration, 0.0, 1.0, ramp.steps, at_step_end=True)
+    return start + (ramp.end_temperature - start) * level
 
 
 @pytree_dataclass
@@ -760,19 +763,24 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         law = neck_growth.law_params(spec, prep.params.sintering)
 
         def grow(contacts, carried):
+            elapsed = (state.step - carried.interval_start).astype(state.dt.dtype) * state.dt
             neck, overlap = neck_growth.grow_table_necks(spec, law, carried, contacts.neck, particles.radii,
-                                                         particles.temperature, spec.every * state.dt)
+                                                         particles.temperature, elapsed)
             contacts = dataclasses.replace(contacts, neck=neck, overlap=overlap)
             conductance = neck_conductance(physics, dataclasses.replace(state, contacts=contacts), prep.params)
             total = jnp.sum(conductance, axis=1)
-            if prep.wall_conductance is not None:
-                total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
+            if physics.conduction.conducting_walls:
+                wall_k = prep.wall_conductance
+                if physics.conduction.conductivity_table:
+                    wall_k = _wall_lift(physics, particles, contacts, prep.params,
+                                        merged_law_params(physics, prep.params))
+                total = total + prep.scale * jnp.sum(wall_k, axis=0)
+            if physics.conduction.held:  # held particles are reset every step: their rows do not count
+                total = jnp.where(particles.fixed, 0.0, total)
             limit = thermal.explicit_stability_limit(prep.capacity, total)
-            if physics.conduction.held:
-                limit = jnp.where(particles.fixed, jnp.inf, limit)
             unstable = carried.unstable | jnp.any(state.dt > limit)
             return contacts, dataclasses.replace(carried, interval_temperature=particles.temperature,
-                                                 unstable=unstable)
+                                                 interval_start=state.step, unstable=unstable)
 
         if spec.every == 1:
             contacts, carried = grow(state.contacts, carried)
@@ -1026,7 +1034,11 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
         if not isinstance(table, materials.Table):
             raise ValueError("Conduction.conductivity_table needs Params.conductivity as a "
                              f"sintercond.materials.Table (materials.tabulated(T, kappa)); got {table!r}")
+        if table.extrapolate:
+            raise ValueError("Params.conductivity (a table) must clamp at its ends (extrapolate=False): the stable "
+                             "step is bounded by the table's largest conductivity")
         nodes, values = np.asarray(table.temperatures, np.float64), np.asarray(table.values, np.float64)
+        require_positive("Params.conductivity table's temperatures (K)", nodes)
         if nodes.ndim != 1 or nodes.shape != values.shape or len(nodes) < 2 or not np.all(np.diff(nodes) > 0):
             raise ValueError("Params.conductivity (a table) needs >= 2 strictly increasing temperatures (K) and as "
                              f"many conductivities; got {nodes.tolist()} and {values.tolist()}")

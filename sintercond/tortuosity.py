@@ -53,6 +53,10 @@ def powder_conductivity(n, tau2, lambda0):
     return n * lambda0 / tau2
 
 
+STEP_EDGE = 1e-9
+"""How close (in steps of the ramp) a time must come to an edge between two steps to count as on it."""
+
+
 def preheating_temperature(t, t_start=0.0, t_end=9.5, temperature_start=845.0, temperature_end=1273.0, steps=25,
                            *, at_step_end=False):
     """Stepped preheating ramp of Rizza & Galati (2024), Eq. 6.
@@ -66,11 +70,15 @@ def preheating_temperature(t, t_start=0.0, t_end=9.5, temperature_start=845.0, t
 
     With ``at_step_end=True`` the temperature reached at the end of the step
     containing ``t`` is returned: that is what their Table 1 lists (e.g. 879 K
-    at 0.5 s, within 1 K).
+    at 0.5 s, within 1 K). A time within ``STEP_EDGE`` of a step of an edge
+    between steps counts as on it (``25 t / 9.5`` at ``t = 6.46`` s is
+    ``17.000000000000004`` in floating point), so an edge reached by adding
+    time steps takes the level it ends, not the next one.
     """
     t = jnp.asarray(t)
     fraction = jnp.clip((t - t_start) / (t_end - t_start), 0.0, 1.0)
-    step = jnp.ceil(fraction * steps) if at_step_end else jnp.floor(fraction * steps)
+    step = (jnp.ceil(fraction * steps - STEP_EDGE) if at_step_end
+            else jnp.floor(fraction * steps + STEP_EDGE))
     return temperature_start + step * (temperature_end - temperature_start) / steps
 
 

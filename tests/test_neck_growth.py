@@ -248,3 +248,68 @@ def test_the_gradient_of_k_star_at_the_end_by_the_kinetic_parameters_equals_cent
         central = (value(*up) - value(*down)) / (2 * h)
         np.testing.assert_allclose(float(grad[k]), float(central), rtol=1e-6)
     assert float(grad[0]) > 0 > float(grad[1])  # faster kinetics, a better conductor at 1 s
+
+
+def test_the_ramp_takes_each_level_at_its_edge_whatever_the_round_off_of_the_steps():
+    """Review: ``25 t / 9.5`` at a step's edge reached by adding time steps is a whole number plus round-off, which a
+    bare ``ceil`` took one level early (steps 6460, 6840 and 7220 of 9,500 steps of 1 ms)."""
+    ramp = simulate.HeldRampParams(1273.0, 9.5, 25.0)
+    k = np.arange(1, 9501)
+    dt = jnp.asarray(1e-3)
+    t = (jnp.asarray(k - 1).astype(dt.dtype) * dt) + dt  # as the step computes state.time + dt
+    held = np.asarray(simulate.held_ramp_temperature(ramp, jnp.full(k.shape, 845.0), t))
+    level = -(-25 * k // 9500)  # ceil(25 k / 9500) in integers
+    np.testing.assert_allclose(held, 845.0 + level * (1273.0 - 845.0) / 25, rtol=1e-14)
+
+
+def test_held_particles_do_not_count_in_the_stability_of_growing_necks():
+    """Review: the flag took the minimum over every particle before leaving the held ones out."""
+    radii = np.array([10e-6, 40e-6])
+    x = np.array([[0.0, 0.0, 0.0], [50e-6, 0.0, 0.0]])
+    physics = simulate.Physics.create(law="rojek", conductance="lifted", held=True,
+                                      sintering=neck_growth.Sintering())
+    particles = particle_state(x, radii, np.array([1200.0, 1000.0]), DENSITY, fixed=[True, False])
+    contacts = simulate.lifted_contacts(physics, x, radii)
+    params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT], sintering={"A": 1e-10,
+                                                                                      "activation_energy": 100.0})
+    sim = simulate.simulator(physics)
+    capped = neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts, radii)
+    k = float(simulate.neck_conductance(physics, simulate.init_state(particles, capped, 1.0), params)[0, 0])
+    c = np.asarray(particles.mass) * HEAT
+    dt = 0.5 * (c[0] / k + c[1] / k)  # above the small held sphere's limit, below the free one's
+    assert c[0] / k < dt < c[1] / k
+    state = simulate.init_state(particles, contacts, dt, sintering=neck_growth.neck_state(contacts,
+                                                                                          particles.temperature))
+    end, _ = simulate.rollout(sim, state, params, 200)
+    assert float(end.contacts.neck[0, 0]) == pytest.approx(float(capped.neck[0, 0]), rel=1e-9)  # at the cap
+    assert not bool(end.sintering.unstable)
+
+
+def test_a_state_started_between_updates_grows_its_first_interval_from_its_own_start():
+    sim, state, params = pulsed_chain(every=4)
+    import dataclasses
+    start = dataclasses.replace(state, step=state.step + 3,
+                                sintering=dataclasses.replace(state.sintering,
+                                                              interval_start=state.sintering.interval_start + 3))
+    end, _ = simulate.rollout(sim, start, params, 1)  # step 4: one step of growth, not four
+    r = np.asarray(state.particles.radii)
+    pair = 0.5 * (np.asarray(state.particles.temperature)[:2].mean() + np.asarray(end.particles.temperature)[:2].mean())
+    spec = sim.physics.sintering
+    expected = sintering.grow_neck("grain_boundary", float(state.contacts.neck[0, 0]), r[0], r[1], [pair],
+                                   [float(state.dt)], KINETICS, quadrature_nodes=spec.quadrature_nodes,
+                                   newton_iterations=spec.newton_iterations)[-1]
+    np.testing.assert_allclose(float(end.contacts.neck[0, 0]), float(expected), rtol=1e-12)
+
+
+def test_a_one_sided_table_and_an_extrapolating_conductivity_table_are_refused():
+    sim, state, params = chain([40e-6, 40e-6], [1000.0, 1200.0])
+    import dataclasses
+    one_sided = dataclasses.replace(state.contacts, neighbors=state.contacts.neighbors.at[1, 0].set(1))
+    with pytest.raises(ValueError, match="in one of its rows only"):
+        neck_growth.neck_state(one_sided, state.particles.temperature)
+    from sintercond import materials
+    physics = simulate.Physics.create(law="rojek", conductance="lifted", conductivity_table=True)
+    table = materials.tabulated([500.0, 1500.0], [7.0, 14.0], extrapolate=True)
+    with pytest.raises(ValueError, match="must clamp at its ends"):
+        simulate.rollout(simulate.simulator(physics), dataclasses.replace(state, sintering=None),
+                         dataclasses.replace(params, conductivity=table, sintering=None), 2)

@@ -8,7 +8,7 @@ import pytest
 from sintercond import io, neck_growth, sintering
 from sintercond import run as runner
 from sintercond.observe import SINTERING_COLUMNS
-from sintercond.scene import SceneError, load_scene, validate_scene
+from sintercond.scene import SceneError, build, load_scene, validate_scene
 
 # a small touching lattice on a hot floor, necks from point contacts (the built-in sintering_hot_floor, shrunk)
 CELL = {
@@ -190,3 +190,18 @@ def test_the_preheating_bed_scene_heats_from_its_ramped_plate_and_measures_k_sta
     assert 845.0 < history["T_mean_K"][-1] < 862.12
     assert np.all(np.diff(history["k_star_W_mK"]) > 0)  # the necks grow, the bed conducts better
     assert summary["isolated_particles"] == 0
+
+
+def test_preheating_walls_and_floor_and_the_interval_against_the_ramp():
+    scene = copy.deepcopy(CELL)
+    scene["preheating"] = {"end_temperature": 1273.0, "duration": 1.0, "steps": 5}
+    floor = copy.deepcopy(scene)
+    floor.pop("walls")
+    floor["boundary"] = {"floor_temperature": 845.0}
+    assert validate_scene(floor)["preheating"]["hold"] == "walls"  # the floor is a held wall (review)
+    both = copy.deepcopy(scene)
+    both["preheating"]["hold"] = "all"
+    with pytest.raises(SceneError, match=r"preheating\.hold = \"all\" holds every particle"):
+        validate_scene(both)
+    model = build.build_model(validate_scene(copy.deepcopy(scene)))  # every = 5: an interval is 5 steps
+    assert model.dt <= 0.1 * (1.0 / 5) / 5 * (1 + 1e-12)

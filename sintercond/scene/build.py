@@ -291,8 +291,10 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                          "radiation)")}
     if "preheating" in scene:
         ramp = scene["preheating"]
-        step = RAMP_STEP_FRACTION * ramp["duration"] / ramp["steps"]
-        bounds["preheating"] = (step, f"{step:.6g} s, {RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
+        every = scene["sintering"]["every"] if "sintering" in scene else 1  # a growth interval spans every steps
+        step = RAMP_STEP_FRACTION * ramp["duration"] / ramp["steps"] / every
+        bounds["preheating"] = (step, f"{step:.6g} s, in which {every} step(s) (sintering.every) span "
+                                      f"{RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
                                       "(preheating.duration / preheating.steps)")
     reallocate = None
     motion = None
@@ -490,7 +492,7 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
 
 
 RAMP_STEP_FRACTION = 0.1
-"""The largest time step is this fraction of a step of a ``[preheating]`` ramp: each level of the ramp is resolved
-in ten steps (necks grow over an interval at the mean of its start and end temperatures, so the interval that
-straddles a level's edge takes the mean of two levels)."""
+"""A growth interval (``sintering.every`` time steps; one without ``[sintering]``) spans at most this fraction of a
+step of a ``[preheating]`` ramp: each level is resolved in ten intervals (necks grow over an interval at the mean of
+its start and end temperatures, so the interval that straddles a level's edge takes the mean of two levels)."""
 

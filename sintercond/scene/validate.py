@@ -254,9 +254,14 @@ def _check_sintering(scene):
     """``[sintering]``: its law's parameters, and the physics the first stage grows necks on; ``[preheating]``."""
     if "preheating" in scene:
         ramp = scene["preheating"]
-        if ramp["hold"] == "walls" and not any(w["mode"] == "held" for w in scene["walls"]):
+        floor = "floor_temperature" in scene.get("boundary", {})
+        if ramp["hold"] == "walls" and not (floor or any(w["mode"] == "held" for w in scene["walls"])):
             raise SceneError("[preheating] with preheating.hold = \"walls\" ramps the held walls: give a held "
                              "[[walls]] (or boundary.floor_temperature), or preheating.hold = \"all\"")
+        if ramp["hold"] == "all" and (floor or any(w["mode"] != "insulated" for w in scene["walls"])):
+            raise SceneError("preheating.hold = \"all\" holds every particle on the ramp from initial.temperature: "
+                             "held or conducting walls (and boundary.floor_temperature) would be ignored; drop them "
+                             "or use preheating.hold = \"walls\"")
         if scene["physics"]["mechanics"]:
             raise SceneError("[preheating] needs physics.mechanics = false in this version")
     if "sintering" not in scene:
