@@ -267,13 +267,8 @@ def _check_sintering(scene):
     if "sintering" not in scene:
         return
     s, conduction = scene["sintering"], scene["conduction"]
-    law = KINETIC_LAWS[s["law"]]
-    params = s.get("params", {})
-    for key, value in params.items():
-        if key not in law.default_params:
-            raise SceneError(f"unknown key sintering.params.{key}{_suggest(key, list(law.default_params))}; "
-                             f"kinetic law {law.name!r} takes {sorted(law.default_params)}")
-        params[key] = _value(f"sintering.params.{key}", value, _SINTERING_PARAMS[key])
+    _check_law_params("sintering.params", s.get("params", {}), KINETIC_LAWS[s["law"]], _SINTERING_PARAMS,
+                      "kinetic law")
     if scene["physics"]["mechanics"]:
         raise SceneError("[sintering] grows necks on a packing that does not move (the first stage): it needs "
                          "physics.mechanics = false")
@@ -281,6 +276,16 @@ def _check_sintering(scene):
     if model != "volume_conserving":
         raise SceneError(f"[sintering] grows Rojek's volume-conserving necks: conduction.neck_model must be "
                          f"\"volume_conserving\" (conduction.law {conduction['law']!r} takes {model!r})")
+
+
+def _check_law_params(section, params, law, keys, kind):
+    """A law's parameters in ``[section]``: each a key of ``law``, in the range of its :class:`Key` in ``keys``
+    (normalised in place); an unknown one is named with the law's keys."""
+    for key, value in params.items():
+        if key not in law.default_params:
+            raise SceneError(f"unknown key {section}.{key}{_suggest(key, list(law.default_params))}; "
+                             f"{kind} {law.name!r} takes {sorted(law.default_params)}")
+        params[key] = _value(f"{section}.{key}", value, keys[key])
 
 
 def _check_conductivity_table(material):
@@ -302,13 +307,8 @@ def _check_conductivity_table(material):
 def _check_details(scene):
     _check_conductivity_table(scene["material"])
     conduction = scene["conduction"]
-    law = CONDUCTANCE_LAWS[conduction["law"]]
-    params = conduction.get("params", {})
-    for key, value in params.items():
-        if key not in law.default_params:
-            raise SceneError(f"unknown key conduction.params.{key}{_suggest(key, list(law.default_params))}; "
-                             f"law {law.name!r} takes {sorted(law.default_params)}")
-        params[key] = _value(f"conduction.params.{key}", value, _LAW_PARAMS[key])
+    _check_law_params("conduction.params", conduction.get("params", {}), CONDUCTANCE_LAWS[conduction["law"]],
+                      _LAW_PARAMS, "law")
     _check_sintering(scene)
     _check_packing(scene["packing"], conduction, "sintering" in scene)
     if "beam" in scene:
