@@ -23,6 +23,43 @@ Positions are fixed in the first stage, so the shrinkage is what the contacts' a
 over contacts of ``(H(a) - h_0) / (r_i + r_j)``, ``h_0`` the approach at the start of the run
 (:func:`neck_statistics`). It is the linear shrinkage of a chain of such contacts.
 
+Many-body shrinkage
+-------------------
+With ``Sintering(shrinkage="many_body")`` (second stage) the particles move. The contacts of a packing cannot all
+approach at their own free rate (a ring of contacts, a contact that has stopped growing between two that grow), so
+each update solves the overdamped force balance of the sintering contacts (Bouvard & McMeeking 1996; Parhami &
+McMeeking 1998): a contact pulls its particles together with its sintering force ``F_s`` and resists their
+approach rate ``dh/dt`` with the dashpot ``eta_N``, and on every particle that is free to move::
+
+    sum_j [F_s,ij - eta_N,ij dh_ij/dt] n_ij = 0,     dh_ij/dt = (v_i - v_j) . n_ij
+
+(``n_ij`` the unit vector from ``i`` to ``j``). No inertia enters: with diffusion data the dashpot's time
+``m / eta_N`` is some 1e-24 s, so the balance is quasi-static. Over an update interval it is taken in the
+displacements ``u`` with each contact's secant dashpot: the free growth of the first stage gives the contact's free
+approach ``dh_free`` over the interval (``eta_N dh_free = F_s dt`` for a free pair), so
+``w_ij = F_s,ij / dh_free,ij`` (``F_s`` from the kinetic law's ``force``, :class:`sintercond.sintering.KineticLaw`)
+and the balance is the sparse symmetric positive semi-definite system::
+
+    sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0
+
+solved by preconditioned conjugate gradients (:func:`jax.scipy.sparse.linalg.cg`, which is differentiated
+implicitly, through the same solve). It is the minimum of the dissipation ``sum w (dh - dh_free)^2 / 2``: a free
+pair, a chain or a uniform lattice approaches exactly as the first stage; elsewhere contacts carry forces and
+approach faster or slower than free. A contact that does not grow over the interval (at its cap, or cold) is
+``1 / STIFF_CONTACT_RATIO`` times stiffer than the fastest one (a near-rigid contact, not an infinite weight).
+The balance does not fix every motion: rigid motions of a cluster (the sintering forces have no net force or
+torque) and, in a sparse packing, floppy modes (a particle sliding sideways on a single contact) cost nothing.
+The solve leaves them out: its displacements are those of least ``sum_i (sum_j w_ij) |u_i|^2``, as if each
+particle felt a vanishing drag in proportion to its dashpots (the conjugate-gradient iterates, preconditioned by
+that diagonal and started from rest, stay in the range of the system), so a free pair or a symmetric cell keeps
+its weighted centre. The components given in ``NeckState.supports`` do not move (particles resting on a plate:
+the plate's normal). Each contact's neck then follows its approach through Rojek's geometry,
+``a = H^-1(H(a_0) + dh)`` (:func:`sintercond.neck.neck_radius`), never below ``a_0`` and never beyond the
+law's cap. Only sintering forces enter: gravity and external loads do not (for the 45-105 um Ti6Al4V of the
+preheating scenes a particle's weight is some 1e-8 N against sintering forces of some 1e-4 N, ``pi gamma_s r*``
+with ``gamma_s`` about 2 N/m), so the grain-boundary law's ``A`` need not be split into its factors.
+The shrinkage of :func:`neck_statistics` is then measured from the positions.
+
 Stability
 ---------
 Growing necks raise the conductances, and with them lower the explicit step's limit
@@ -48,7 +85,17 @@ import numpy as np
 
 from sintercond import sintering
 from sintercond._validation import all_concrete, require_law_params
+from sintercond.neck import neck_radius
 from sintercond.state import LiftedContacts, pytree_dataclass
+
+
+SHRINKAGE_MODES = ("independent", "many_body")
+"""``Sintering.shrinkage``: contacts that sinter on their own on a packing that does not move (first stage), or
+the many-body force balance that moves the particles (module docstring)."""
+
+STIFF_CONTACT_RATIO = 1e-6
+"""The free approach, relative to the largest of an update, below which a contact counts as that much stiffer than
+the fastest one in the many-body balance (its weight is capped there, not infinite)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,12 +110,18 @@ class Sintering:
         interval grows a neck by a small fraction of itself, so fewer than the law tier's defaults (8, 4)
         reach round-off: 4 and 2 agree with them to 1e-12 on the pulsed chain of ``benchmarks/sintering_step.py``
         (its table gives the error of each choice).
+      shrinkage: ``"independent"`` (first stage: positions fixed, each contact's approach recorded) or
+        ``"many_body"`` (the overdamped force balance moves the particles; :data:`SHRINKAGE_MODES`).
+      balance_tol: relative residual of the many-body balance's conjugate-gradient solve (float32 solves to at
+        least 50 machine epsilons); an update that does not reach ten times it sets ``NeckState.unbalanced``.
     """
 
     law: str = "grain_boundary"
     every: int = 1
     quadrature_nodes: int = 4
     newton_iterations: int = 2
+    shrinkage: str = "independent"
+    balance_tol: float = 1e-12
 
     def __post_init__(self):
         if self.law not in sintering.KINETIC_LAWS:
@@ -77,6 +130,10 @@ class Sintering:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"Sintering.{name} must be an integer >= 1; got {value!r}")
+        if self.shrinkage not in SHRINKAGE_MODES:
+            raise ValueError(f"Sintering.shrinkage must be one of {list(SHRINKAGE_MODES)}; got {self.shrinkage!r}")
+        if not (isinstance(self.balance_tol, (int, float)) and 0.0 < self.balance_tol < 1.0):
+            raise ValueError(f"Sintering.balance_tol must be in (0, 1); got {self.balance_tol!r}")
 
 
 @pytree_dataclass
@@ -95,6 +152,9 @@ class NeckState:
       pairs: ``[c, 2]`` int32 the contacts ``(i, j)``, ``i < j``.
       pair_slot: ``[c]`` int32 the flat index of each pair's slot in row ``i`` of the table.
       slot_pair: ``[n, m]`` int32 the pair each slot of the table holds; ``c`` in padding.
+      supports: ``[n, 3]`` bool, the displacement components held at zero by the many-body balance
+        (``Sintering(shrinkage="many_body")``), or None (independent contacts).
+      unbalanced: bool scalar, set when a many-body balance did not converge (None without one).
     """
 
     start_overlap: Any
@@ -104,12 +164,18 @@ class NeckState:
     pairs: Any
     pair_slot: Any
     slot_pair: Any
+    supports: Any = None
+    unbalanced: Any = None
 
 
-def neck_state(contacts: LiftedContacts, temperature, step=0) -> NeckState:
+def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None) -> NeckState:
     """The :class:`NeckState` at the start of a run on ``contacts`` with particle ``temperature`` ``[n]`` (K), at
     ``step`` (the state's, :func:`sintercond.simulate.init_state`). The table must list each contact in both its
-    rows (as :func:`sintercond.simulate.lifted_contacts` does)."""
+    rows (as :func:`sintercond.simulate.lifted_contacts` does).
+
+    ``supports``: for ``Sintering(shrinkage="many_body")``, ``[n, 3]`` bool, the displacement components that stay
+    (e.g. ``[False, False, True]`` for a particle resting on a plate normal to z); all
+    False lets the packing shrink about its centre. None for independent contacts."""
     neighbors = np.asarray(contacts.neighbors)
     n, m = neighbors.shape
     rows = np.broadcast_to(np.arange(n)[:, None], (n, m))
@@ -132,7 +198,17 @@ def neck_state(contacts: LiftedContacts, temperature, step=0) -> NeckState:
                      unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type),
                      pairs=jnp.asarray(pairs, jnp.int32),
                      pair_slot=jnp.asarray(np.flatnonzero(lower), jnp.int32),
-                     slot_pair=jnp.asarray(slot_pair, jnp.int32))
+                     slot_pair=jnp.asarray(slot_pair, jnp.int32),
+                     supports=None if supports is None else _supports(supports, n),
+                     unbalanced=None if supports is None else jnp.zeros((), bool))
+
+
+def _supports(supports, n):
+    supports = np.asarray(supports)
+    if supports.dtype != bool or supports.shape != (n, 3):
+        raise ValueError(f"supports must be a [n, 3] = [{n}, 3] bool array (the components that stay); got "
+                         f"{supports.dtype} of shape {supports.shape}")
+    return jnp.asarray(supports)
 
 
 def law_params(spec: Sintering, params) -> dict:
@@ -148,12 +224,33 @@ def law_params(spec: Sintering, params) -> dict:
         raise ValueError(f"Params.sintering: {error}") from None
 
 
-def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii) -> None:
+def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii, carried: NeckState | None = None,
+                       positions=None) -> None:
     """Raise ``ValueError`` naming the field unless the necks and the kinetic parameters can grow (concrete values).
 
     Parameters as :func:`sintercond.sintering.validate_growth_inputs` wants them; every neck in
-    ``[0, min(r_i, r_j)]`` of its pair.
+    ``[0, min(r_i, r_j)]`` of its pair. With ``carried`` (the state's :class:`NeckState`): supports given exactly
+    when the shrinkage is many-body, and then (with ``positions`` ``[n, 3]``, m) every contact's centres no
+    farther apart than its radii (a contact across a periodic boundary cannot shrink by moving its particles).
     """
+    if carried is not None:
+        many_body = spec.shrinkage == "many_body"
+        if many_body and carried.supports is None:
+            raise ValueError("Sintering(shrinkage='many_body') needs NeckState.supports: "
+                             "neck_growth.neck_state(contacts, temperature, supports=...) ([n, 3] bool, the "
+                             "displacement components that stay; all False for none)")
+        if not many_body and carried.supports is not None:
+            raise ValueError(f"NeckState.supports is for Sintering(shrinkage='many_body'); the shrinkage is "
+                             f"{spec.shrinkage!r}: build the state without supports")
+        if many_body and positions is not None and all_concrete(positions, radii, carried.pairs):
+            x, r, pairs = np.asarray(positions, np.float64), np.asarray(radii, np.float64), np.asarray(carried.pairs)
+            gap = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
+            far = gap > 1e-6 * np.minimum(r[pairs[:, 0]], r[pairs[:, 1]])
+            if far.any():
+                k = int(np.flatnonzero(far)[0])
+                raise ValueError(f"many-body shrinkage moves the particles of each contact together, so their centres "
+                                 f"must be within r_i + r_j; particles {int(pairs[k, 0])} and {int(pairs[k, 1])} are "
+                                 f"{gap[k]:.3g} m apart beyond it (a contact across a periodic boundary?)")
     merged = law_params(spec, params)
     if not all_concrete(merged, contacts.neck, radii):
         return
@@ -183,8 +280,26 @@ def _pairs(neighbors, n):
     return jnp.minimum(rows, j), jnp.maximum(rows, j), valid
 
 
+def _free_growth(spec: Sintering, params: dict, carried: NeckState, start_neck, radii, end_temperature, duration):
+    """``[c]`` neck of each pair after growing freely over the interval, from ``start_neck`` ``[c]`` (m)."""
+    i, j = carried.pairs[:, 0], carried.pairs[:, 1]
+    start = carried.interval_temperature
+    temperature = 0.5 * (sintering.pair_temperature(start[i], start[j])
+                         + sintering.pair_temperature(end_temperature[i], end_temperature[j]))
+    dtype = start_neck.dtype
+    return sintering._grow_neck(sintering.kinetic_law(spec.law), start_neck, radii[i], radii[j], temperature[None],
+                                jnp.reshape(jnp.asarray(duration, dtype), (1,)), params, spec.quadrature_nodes,
+                                spec.newton_iterations)[0]
+
+
+def _on_table(carried: NeckState, per_pair):
+    """A ``[c]`` per-pair value in both slots of the padded table ``[n, m]``, 0 in padding."""
+    return jnp.concatenate([per_pair, jnp.zeros((1,), per_pair.dtype)])[carried.slot_pair]
+
+
 def grow_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, radii, end_temperature, duration):
-    """Necks and approaches ``[n, m]`` (m) of a padded table after one growth interval of ``duration`` (s).
+    """Necks and approaches ``[n, m]`` (m) of a padded table after one growth interval of ``duration`` (s),
+    each contact on its own (``shrinkage="independent"``).
 
     The pair temperature is the mean of its value at the start (``carried.interval_temperature``, K) and at the
     end (``end_temperature`` ``[n]``) of the interval (module docstring). Each contact grows once, on its pair,
@@ -192,22 +307,80 @@ def grow_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, ra
     Padding slots stay 0.
     """
     i, j = carried.pairs[:, 0], carried.pairs[:, 1]
+    a = _free_growth(spec, params, carried, neck.reshape(-1)[carried.pair_slot], radii, end_temperature, duration)
+    return _on_table(carried, a), _on_table(carried, sintering.neck_overlap(a, radii[i], radii[j]))
+
+
+def balance_displacements(pairs, positions, weights, free_approach, supports, tol):
+    """Displacements ``[n, 3]`` (m) of the many-body balance ``sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0``
+    on the components that are not ``supports`` (module docstring), and whether its solve fell short.
+
+    Args:
+      pairs: ``[c, 2]`` the contacts; positions ``[n, 3]`` (m) give their normals ``n_ij`` (``i`` to ``j``).
+      weights: ``[c]`` the secant dashpots ``w_ij`` (any consistent unit; only ratios enter), >= 0.
+      free_approach: ``[c]`` the approach each contact would make on its own (m).
+      supports: ``[n, 3]`` bool, the components held at zero.
+      tol: relative residual of the conjugate-gradient solve.
+
+    Returns:
+      ``(u, unbalanced)``: the displacements, and a bool scalar set when the residual exceeds ``10 tol``.
+    """
+    i, j = pairs[:, 0], pairs[:, 1]
+    separation = positions[j] - positions[i]
+    normal = separation / jnp.linalg.norm(separation, axis=1, keepdims=True)
+    movable = ~supports
+
+    def on_particles(per_pair):  # [c] -> [n, 3]: + along n_ij on i, - on j
+        f = per_pair[:, None] * normal
+        return jnp.zeros_like(positions).at[i].add(f).at[j].add(-f)
+
+    def operator(u):  # P K P + (I - P): symmetric, the held components decoupled
+        u_free = jnp.where(movable, u, 0.0)
+        approach = jnp.sum((u_free[i] - u_free[j]) * normal, axis=1)
+        return jnp.where(movable, on_particles(weights * approach), u)
+
+    rhs = jnp.where(movable, on_particles(weights * free_approach), 0.0)
+    # the same scale for the three components of a particle (the trace of its diagonal block): the solve then
+    # leaves out the motions the balance does not fix, in the norm sum_i (sum_j w_ij) |u_i|^2 (module docstring)
+    trace = jnp.zeros(positions.shape[:1], positions.dtype).at[i].add(weights).at[j].add(weights)
+    usable = movable & (trace[:, None] > 0)
+    inverse_diagonal = jnp.where(usable, 1.0 / jnp.where(usable, trace[:, None], 1.0), 1.0)
+    u, _ = jax.scipy.sparse.linalg.cg(operator, rhs, tol=tol, atol=0.0, M=lambda r: inverse_diagonal * r)
+    residual = jnp.linalg.norm(rhs - operator(u))
+    return u, residual > 10.0 * tol * jnp.linalg.norm(rhs)
+
+
+def balance_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, positions, radii, end_temperature,
+                        duration):
+    """The many-body update (``shrinkage="many_body"``, module docstring): ``(neck, overlap, displacement,
+    unbalanced)``, the necks and approaches ``[n, m]`` (m) after the interval, the particles' displacements
+    ``[n, 3]`` (m) over it and whether the balance fell short of its tolerance."""
+    i, j = carried.pairs[:, 0], carried.pairs[:, 1]
     r_i, r_j = radii[i], radii[j]
-    start = carried.interval_temperature
-    temperature = 0.5 * (sintering.pair_temperature(start[i], start[j])
-                         + sintering.pair_temperature(end_temperature[i], end_temperature[j]))
-    dtype = neck.dtype
-    a = sintering._grow_neck(sintering.kinetic_law(spec.law), neck.reshape(-1)[carried.pair_slot], r_i, r_j,
-                             temperature[None], jnp.reshape(jnp.asarray(duration, dtype), (1,)), params,
-                             spec.quadrature_nodes, spec.newton_iterations)[0]
-    h = sintering.neck_overlap(a, r_i, r_j)
-    padded = lambda x: jnp.concatenate([x, jnp.zeros((1,), x.dtype)])[carried.slot_pair]  # noqa: E731
-    return padded(a), padded(h)
+    law = sintering.kinetic_law(spec.law)
+    a_start = neck.reshape(-1)[carried.pair_slot]
+    a_free = _free_growth(spec, params, carried, a_start, radii, end_temperature, duration)
+    h_start = sintering.neck_overlap(a_start, r_i, r_j)
+    free = sintering.neck_overlap(a_free, r_i, r_j) - h_start
+    fastest = jnp.max(free, initial=0.0)
+    growing = fastest > 0
+    weights = jnp.where(growing, law.force(0.5 * (a_start + a_free), r_i, r_j, params)
+                        / jnp.maximum(free, jnp.where(growing, STIFF_CONTACT_RATIO * fastest, 1.0)), 0.0)
+    tol = max(spec.balance_tol, 50.0 * float(jnp.finfo(positions.dtype).eps))
+    u, unbalanced = balance_displacements(carried.pairs, positions, weights, free, carried.supports, tol)
+    separation = positions[j] - positions[i]
+    approach = jnp.sum((u[i] - u[j]) * separation, axis=1) / jnp.linalg.norm(separation, axis=1)
+    cap = jnp.minimum(law.cap(r_i, r_j, params), jnp.minimum(r_i, r_j))
+    h = jnp.clip(h_start + approach, h_start, sintering.neck_overlap(cap, r_i, r_j))
+    a = jnp.clip(neck_radius(r_i, r_j, h), a_start, cap)
+    return _on_table(carried, a), _on_table(carried, sintering.neck_overlap(a, r_i, r_j)), u, unbalanced
 
 
 def neck_statistics(state) -> dict:
     """Mean and largest neck ratio ``a / min(r_i, r_j)`` over the contacts, and the mean linear shrinkage
-    ``(H(a) - h_0) / (r_i + r_j)`` (module docstring) of a :class:`sintercond.simulate.SimState` with sintering.
+    ``(h - h_0) / (r_i + r_j)`` (module docstring) of a :class:`sintercond.simulate.SimState` with sintering:
+    ``h`` the approach ``H(a)`` of the neck (independent contacts), or ``r_i + r_j - |x_i - x_j|`` of the
+    positions (many-body shrinkage).
 
     Returns ``{"mean_neck_ratio", "max_neck_ratio", "shrinkage"}`` (scalars; 0 without contacts).
     """
@@ -217,7 +390,13 @@ def neck_statistics(state) -> dict:
     count = jnp.sum(valid.astype(radii.dtype))
     per = lambda x: jnp.sum(jnp.where(valid, x, 0.0)) / jnp.maximum(count, 1.0)  # noqa: E731
     ratio = contacts.neck / jnp.minimum(r_lo, r_hi)
-    approach = contacts.overlap - state.sintering.start_overlap
+    if state.sintering.supports is None:
+        approach = contacts.overlap
+    else:
+        x = state.particles.positions
+        separation = jnp.where(valid[..., None], x[hi] - x[lo], 1.0)  # padding: no 0/0 in the gradient
+        approach = r_lo + r_hi - jnp.linalg.norm(separation, axis=-1)
+    approach = approach - state.sintering.start_overlap
     return {"mean_neck_ratio": per(ratio), "max_neck_ratio": jnp.max(jnp.where(valid, ratio, 0.0), initial=0.0),
             "shrinkage": per(approach / (r_lo + r_hi))}
 
@@ -245,8 +424,16 @@ def necks_at_cap(spec: Sintering, params, contacts: LiftedContacts, radii) -> Li
 
 
 def check_stable(state) -> None:
-    """Refuse (``FloatingPointError``) a state whose grown necks made its time step unstable."""
-    if state.sintering is not None and bool(state.sintering.unstable):
+    """Refuse (``FloatingPointError``) a state whose grown necks made its time step unstable, or whose many-body
+    balance fell short of its tolerance."""
+    if state.sintering is None:
+        return
+    if state.sintering.unbalanced is not None and bool(state.sintering.unbalanced):
+        raise FloatingPointError(
+            f"the many-body sintering balance did not converge by step {int(state.step)} (its conjugate-gradient "
+            "residual stayed above Sintering.balance_tol): loosen balance_tol or check the packing for contacts "
+            "that hold nothing in place")
+    if bool(state.sintering.unstable):
         raise FloatingPointError(
             f"the necks grew so that the time step {float(state.dt):.4g} s exceeds the explicit stability limit "
             f"by step {int(state.step)}; start from a smaller dt (simulate.thermal_time_step on the necks you "
@@ -258,5 +445,6 @@ def update_interval(spec: Sintering, step) -> jax.Array:
     return step % spec.every == 0
 
 
-__all__ = ["NeckState", "Sintering", "check_stable", "grow_table_necks", "law_params", "neck_state",
-           "neck_statistics", "necks_at_cap", "particle_neck_ratio", "validate_sintering"]
+__all__ = ["NeckState", "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering", "balance_displacements",
+           "balance_table_necks", "check_stable", "grow_table_necks", "law_params", "neck_state", "neck_statistics",
+           "necks_at_cap", "particle_neck_ratio", "validate_sintering"]

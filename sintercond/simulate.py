@@ -762,10 +762,16 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         spec, carried, particles = physics.sintering, state.sintering, state.particles
         law = neck_growth.law_params(spec, prep.params.sintering)
 
-        def grow(contacts, carried):
+        def grow(contacts, carried, positions):
             elapsed = (state.step - carried.interval_start).astype(state.dt.dtype) * state.dt
-            neck, overlap = neck_growth.grow_table_necks(spec, law, carried, contacts.neck, particles.radii,
-                                                         particles.temperature, elapsed)
+            if spec.shrinkage == "many_body":
+                neck, overlap, displacement, unbalanced = neck_growth.balance_table_necks(
+                    spec, law, carried, contacts.neck, positions, particles.radii, particles.temperature, elapsed)
+                positions = positions + displacement
+                carried = dataclasses.replace(carried, unbalanced=carried.unbalanced | unbalanced)
+            else:
+                neck, overlap = neck_growth.grow_table_necks(spec, law, carried, contacts.neck, particles.radii,
+                                                             particles.temperature, elapsed)
             contacts = dataclasses.replace(contacts, neck=neck, overlap=overlap)
             conductance = neck_conductance(physics, dataclasses.replace(state, contacts=contacts), prep.params)
             total = jnp.sum(conductance, axis=1)
@@ -780,14 +786,17 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             limit = thermal.explicit_stability_limit(prep.capacity, total)
             unstable = carried.unstable | jnp.any(state.dt > limit)
             return contacts, dataclasses.replace(carried, interval_temperature=particles.temperature,
-                                                 interval_start=state.step, unstable=unstable)
+                                                 interval_start=state.step, unstable=unstable), positions
 
         if spec.every == 1:
-            contacts, carried = grow(state.contacts, carried)
+            contacts, carried, positions = grow(state.contacts, carried, particles.positions)
         else:
-            contacts, carried = jax.lax.cond(neck_growth.update_interval(spec, state.step), grow, lambda c, n: (c, n),
-                                             state.contacts, carried)
-        return dataclasses.replace(state, contacts=contacts, sintering=carried)
+            contacts, carried, positions = jax.lax.cond(neck_growth.update_interval(spec, state.step), grow,
+                                                        lambda *kept: kept, state.contacts, carried,
+                                                        particles.positions)
+        if spec.shrinkage == "many_body":
+            particles = dataclasses.replace(particles, positions=positions)
+        return dataclasses.replace(state, particles=particles, contacts=contacts, sintering=carried)
 
     def step_fn(state: SimState, params: Params) -> SimState:
         return advance_fn(state, prepare_fn(state, params))
@@ -1077,7 +1086,8 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
         if state.sintering is None:
             raise ValueError("Physics.sintering needs SimState.sintering (simulate.init_state(..., "
                              "sintering=neck_growth.neck_state(contacts, temperature)))")
-        neck_growth.validate_sintering(sim.physics.sintering, params.sintering, state.contacts, p.radii)
+        neck_growth.validate_sintering(sim.physics.sintering, params.sintering, state.contacts, p.radii,
+                                       state.sintering, p.positions)
     if sim.physics.mechanics is None:
         return
     if params.mechanics is None:

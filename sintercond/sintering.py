@@ -264,10 +264,12 @@ def _equivalent_radius(r_i, r_j):
 
 
 def _grain_boundary_shape(a, r_i, r_j, params):
+    return 48.0 * _half_inverse_slope(a, r_i, r_j) * _grain_boundary_force(a, r_i, r_j, params)
+
+
+def _grain_boundary_force(a, r_i, r_j, params):
     psi_half = 0.5 * jnp.deg2rad(params["dihedral_angle"])
-    r_star = _equivalent_radius(r_i, r_j)
-    force_over_pi_gamma = 4.0 * r_star * (1.0 - jnp.cos(psi_half)) + a * jnp.sin(psi_half)
-    return 48.0 * _half_inverse_slope(a, r_i, r_j) * force_over_pi_gamma
+    return 4.0 * _equivalent_radius(r_i, r_j) * (1.0 - jnp.cos(psi_half)) + a * jnp.sin(psi_half)
 
 
 def _grain_boundary_speed(temperature, params):
@@ -293,6 +295,10 @@ def _viscous_shape(a, r_i, r_j, params):
 
 def _viscous_speed(temperature, params):
     return params["surface_energy"] / params["viscosity"] * _arrhenius(temperature, params["activation_energy"])
+
+
+def _size_force(a, r_i, r_j, params):
+    return _equivalent_radius(r_i, r_j) * jnp.ones_like(a)
 
 
 def _ratio_cap(r_i, r_j, params):
@@ -321,6 +327,11 @@ class KineticLaw(NamedTuple):
       reference: paper and equations.
       params_allowing_zero: parameters that may be 0 (others > 0, except ``params_any_sign``).
       params_any_sign: parameters that may take any finite value.
+      force: ``fn(a, r_i, r_j, params)``: the contact's sintering force over ``pi gamma_s`` (m), for the
+        many-body balance of :mod:`sintercond.neck_growth` (only its ratios between contacts enter there):
+        Bouvard & McMeeking's ``4 r* (1 - cos(psi/2)) + a sin(psi/2)`` for grain-boundary diffusion;
+        ``r*`` (a force in proportion to the contact's size) for the power law and viscous flow, which
+        give no force of their own.
     """
 
     name: str
@@ -335,6 +346,7 @@ class KineticLaw(NamedTuple):
     reference: str
     params_allowing_zero: tuple[str, ...] = ()
     params_any_sign: tuple[str, ...] = ()
+    force: Callable | None = None
 
     def exponent(self, params):
         """``n`` of ``u = a^n`` for these parameters."""
@@ -350,7 +362,7 @@ KINETIC_LAWS: dict[str, KineticLaw] = {
             {"A": "m^4 K/s", "activation_energy": "kJ/mol", "dihedral_angle": "degrees"},
             None, 6.0, True,
             "Bouvard & McMeeking 1996; Parhami & McMeeking 1998; Nosewicz et al. 2013 (Rojek 2022 ref. 14)",
-            ("activation_energy",),
+            ("activation_energy",), (), _grain_boundary_force,
         ),
         KineticLaw(
             "power_law", _power_law_shape, _power_law_speed, _ratio_cap,
@@ -359,13 +371,14 @@ KINETIC_LAWS: dict[str, KineticLaw] = {
             {"K0": "m^n/s", "activation_energy": "kJ/mol", "exponent": "1", "size_exponent": "1",
              "reference_radius": "m", "max_neck_ratio": "1"},
             "exponent", 0.0, False, "phenomenological d(a^n)/dt = K0 exp(-Q/RT) (r*/r_ref)^p",
-            ("activation_energy",), ("size_exponent",),
+            ("activation_energy",), ("size_exponent",), _size_force,
         ),
         KineticLaw(
             "viscous", _viscous_shape, _viscous_speed, _ratio_cap,
             {"surface_energy": 0.03, "viscosity": 1e3, "activation_energy": 0.0, "max_neck_ratio": 1.0},
             {"surface_energy": "N/m", "viscosity": "Pa s", "activation_energy": "kJ/mol", "max_neck_ratio": "1"},
-            None, 2.0, False, "Frenkel 1945: a^2 = 3 gamma r t / (2 eta)", ("activation_energy",),
+            None, 2.0, False, "Frenkel 1945: a^2 = 3 gamma r t / (2 eta)", ("activation_energy",), (),
+            _size_force,
         ),
     )
 }

@@ -118,6 +118,7 @@ ELSEWHERE = {
     "run.override_limits": "test_bad_input.py: the limits refused and overridden",
     **{f"sintering.{key}": "test_sintering_scene.py: test_the_sintering_keys_reach_the_model (no mechanics)"
        for key in ("law", "every", "params")},
+    "sintering.shrinkage": "test_sintering_scene.py: test_many_body_shrinkage_holds_the_bottom_layer_on_its_floor...",
     "run.contact_network": "test_contact_network.py: network frames written when asked, none otherwise",
     "material.conductivity_table": "test_conductivity_table.py: test_a_scenes_table_reaches_the_run",
     "sintering.k_star_axis": "test_sintering_scene.py: the SC cell's k_star_W_mK against K_pair / spacing",

@@ -205,3 +205,54 @@ def test_preheating_walls_and_floor_and_the_interval_against_the_ramp():
         validate_scene(both)
     model = build.build_model(validate_scene(copy.deepcopy(scene)))  # every = 5: an interval is 5 steps
     assert model.dt <= 0.1 * (1.0 / 5) / 5 * (1 + 1e-12)
+
+
+def many_body_cell(**run):
+    scene = copy.deepcopy(CELL)
+    scene["sintering"]["shrinkage"] = "many_body"
+    scene["run"].update(run)
+    return validate_scene(scene)
+
+
+def test_many_body_shrinkage_holds_the_bottom_layer_on_its_floor_and_the_column_closes_up_on_it(tmp_path):
+    model = runner.build_model(many_body_cell())
+    assert model.physics.sintering == neck_growth.Sintering(every=5, shrinkage="many_body")
+    x0 = np.asarray(model.state.particles.positions)
+    bottom = x0[:, 2] == x0[:, 2].min()
+    # the floor holds the vertical component of the particles resting on it, nothing else
+    np.testing.assert_array_equal(np.asarray(model.state.sintering.supports),
+                                  np.stack([0 * bottom, 0 * bottom, bottom], 1).astype(bool))
+    _, summary = runner.run_scene(many_body_cell(), tmp_path, progress=False, pictures=False)
+    state = io.load_checkpoint(tmp_path / "checkpoint.npz", model.state)
+    x = np.asarray(state.particles.positions)
+    np.testing.assert_array_equal(x[bottom, 2], x0[bottom, 2])
+    top = x0[:, 2] == x0[:, 2].max()
+    assert np.all(x[top, 2] < x0[top, 2])  # the column sinters down onto the floor
+    # each column of four closes by the approaches of its three vertical contacts: the top's drop is at least
+    # the smallest and at most the largest contact approach times three
+    drop = x0[top, 2] - x[top, 2]
+    necks = np.asarray(state.contacts.neck)
+    valid = necks > 0
+    h = np.asarray(sintering.neck_overlap(necks[valid], 40e-6, 40e-6)) - np.asarray(
+        state.sintering.start_overlap)[valid]
+    assert np.all(drop >= 3 * h.min() * (1 - 1e-9)) and np.all(drop <= 3 * h.max() * (1 + 1e-9))
+    assert summary["shrinkage"] > 0 and not bool(state.sintering.unbalanced)
+
+
+@pytest.mark.slow
+def test_a_many_body_sintering_run_killed_mid_way_resumes_bitwise(tmp_path):
+    scene = many_body_cell(duration=0.02, output_every=20, checkpoint_every=40)
+    full, _ = runner.run_scene(copy.deepcopy(scene), tmp_path / "full", progress=False, pictures=False)
+    runner.run_scene(copy.deepcopy(scene), tmp_path / "cut", progress=False, pictures=False, stop_after_chunks=3)
+    resumed, _ = runner.resume(tmp_path / "cut", progress=False, pictures=False)
+    np.testing.assert_array_equal(np.asarray(resumed), np.asarray(full))
+    assert (tmp_path / "full" / "history.csv").read_bytes() == (tmp_path / "cut" / "history.csv").read_bytes()
+    for frame in ("full", "cut"):
+        assert sorted((tmp_path / frame / "vtp").glob("*.vtp"))
+
+
+def test_a_bad_shrinkage_is_named():
+    scene = copy.deepcopy(CELL)
+    scene["sintering"]["shrinkage"] = "collective"
+    with pytest.raises(SceneError, match=r"sintering\.shrinkage must be one of"):
+        validate_scene(scene)

@@ -139,7 +139,8 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
             held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table),
         sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
                                  radiation="radiation" in scene),
-        sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"]))
+        sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"],
+                                                               shrinkage=s["shrinkage"]))
 
 
 def mechanics_on(scene) -> bool:
@@ -276,7 +277,9 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     sim = simulate.simulator(physics)
     necks = None
     if physics.sintering is not None:
-        necks = neck_growth.neck_state(contacts, particles.temperature)
+        many_body = physics.sintering.shrinkage == "many_body"
+        necks = neck_growth.neck_state(contacts, particles.temperature,
+                                       supports=wall_supports(scene, centres, radii) if many_body else None)
     # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
     limiting = contacts if necks is None else neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts,
                                                                       particles.radii)
@@ -414,6 +417,15 @@ def _wall_heat_specs(scene, centres, radii):
 
 FEW_WALL_CONTACTS = 0.5
 """A held or conducting wall touching fewer than this fraction of the particles facing it is reported as a handful."""
+
+
+def wall_supports(scene, centres, radii) -> np.ndarray:
+    """``[n, 3]`` bool: the displacement components the walls hold in a many-body sintering run, each wall's axis
+    for the particles that touch it (:func:`sintercond.neck_growth.neck_state`)."""
+    supports = np.zeros((len(radii), 3), bool)
+    for wall, plane in zip(_walls(scene), scene_walls(scene, centres, radii)):
+        supports[:, wall["axis"]] |= np.asarray(plane.penetration(centres, radii)) >= 0
+    return supports
 
 
 def wall_contacts(scene, centres, radii, log=None) -> dict:

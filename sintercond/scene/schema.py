@@ -227,6 +227,11 @@ _SCHEMA = {
                          "mean of the pair temperatures at their start and end"),
         "params": Key(dict, None, False, default="the law's",
                       doc="the kinetic law's parameters, see [sintering.params]"),
+        "shrinkage": Key(str, _choice("independent", "many_body"), False, default="independent",
+                         doc="independent: the packing stays, each contact's approach H(a) recorded (first stage); "
+                             "many_body: the overdamped balance of the contacts' sintering forces and dashpots moves "
+                             "the particles at each neck update, those touching a wall held along its normal "
+                             "(sintercond.neck_growth)"),
         "k_star_axis": Key(int, _choice(0, 1, 2), False,
                            doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
                                "steady solve on the grown necks at each output (sintercond.steady, the face "
