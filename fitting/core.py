@@ -268,8 +268,9 @@ def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, metho
     for path, leaf, t in zip(layout.paths, starts, leaf_transforms):
         _check_in_range(f"params0{path}", np.asarray(leaf, dtype=np.float64), t)
     try:
-        out = jax.eval_shape(model, layout.unflatten(jnp.concatenate([jnp.ravel(jnp.asarray(v, y_np.dtype))
-                                                                      for v in starts])), x)
+        # the tree is built inside, as the fit builds it: eval_shape's own flattening would sort a dict's keys
+        out = jax.eval_shape(lambda theta, x: model(layout.unflatten(theta), x),
+                             jnp.concatenate([jnp.ravel(jnp.asarray(v, y_np.dtype)) for v in starts]), x)
     except Exception as err:  # noqa: BLE001 - any failure to trace the model is the caller's to see, named
         raise ValueError(f"model(params0, x) cannot be evaluated: {type(err).__name__}: {err}") from None
     if invalid:
@@ -357,12 +358,12 @@ def _leaf_transforms(params0, transforms) -> tuple:
 def _children(node):
     """``[(key, child)]`` of a pytree node in reading order (a dict's keys as inserted: JAX sorts them), or None
     for a leaf."""
-    if node is None:
-        return []
     if type(node) is dict:
         return [(jax.tree_util.DictKey(k), v) for k, v in node.items()]
     flat, treedef = jax.tree_util.tree_flatten_with_path(node, is_leaf=lambda child: child is not node)
-    return None if jax.tree_util.treedef_is_leaf(treedef) else [(path[0], child) for path, child in flat]
+    if treedef.num_nodes == 1 and treedef.num_leaves == 1:  # (treedef_is_leaf is also true of None and [])
+        return None
+    return [(path[0], child) for path, child in flat]
 
 
 def _walk(node, path=()):
