@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
+import numbers
 from collections.abc import Callable, Mapping
 
 import jax
@@ -322,8 +324,8 @@ def _leaf_transforms(params0, transforms) -> tuple:
     def assign(node, t, path):
         where = f"transforms{jax.tree_util.keystr(path)}"
         if isinstance(t, _TRANSFORMS):
-            if isinstance(t, Bounded) and not (np.ndim(t.low) == np.ndim(t.high) == 0
-                                               and np.isfinite([t.low, t.high]).all() and t.low < t.high):
+            if isinstance(t, Bounded) and not (all(isinstance(b, numbers.Real) and not isinstance(b, bool)
+                                                   and math.isfinite(b) for b in (t.low, t.high)) and t.low < t.high):
                 raise ValueError(f"{where} must have finite numbers low < high; got {t!r}")
             found.extend([t] * len(_walk(node)[1]))
             return

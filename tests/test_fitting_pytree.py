@@ -198,6 +198,8 @@ BAD = [
     ("not a transform", {"s": {"A": 1.0}}, {"s": {"A": "positive"}}, r"transforms\['s'\]\['A'\] must be Free\(\)"),
     ("Bounded the wrong way round", {"s": {"A": 1.0}}, {"s": {"A": Bounded(2.0, 0.0)}},
      r"transforms\['s'\]\['A'\] must have finite numbers low < high"),
+    ("Bounded above by inf", {"s": {"A": 1.0}}, {"s": Bounded(0.0, math.inf)},
+     r"transforms\['s'\] must have finite numbers low < high"),
     ("inf leaf", {"s": {"A": math.inf}}, None, r"params0\['s'\]\['A'\] must be a finite number"),
     ("NaN element", {"kappa": np.array([1.0, np.nan, 2.0])}, None, r"params0\['kappa'\]\[1\] must be a finite number"),
     ("negative element, Positive", {"kappa": np.array([1.0, -2.0])}, {"kappa": Positive()},
