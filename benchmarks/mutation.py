@@ -52,6 +52,7 @@ NECK = [T + "test_neck.py"]
 COND = [T + "test_conductance.py"]
 DZ = [T + "test_dryden_zok.py"]
 FIT = [T + "test_fitting.py"]
+FIT_TREE = [T + "test_fitting_pytree.py"]
 TEETH = T + "test_teeth_thermal.py"
 THERMAL = [T + "test_thermal.py", TEETH]
 SCENE = [T + "test_scene.py", T + "test_scene_run.py"]
@@ -131,7 +132,8 @@ MUTANTS = [
     ("gamma 2x", "sintercond/tortuosity.py", "return (diameter - 2.0 * x) / diameter", "return (diameter - x) / diameter",
      [T + "test_tortuosity.py"]),
     ("tau2 exponent", "sintercond/tortuosity.py", "n ** (1.0 - phi)", "n ** (1.0 + phi)", [T + "test_tortuosity.py"]),
-    ("ramp floor", "sintercond/tortuosity.py", "else jnp.floor(fraction * steps)", "else jnp.round(fraction * steps)",
+    ("ramp floor", "sintercond/tortuosity.py", "else jnp.floor(fraction * steps + STEP_EDGE)",
+     "else jnp.round(fraction * steps + STEP_EDGE)",
      [T + "test_tortuosity.py"]),
     ("segment area", "sintercond/geometry.py", "return 0.5 * (x * np.sqrt(np.maximum(r * r - x * x, 0.0))",
      "return 0.5 * (x * np.sqrt(np.maximum(r * r - 0.99 * x * x, 0.0))", [T + "test_geometry.py"]),
@@ -222,6 +224,14 @@ MUTANTS = [
     ("positive inverse", "fitting/core.py", "return x + jnp.log(-jnp.expm1(-x))", "return x", FIT),
     ("lm damping", "fitting/core.py", "damping = jnp.where(better, damping / 3.0, damping * 2.0)",
      "damping = jnp.where(better, damping * 2.0, damping / 3.0)", FIT),
+    ("pytree dict keys sorted", "fitting/core.py",
+     "return [(jax.tree_util.DictKey(k), v) for k, v in node.items()]",
+     "return [(jax.tree_util.DictKey(k), node[k]) for k in sorted(node)]", FIT_TREE),
+    ("pytree subtree transform taken once", "fitting/core.py", "found.extend([t] * len(_walk(node)[1]))",
+     "found.append(t)", FIT_TREE),
+    ("pytree one slot per leaf", "fitting/core.py",
+     "stops = np.cumsum([int(np.prod(shape)) for shape in self.shapes], dtype=int).tolist()",
+     "stops = np.cumsum([1 for shape in self.shapes], dtype=int).tolist()", FIT_TREE),
     ("slope keep", "fitting/slope.py", "keep = a_over_r <= max_a_over_r", "keep = a_over_r < max_a_over_r", FIT),
     ("phi mean", "fitting/phi.py", "return lam.mean(axis=1)", "return lam.max(axis=1)", FIT),
     ("phi bounds", "fitting/phi.py", 'transforms = {"phi": Bounded(1.0, 12.0)}', 'transforms = {"phi": Bounded(1.0, 5.0)}',
@@ -420,8 +430,8 @@ MUTANTS = [
      "            return contacts, dataclasses.replace(carried, interval_temperature=particles.temperature,",
      "            return contacts, dataclasses.replace(carried, interval_temperature=carried.interval_temperature,",
      [T + "test_neck_growth.py"]),
-    ("ramp level at its start", "sintercond/simulate.py", "jnp.minimum(jnp.ceil(ramp.steps * t / ramp.duration)",
-     "jnp.minimum(jnp.floor(ramp.steps * t / ramp.duration)", [T + "test_neck_growth.py"]),
+    ("ramp level at its start", "sintercond/tortuosity.py", "step = (jnp.ceil(fraction * steps - STEP_EDGE)",
+     "step = (jnp.floor(fraction * steps - STEP_EDGE)", [T + "test_neck_growth.py"]),
     ("step on the start necks", "sintercond/neck_growth.py", "jnp.where(valid, jnp.maximum(cap, contacts.neck), 0.0)",
      "jnp.where(valid, contacts.neck, 0.0)", [T + "test_sintering_scene.py"]),
 ]

@@ -1,8 +1,12 @@
 """A small fitting core on optax: constrained parameters, least squares, a jitted loop, uncertainties.
 
-Parameters are a dict ``name -> value``; each has a transform from an
-unconstrained variable (``Free``, ``Positive`` via softplus, ``Bounded`` via a
-sigmoid), so optax works on unconstrained numbers. The whole optimisation
+Parameters are a dict ``name -> value``, or any pytree of numbers and float
+arrays (nested dicts, lists, tuples): its leaves are laid out as one flat
+vector in reading order (a dict's keys as inserted), one entry per scalar,
+named by its tree path (``"sintering.A"``, ``"kappa[2]"``). Each leaf has a
+transform from an unconstrained variable (``Free``, ``Positive`` via softplus,
+``Bounded`` via a sigmoid; elementwise on an array), so optax works on
+unconstrained numbers. The whole optimisation
 (``lax.while_loop`` over optax updates, with stopping on the gradient norm,
 the relative loss change or a step limit) is one compiled function. At the
 optimum the Gauss-Newton covariance ``s^2 (J^T J)^-1`` of the parameters
@@ -22,6 +26,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
+import numbers
 from collections.abc import Callable, Mapping
 
 import jax
@@ -76,11 +82,13 @@ class FitResult:
     """Outcome of :func:`least_squares`.
 
     Attributes:
-      params: fitted parameters (dict of floats).
-      stderr: standard errors (dict), Gauss-Newton at the optimum; ``inf`` when the data do not
+      params: fitted parameters in ``params0``'s structure (for a flat dict, a dict of floats); a scalar leaf is a
+        float, an array leaf a NumPy array of its shape.
+      stderr: standard errors in the same structure, Gauss-Newton at the optimum; ``inf`` when the data do not
         determine them (as many observations as parameters, or a rank-deficient Jacobian).
-      covariance: ``[p, p]`` in the order of ``names``.
-      names: parameter names.
+      covariance: ``[p, p]`` over the ``p`` fitted scalars, in the order of ``names``.
+      names: one per fitted scalar, the path of its leaf (``"a"`` for a flat dict's key, ``"sintering.A"`` in a
+        nested dict, ``"kappa[2]"`` for an element of an array leaf), in reading order (a dict's keys as inserted).
       loss_history: loss per step (NaN after the stop).
       steps: optimiser steps taken.
       residual_std: ``s``, the residual standard deviation (weighted units).
@@ -97,20 +105,49 @@ class FitResult:
     residual_std: float
     converged: bool = True
 
+    @property
+    def flat_params(self) -> dict:
+        """``name -> value`` for every fitted scalar, in the order of ``names`` (``params`` itself for a flat dict)."""
+        return dict(zip(self.names, _Layout.of(self.params)[1].tolist()))
 
-def least_squares(model: Callable, x, y, params0: Mapping[str, float], transforms: Mapping | None = None,
+    @property
+    def flat_stderr(self) -> dict:
+        """``name -> standard error`` for every fitted scalar, in the order of ``names``."""
+        return dict(zip(self.names, _Layout.of(self.stderr)[1].tolist()))
+
+    def to_tree(self, vector):
+        """``vector``, one value per entry of ``names`` (e.g. ``np.diag(covariance)``), in ``params``' structure."""
+        layout, _ = _Layout.of(self.params)
+        vector = np.asarray(vector, dtype=np.float64)
+        if vector.shape != (len(self.names),):
+            raise ValueError(f"vector must have one value per fitted scalar, shape ({len(self.names)},); "
+                             f"got shape {vector.shape}")
+        return layout.host_tree(vector)
+
+    def intervals(self, z=1.959964):
+        """``(low, high)``, each in ``params``' structure: ``params -+ z stderr`` (95 % at the default ``z`` for many
+        degrees of freedom; with few, take ``z`` from Student's t with ``len(y) - len(names)`` of them)."""
+        value, error = _Layout.of(self.params)[1], _Layout.of(self.stderr)[1]
+        return self.to_tree(value - z * error), self.to_tree(value + z * error)
+
+
+def least_squares(model: Callable, x, y, params0, transforms=None,
                   weights=None, relative=False, learning_rate=0.05, max_steps=5000, grad_tol=1e-10,
                   loss_tol=1e-14, polish_steps=3, jacobian_model: Callable | None = None,
                   report_every=0, method="adam", invalid=False, invalid_message=None) -> FitResult:
     """Fit ``model(params, x) ~ y`` by weighted least squares: optax Adam, or Levenberg-Marquardt.
 
     Args:
-      model: ``(params dict, x) -> prediction``, traceable and hashable (a function). The compiled
-        loop is cached per model, transforms and settings, so repeated fits of the same kind on data of
-        the same shapes (bootstrap, synthetic-recovery loops) compile once.
+      model: ``(params, x) -> prediction``, ``params`` in ``params0``'s structure; traceable and hashable (a
+        function). The compiled loop is cached per model, parameter structure, transforms and settings, so
+        repeated fits of the same kind on data of the same shapes (bootstrap, synthetic-recovery loops)
+        compile once.
       x, y: data (``x`` any PyTree of arrays, or None; ``y`` an array of observations).
-      params0: starting values (constrained space).
-      transforms: name -> ``Free()`` / ``Positive()`` / ``Bounded(lo, hi)`` (default Free).
+      params0: starting values (constrained space): a dict name -> number, or a pytree of them (nested dicts,
+        lists, tuples) whose leaves are real numbers or float arrays; every scalar in it is fitted.
+      transforms: ``Free()`` / ``Positive()`` / ``Bounded(lo, hi)`` in ``params0``'s structure (default Free): a
+        dict may leave keys out (Free); a transform on an array leaf, or on a whole subtree, applies to each
+        scalar in it.
       weights: per-observation weights ``1 / sigma`` (default 1).
       relative: residuals relative to ``y`` instead of absolute.
       learning_rate, max_steps, grad_tol, loss_tol: optimiser settings and stopping rule
@@ -131,21 +168,22 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
       :class:`FitResult`.
 
     Raises:
+      ValueError: input that cannot be fitted (named: the argument, or the parameter's path), before compiling.
       InvalidEvaluation: ``invalid=True`` and any evaluation of the fit was flagged.
     """
-    names = tuple(params0)
-    _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method, invalid)
-    transforms = tuple((n, (transforms or {}).get(n, Free())) for n in names)
+    layout, starts, transforms = _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method,
+                                                   invalid)
+    names = layout.names
     y = jnp.asarray(y)
     w = jnp.ones_like(y) if weights is None else jnp.broadcast_to(jnp.asarray(weights, y.dtype), y.shape)
-    program = _fit_program(model, model if jacobian_model is None else jacobian_model, transforms, bool(relative),
-                           method, float(learning_rate), int(max_steps), float(grad_tol), float(loss_tol),
-                           int(report_every), bool(invalid))
-    u0 = jnp.stack([jnp.asarray(t.inverse(jnp.asarray(params0[n], y.dtype)), y.dtype) for n, t in transforms])
+    program = _fit_program(model, model if jacobian_model is None else jacobian_model, layout, transforms,
+                           bool(relative), method, float(learning_rate), int(max_steps), float(grad_tol),
+                           float(loss_tol), int(report_every), bool(invalid))
+    u0 = jnp.concatenate([jnp.ravel(jnp.asarray(t.inverse(jnp.asarray(v, y.dtype)), y.dtype))
+                          for v, t in zip(starts, transforms)])
     with jax.numpy_dtype_promotion("standard"):  # optax mixes its int32 step count with floats
         u, steps, history, flagged = program.run(u0, x, y, w)
     flags = [bool(flagged)]
-    transforms = dict(transforms)
     # Gauss-Newton covariance in the constrained parameters
     theta = program.constrained(u)
 
@@ -155,7 +193,8 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
         r, jac, flag = program.residuals_and_jacobian(theta, x, y, w)
         flags.append(bool(flag))
         candidate = theta - jnp.linalg.solve(jac.T @ jac, jac.T @ r)
-        inside = all(bool(jnp.isfinite(transforms[n].inverse(candidate[k]))) for k, n in enumerate(names))
+        inside = all(bool(jnp.all(jnp.isfinite(t.inverse(candidate[a:b])))) for (a, b), t in zip(layout.bounds,
+                                                                                                    transforms))
         r_candidate, _, flag = program.residuals_and_jacobian(candidate, x, y, w)
         flags.append(bool(flag))
         if inside and float(jnp.sum(r_candidate**2)) < float(jnp.sum(r**2)):
@@ -181,23 +220,36 @@ def least_squares(model: Callable, x, y, params0: Mapping[str, float], transform
     else:
         s2 = float(jnp.sum(r**2)) / dof
         covariance = s2 * np.linalg.inv(jtj)
-    params = {n: float(theta[k]) for k, n in enumerate(names)}
-    stderr = {n: float(np.sqrt(covariance[k, k])) for k, n in enumerate(names)}
+    params = layout.host_tree(np.asarray(theta, dtype=np.float64))
+    stderr = layout.host_tree(np.sqrt(np.diag(covariance)))
     return FitResult(params, stderr, covariance, names, np.asarray(history), int(steps), float(np.sqrt(s2)),
                      int(steps) < int(max_steps))
 
 
 def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, method, invalid=False):
-    """Raise ``ValueError`` naming the argument for input :func:`least_squares` cannot fit (before compiling)."""
+    """Raise ``ValueError`` naming the argument or the parameter's path for input :func:`least_squares` cannot fit
+    (before compiling); else ``(layout, starting leaves, each leaf's transform)``, leaves in reading order."""
     from sintercond._validation import fail_where
 
     if method not in ("adam", "levenberg_marquardt"):
         raise ValueError(f"method must be 'adam' or 'levenberg_marquardt'; got {method!r}")
-    if not isinstance(params0, Mapping) or not params0:
-        raise ValueError(f"params0 must be a non-empty dict name -> starting value; got {params0!r}")
-    unknown = set(transforms or {}) - set(params0)
-    if unknown:
-        raise ValueError(f"transforms has keys that are not parameters: {sorted(unknown)}; params0 has {list(params0)}")
+    if _children(params0) is None:
+        raise ValueError("params0 must be a non-empty dict name -> starting value (or a pytree of them: nested dicts, "
+                         f"lists, tuples); got {params0!r}")
+    leaves = _walk(params0)[1]
+    if not leaves:
+        raise ValueError(f"params0 must be a non-empty dict name -> starting value; got {params0!r}: no parameters")
+    for path, leaf in leaves:
+        _check_start(f"params0{jax.tree_util.keystr(path)}", leaf)
+    layout, _ = _Layout.of(params0)
+    starts = [leaf for _, leaf in leaves]
+    seen = {}
+    for name, where in zip(layout.names, layout.scalar_paths()):
+        if name in seen:
+            raise ValueError(f"params0{seen[name]} and params0{where} have the same name {name!r} in the fit's "
+                             "report: rename one key")
+        seen[name] = where
+    leaf_transforms = _leaf_transforms(params0, Free() if transforms is None else transforms)
     y_np = np.asarray(y, dtype=np.float64)
     if y_np.ndim == 0 or y_np.size == 0:
         raise ValueError(f"y must be a non-empty array of observations; got shape {y_np.shape}")
@@ -205,8 +257,8 @@ def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, metho
     if relative:
         fail_where(y_np == 0, lambda i: f"y must be nonzero for relative=True (residuals are divided by y); "
                                         f"got 0 at index {i}")
-    if y_np.size < len(params0):
-        raise ValueError(f"y has {y_np.size} observations for {len(params0)} parameters: an underdetermined fit; "
+    if y_np.size < len(layout.names):
+        raise ValueError(f"y has {y_np.size} observations for {len(layout.names)} parameters: an underdetermined fit; "
                          "y needs at least as many observations as params0 has parameters")
     if weights is not None:
         w = np.asarray(weights, dtype=np.float64)
@@ -215,20 +267,12 @@ def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, metho
         except ValueError:
             raise ValueError(f"weights must broadcast to y's shape {y_np.shape}; got shape {w.shape}") from None
         fail_where(~(np.isfinite(w) & (w > 0)), lambda i: f"weights must be finite and > 0; got {w[i]!r} at index {i}")
-    for name, value in params0.items():
-        v = np.asarray(value, dtype=np.float64)
-        if v.shape != () or not np.isfinite(v):
-            raise ValueError(f"params0[{name!r}] must be a finite number; got {value!r}")
-        t = (transforms or {}).get(name, Free())
-        if isinstance(t, Positive) and not v > 0:
-            raise ValueError(f"params0[{name!r}] must be > 0 for its Positive transform; got {float(v)!r}")
-        if isinstance(t, Bounded) and not t.low < v < t.high:
-            raise ValueError(f"params0[{name!r}] must be in ({t.low:g}, {t.high:g}) for its Bounded transform; "
-                             f"got {float(v)!r}")
-        if not isinstance(t, (Free, Positive, Bounded)):
-            raise ValueError(f"transforms[{name!r}] must be Free(), Positive() or Bounded(low, high); got {t!r}")
+    for path, leaf, t in zip(layout.paths, starts, leaf_transforms):
+        _check_in_range(f"params0{path}", np.asarray(leaf, dtype=np.float64), t)
     try:
-        out = jax.eval_shape(model, {n: jnp.asarray(v, y_np.dtype) for n, v in params0.items()}, x)
+        # the tree is built inside, as the fit builds it: eval_shape's own flattening would sort a dict's keys
+        out = jax.eval_shape(lambda theta, x: model(layout.unflatten(theta), x),
+                             jnp.concatenate([jnp.ravel(jnp.asarray(v, y_np.dtype)) for v in starts]), x)
     except Exception as err:  # noqa: BLE001 - any failure to trace the model is the caller's to see, named
         raise ValueError(f"model(params0, x) cannot be evaluated: {type(err).__name__}: {err}") from None
     if invalid:
@@ -239,6 +283,176 @@ def _check_fit_inputs(model, x, y, params0, transforms, weights, relative, metho
     if getattr(out, "shape", None) != y_np.shape:
         raise ValueError(f"model(params0, x) has shape {getattr(out, 'shape', None)} but y has shape {y_np.shape}; "
                          "they must be equal")
+    return layout, starts, leaf_transforms
+
+
+def _check_start(where, leaf):
+    """Raise ``ValueError`` naming ``where`` unless ``leaf`` is a finite real number or a non-empty float array."""
+    from sintercond._validation import fail_where
+
+    v = np.asarray(leaf)
+    if v.dtype.kind in "biu":
+        raise ValueError(f"{where} is {'a bool' if v.dtype.kind == 'b' else 'an integer'} ({leaf!r}): a fitted "
+                         "parameter is real, so write it as a float; a fixed setting belongs in the model, not in "
+                         "params0")
+    if v.dtype.kind != "f":
+        raise ValueError(f"{where} must be a finite number or an array of them; got {leaf!r}")
+    if v.size == 0:
+        raise ValueError(f"{where} is an empty array: nothing to fit")
+    fail_where(~np.isfinite(v), lambda i: f"{where}{_index(i)} must be a finite number; got {v[i]!r}")
+
+
+def _check_in_range(where, v, t):
+    """Raise ``ValueError`` naming ``where`` and the element unless the start ``v`` lies in ``t``'s range."""
+    from sintercond._validation import fail_where
+
+    if isinstance(t, Positive):
+        fail_where(~(v > 0), lambda i: f"{where}{_index(i)} must be > 0 for its Positive transform; got {float(v[i])!r}")
+    if isinstance(t, Bounded):
+        fail_where(~((t.low < v) & (v < t.high)), lambda i: f"{where}{_index(i)} must be in ({t.low:g}, {t.high:g}) "
+                                                            f"for its Bounded transform; got {float(v[i])!r}")
+
+
+_TRANSFORMS = (Free, Positive, Bounded)
+
+
+def _leaf_transforms(params0, transforms) -> tuple:
+    """Each leaf's transform, in reading order: ``transforms`` has ``params0``'s structure, or a prefix of it (a
+    transform on a subtree applies to each of its leaves); a dict may leave keys out (``Free``)."""
+    found = []
+
+    def assign(node, t, path):
+        where = f"transforms{jax.tree_util.keystr(path)}"
+        if isinstance(t, _TRANSFORMS):
+            if isinstance(t, Bounded) and not (all(isinstance(b, numbers.Real) and not isinstance(b, bool)
+                                                   and math.isfinite(b) for b in (t.low, t.high)) and t.low < t.high):
+                raise ValueError(f"{where} must have finite numbers low < high; got {t!r}")
+            found.extend([t] * len(_walk(node)[1]))
+            return
+        kids = _children(node)
+        if kids is None:  # a parameter, and t is not a transform
+            if _children(t):
+                raise ValueError(f"{where} is a {type(t).__name__} but params0{jax.tree_util.keystr(path)} is one "
+                                 "parameter (on an array, one transform applies to each element)")
+            raise ValueError(f"{where} must be Free(), Positive() or Bounded(low, high); got {t!r}")
+        if isinstance(node, Mapping) and isinstance(t, Mapping):
+            unknown = [k for k in t if k not in node]
+            if unknown:
+                raise ValueError(f"{where} has keys that are not in params0{jax.tree_util.keystr(path)}: {unknown}; "
+                                 f"it has {list(node)}")
+            for key, child in kids:
+                if isinstance(key, jax.tree_util.DictKey) and key.key in t:
+                    assign(child, t[key.key], (*path, key))
+                else:
+                    found.extend([Free()] * len(_walk(child)[1]))
+            return
+        t_kids = _children(t)
+        if t_kids is None or [k for k, _ in t_kids] != [k for k, _ in kids] or type(t) is not type(node):
+            raise ValueError(f"{where} does not match params0{jax.tree_util.keystr(path)}'s structure: a "
+                             f"{type(node).__name__} of {len(kids)}; got {t!r}")
+        for (key, child), (_, t_child) in zip(kids, t_kids):
+            assign(child, t_child, (*path, key))
+
+    assign(params0, transforms, ())
+    return tuple(found)
+
+
+def _children(node):
+    """``[(key, child)]`` of a pytree node in reading order (a dict's keys as inserted: JAX sorts them), or None
+    for a leaf."""
+    if type(node) is dict:
+        return [(jax.tree_util.DictKey(k), v) for k, v in node.items()]
+    flat, treedef = jax.tree_util.tree_flatten_with_path(node, is_leaf=lambda child: child is not node)
+    if treedef.num_nodes == 1 and treedef.num_leaves == 1:  # (treedef_is_leaf is also true of None and [])
+        return None
+    return [(path[0], child) for path, child in flat]
+
+
+def _walk(node, path=()):
+    """``(skeleton, [(path, leaf)])``: the hashable shape of a pytree (what :meth:`_Layout.unflatten` rebuilds) and
+    its leaves in reading order."""
+    kids = _children(node)
+    if kids is None:
+        return ("leaf",), [(path, node)]
+    skeletons, leaves = [], []
+    for key, child in kids:
+        skeleton, below = _walk(child, (*path, key))
+        skeletons.append(skeleton)
+        leaves += below
+    if type(node) is dict:
+        return ("dict", tuple(key.key for key, _ in kids), tuple(skeletons)), leaves
+    return ("node", jax.tree_util.tree_structure(node, is_leaf=lambda child: child is not node),
+            tuple(skeletons)), leaves
+
+
+def _index(i) -> str:
+    """``"[2]"``, ``"[1,0]"`` for an element of an array leaf; ``""`` for a scalar."""
+    return f"[{','.join(str(int(k)) for k in i)}]" if len(i) else ""
+
+
+def _name(path) -> str:
+    """A leaf's readable name: ``"sintering.A"``, ``"layers[1].kappa"``."""
+    name = ""
+    for key in path:
+        if isinstance(key, jax.tree_util.DictKey):
+            name += f"{'.' if name else ''}{key.key}"
+        elif isinstance(key, jax.tree_util.GetAttrKey):
+            name += f"{'.' if name else ''}{key.name}"
+        elif isinstance(key, jax.tree_util.SequenceKey):
+            name += f"[{key.idx}]"
+        else:
+            name += f"[{key.key}]"
+    return name
+
+
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    """Where each leaf of a parameter pytree sits in the flat vector the optimisers work on (hashable: part of the
+    compiled fit's cache key). Leaves in reading order, a dict's keys as inserted, so a flat dict keeps its
+    order in ``names`` and in the covariance."""
+
+    skeleton: tuple  # the tree's nodes (_walk)
+    paths: tuple  # per leaf, as jax.tree_util.keystr writes it: "['sintering']['A']"
+    shapes: tuple  # per leaf
+    names: tuple  # per scalar: "sintering.A", "kappa[2]"
+
+    @staticmethod
+    def of(tree) -> tuple[_Layout, np.ndarray]:
+        """``(layout, the leaves' values as one float64 vector)``."""
+        skeleton, leaves = _walk(tree)
+        shapes = tuple(np.shape(leaf) for _, leaf in leaves)
+        names = tuple(_name(path) + _index(i) for (path, _), shape in zip(leaves, shapes) for i in np.ndindex(shape))
+        layout = _Layout(skeleton, tuple(jax.tree_util.keystr(path) for path, _ in leaves), shapes, names)
+        vector = [np.ravel(np.asarray(leaf, dtype=np.float64)) for _, leaf in leaves if np.size(leaf)]
+        return layout, np.concatenate(vector) if vector else np.zeros(0)
+
+    @property
+    def bounds(self) -> tuple:
+        """``(start, stop)`` of each leaf in the flat vector."""
+        stops = np.cumsum([int(np.prod(shape)) for shape in self.shapes], dtype=int).tolist()
+        return tuple(zip([0, *stops[:-1]], stops))
+
+    def scalar_paths(self) -> tuple:
+        """Each scalar's path, as the error messages write it: ``"['kappa'][2]"``."""
+        return tuple(path + _index(i) for path, shape in zip(self.paths, self.shapes) for i in np.ndindex(shape))
+
+    def unflatten(self, vector, leaf=lambda v: v):
+        """The flat ``vector`` (JAX or NumPy) in the tree's structure, each leaf passed through ``leaf``."""
+        leaves = iter([leaf(vector[a:b].reshape(shape)) for (a, b), shape in zip(self.bounds, self.shapes)])
+
+        def build(skeleton):
+            if skeleton[0] == "leaf":
+                return next(leaves)
+            children = [build(child) for child in skeleton[2]]
+            if skeleton[0] == "dict":
+                return dict(zip(skeleton[1], children))
+            return jax.tree_util.tree_unflatten(skeleton[1], children)
+
+        return build(self.skeleton)
+
+    def host_tree(self, vector):
+        """A NumPy ``vector`` in the tree's structure: floats for scalar leaves, arrays for array leaves."""
+        return self.unflatten(vector, lambda v: float(v) if v.shape == () else np.array(v))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -252,17 +466,17 @@ class _FitProgram:
 
 
 @functools.lru_cache(maxsize=16)
-def _fit_program(model, forward_model, transforms, relative, method, learning_rate, max_steps, grad_tol, loss_tol,
-                 report_every, invalid=False) -> _FitProgram:
-    names = tuple(n for n, _ in transforms)
+def _fit_program(model, forward_model, layout, transforms, relative, method, learning_rate, max_steps, grad_tol,
+                 loss_tol, report_every, invalid=False) -> _FitProgram:
+    """``layout`` places the parameters in the flat vector, ``transforms`` holds each leaf's transform."""
 
     def constrained(u):
-        return jnp.stack([t.forward(u[k]) for k, (_, t) in enumerate(transforms)])
+        return jnp.concatenate([jnp.ravel(t.forward(u[a:b])) for (a, b), t in zip(layout.bounds, transforms)])
 
     def weighted_residuals(fn, theta, x, y, w):
         """``(weighted residuals, flag)``; the flag is False for a model without one."""
         scale = jnp.abs(y) if relative else 1.0
-        out = fn(dict(zip(names, theta)), x)
+        out = fn(layout.unflatten(theta), x)
         prediction, flag = out if invalid else (out, jnp.asarray(False))
         return jnp.ravel(w * (prediction - y) / scale), jnp.asarray(flag, bool)
 

@@ -363,7 +363,7 @@ def fit_conductivity(experiment: ProbeExperiment, readings, specific_heat, kappa
     weights = None if noise is None else jnp.full(readings.shape, 1.0 / noise)
     model, forward_model = _conductivity_models(experiment, float(specific_heat))
     options = {"loss_tol": 1e-10, **options}  # each step is a whole simulation: stop on a flat loss
-    return least_squares(model, None, readings, {"kappa": kappa0}, {"kappa": Bounded(0.0, kappa_max)},
+    return least_squares(model, None, readings, {"kappa": float(kappa0)}, {"kappa": Bounded(0.0, kappa_max)},
                          weights=weights, jacobian_model=forward_model, **options)
 
 

@@ -42,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import numbers
 import warnings
 
 import jax
@@ -260,7 +261,7 @@ def fit_kinetics(series: NeckSeries, law="grain_boundary", *, exponent=6.0, size
             else 1.0
         params0["log_rate_ref"] = float(np.log(u / series.times.max() / scale))
     else:
-        params0.update(start)
+        params0.update({k: float(v) if isinstance(v, numbers.Integral) else v for k, v in start.items()})
     fit = least_squares(model, series, jnp.asarray(series.necks_um), params0, method="levenberg_marquardt",
                         max_steps=max_steps)
     values = {k: float(v) for k, v in model.params(fit.params).items()}

@@ -84,6 +84,18 @@ def test_grain_boundary_fits_residuals_intervals_and_warnings(fits):
 
 
 @pytest.mark.slow
+def test_whole_numbers_in_start_are_starting_values(fits):
+    """least_squares refuses an integer leaf in params0 (issue 24: in a parameter tree an int is more likely a fixed
+    setting than a start); fit_kinetics's own ``start`` still takes whole numbers as the values they are."""
+    fit = fits["80-80"].fit
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fs.IdentifiabilityWarning)
+        again = fs.fit_kinetics(fs.neck_series("80-80"), start={"log_rate_ref": round(fit.params["log_rate_ref"]),
+                                                                "activation_energy": 40})
+    assert again.fit.params == pytest.approx(fit.params, rel=1e-7)
+
+
+@pytest.mark.slow
 def test_exponent_valley():
     """Each fixed exponent has its own best Q: Q rises with n (the valley), the misfit is flat near the best n."""
     n, q, dq, rmse = fs.exponent_valley(fs.neck_series("80-58.6"), exponents=(5.0, 6.0, 7.0, 8.0))

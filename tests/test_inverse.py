@@ -137,6 +137,15 @@ def test_levenberg_marquardt_agrees_with_gradient_descent(experiment):
 
 
 @pytest.mark.slow
+def test_a_whole_number_kappa0_is_a_starting_value(experiment):
+    """least_squares refuses an integer leaf in params0 (issue 24); fit_conductivity's kappa0=3 is the number 3."""
+    noisy = experiment.temperatures(KAPPA_TRUE, C_TRUE) + 0.05 * jax.random.normal(jax.random.key(7), (40, 4))
+    whole, real = (inverse.fit_conductivity(experiment, noisy, C_TRUE, kappa0=k0, noise=0.05,
+                                            method="levenberg_marquardt", max_steps=50) for k0 in (3, 3.0))
+    assert whole.params == real.params and whole.stderr == real.stderr
+
+
+@pytest.mark.slow
 def test_float32_readings_and_gradient_against_float64(experiment):
     """The same experiment built with x64 off (a subprocess): readings within 1e-3 K, gradient within 1e-4."""
     import json
