@@ -42,17 +42,24 @@ and the balance is the sparse symmetric positive semi-definite system::
 
     sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0
 
-solved by preconditioned conjugate gradients (:func:`jax.scipy.sparse.linalg.cg`, which is differentiated
-implicitly, through the same solve). It is the minimum of the dissipation ``sum w (dh - dh_free)^2 / 2``: a free
-pair, a chain or a uniform lattice approaches exactly as the first stage; elsewhere contacts carry forces and
-approach faster or slower than free. A contact that does not grow over the interval (at its cap, or cold) is
-``1 / STIFF_CONTACT_RATIO`` times stiffer than the fastest one (a near-rigid contact, not an infinite weight).
+solved by preconditioned conjugate gradients (:func:`jax.scipy.sparse.linalg.cg`) and differentiated implicitly
+(:func:`jax.lax.custom_linear_solve`: a gradient is one more solve, never the iterations). It is the minimum of the
+dissipation ``sum w (dh - dh_free)^2 / 2``: a free pair, a chain or a uniform lattice approaches exactly as the
+first stage; elsewhere contacts carry forces and approach faster or slower than free. A contact that does not grow
+over the interval (at its cap, or cold) is weighted as if it approached ``STIFF_CONTACT_RATIO`` times the fastest
+one's approach (near-rigid, not an infinite weight). A contact may be pulled apart by its neighbours (a negative
+approach): its neck does not shrink (it keeps its size, and its recorded approach ``H(a)``), while the positions
+follow the balance.
 The balance does not fix every motion: rigid motions of a cluster (the sintering forces have no net force or
 torque) and, in a sparse packing, floppy modes (a particle sliding sideways on a single contact) cost nothing.
 The solve leaves them out: its displacements are those of least ``sum_i (sum_j w_ij) |u_i|^2``, as if each
 particle felt a vanishing drag in proportion to its dashpots (the conjugate-gradient iterates, preconditioned by
 that diagonal and started from rest, stay in the range of the system), so a free pair or a symmetric cell keeps
-its weighted centre. The components given in ``NeckState.supports`` do not move (particles resting on a plate:
+its weighted centre. Reverse-mode gradients solve the system against a cotangent that can reach those free
+motions, where it is singular: that solve adds a drag of ``GRADIENT_DRAG`` times each particle's dashpots, so a
+gradient treats the choice of the free motions as fixed (exact for distances, necks, shrinkage and
+temperatures away from position-dependent sources; for absolute positions, to within the choice's own
+dependence on the weights). The components given in ``NeckState.supports`` do not move (particles resting on a plate:
 the plate's normal). Each contact's neck then follows its approach through Rojek's geometry,
 ``a = H^-1(H(a_0) + dh)`` (:func:`sintercond.neck.neck_radius`), never below ``a_0`` and never beyond the
 law's cap. Only sintering forces enter: gravity and external loads do not (for the 45-105 um Ti6Al4V of the
@@ -93,9 +100,19 @@ SHRINKAGE_MODES = ("independent", "many_body")
 """``Sintering.shrinkage``: contacts that sinter on their own on a packing that does not move (first stage), or
 the many-body force balance that moves the particles (module docstring)."""
 
-STIFF_CONTACT_RATIO = 1e-6
-"""The free approach, relative to the largest of an update, below which a contact counts as that much stiffer than
-the fastest one in the many-body balance (its weight is capped there, not infinite)."""
+STIFF_CONTACT_RATIO = 1e-3
+"""A contact whose free approach over an update is below this fraction of the update's largest is weighted in the
+many-body balance as if it approached that fraction (its dashpot capped): a contact that does not grow (at its cap,
+or cold) is near-rigid, and the solve stays well conditioned."""
+
+MIN_BALANCE_ITERATIONS = 2000
+"""The fewest conjugate-gradient iterations a many-body balance may take before it is flagged (at least ten per
+unknown)."""
+
+GRADIENT_DRAG = 1e-8
+"""The drag, relative to each particle's dashpots, that makes the reverse-mode solve of the many-body balance
+regular (at least the square root of the float's epsilon): gradients hold the motions the balance leaves free
+(rigid motions, floppy modes) fixed, to about this relative accuracy (module docstring)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,6 +131,8 @@ class Sintering:
         ``"many_body"`` (the overdamped force balance moves the particles; :data:`SHRINKAGE_MODES`).
       balance_tol: relative residual of the many-body balance's conjugate-gradient solve (float32 solves to at
         least 50 machine epsilons); an update that does not reach ten times it sets ``NeckState.unbalanced``.
+        The default is far below the error of updating every few steps (``benchmarks/sintering_step.py``); the
+        solve's iterations, its whole cost, grow with the log of its inverse.
     """
 
     law: str = "grain_boundary"
@@ -121,7 +140,7 @@ class Sintering:
     quadrature_nodes: int = 4
     newton_iterations: int = 2
     shrinkage: str = "independent"
-    balance_tol: float = 1e-12
+    balance_tol: float = 1e-8
 
     def __post_init__(self):
         if self.law not in sintering.KINETIC_LAWS:
@@ -155,6 +174,8 @@ class NeckState:
       supports: ``[n, 3]`` bool, the displacement components held at zero by the many-body balance
         (``Sintering(shrinkage="many_body")``), or None (independent contacts).
       unbalanced: bool scalar, set when a many-body balance did not converge (None without one).
+      start_positions: ``[n, 3]`` the positions at the start of a many-body run (m), the shrinkage's reference
+        (None without one).
     """
 
     start_overlap: Any
@@ -166,16 +187,20 @@ class NeckState:
     slot_pair: Any
     supports: Any = None
     unbalanced: Any = None
+    start_positions: Any = None
 
 
-def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None) -> NeckState:
+def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, positions=None) -> NeckState:
     """The :class:`NeckState` at the start of a run on ``contacts`` with particle ``temperature`` ``[n]`` (K), at
     ``step`` (the state's, :func:`sintercond.simulate.init_state`). The table must list each contact in both its
     rows (as :func:`sintercond.simulate.lifted_contacts` does).
 
     ``supports``: for ``Sintering(shrinkage="many_body")``, ``[n, 3]`` bool, the displacement components that stay
     (e.g. ``[False, False, True]`` for a particle resting on a plate normal to z); all
-    False lets the packing shrink about its centre. None for independent contacts."""
+    False lets the packing shrink about its centre. None for independent contacts. ``positions``: ``[n, 3]`` the
+    particles' positions (m), given with ``supports``: the reference of the many-body shrinkage."""
+    if (supports is None) != (positions is None):
+        raise ValueError("neck_state takes supports and positions together (many-body shrinkage) or neither")
     neighbors = np.asarray(contacts.neighbors)
     n, m = neighbors.shape
     rows = np.broadcast_to(np.arange(n)[:, None], (n, m))
@@ -200,7 +225,15 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None) -> 
                      pair_slot=jnp.asarray(np.flatnonzero(lower), jnp.int32),
                      slot_pair=jnp.asarray(slot_pair, jnp.int32),
                      supports=None if supports is None else _supports(supports, n),
-                     unbalanced=None if supports is None else jnp.zeros((), bool))
+                     unbalanced=None if supports is None else jnp.zeros((), bool),
+                     start_positions=None if positions is None else _start_positions(positions, n))
+
+
+def _start_positions(positions, n):
+    positions = jnp.asarray(positions)
+    if positions.shape != (n, 3):
+        raise ValueError(f"positions must be [n, 3] = [{n}, 3] (m); got shape {positions.shape}")
+    return positions
 
 
 def _supports(supports, n):
@@ -224,26 +257,27 @@ def law_params(spec: Sintering, params) -> dict:
         raise ValueError(f"Params.sintering: {error}") from None
 
 
-def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii, carried: NeckState | None = None,
-                       positions=None) -> None:
+def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii, carried: NeckState | None = None
+                       ) -> None:
     """Raise ``ValueError`` naming the field unless the necks and the kinetic parameters can grow (concrete values).
 
     Parameters as :func:`sintercond.sintering.validate_growth_inputs` wants them; every neck in
     ``[0, min(r_i, r_j)]`` of its pair. With ``carried`` (the state's :class:`NeckState`): supports given exactly
-    when the shrinkage is many-body, and then (with ``positions`` ``[n, 3]``, m) every contact's centres no
-    farther apart than its radii (a contact across a periodic boundary cannot shrink by moving its particles).
+    when the shrinkage is many-body, and then every contact's centres at the start positions no farther apart than
+    its radii (a contact across a periodic boundary cannot shrink by moving its particles).
     """
     if carried is not None:
         many_body = spec.shrinkage == "many_body"
         if many_body and carried.supports is None:
             raise ValueError("Sintering(shrinkage='many_body') needs NeckState.supports: "
-                             "neck_growth.neck_state(contacts, temperature, supports=...) ([n, 3] bool, the "
-                             "displacement components that stay; all False for none)")
+                             "neck_growth.neck_state(contacts, temperature, supports=..., positions=...) ([n, 3] "
+                             "bool, the displacement components that stay, all False for none; the positions)")
         if not many_body and carried.supports is not None:
             raise ValueError(f"NeckState.supports is for Sintering(shrinkage='many_body'); the shrinkage is "
                              f"{spec.shrinkage!r}: build the state without supports")
-        if many_body and positions is not None and all_concrete(positions, radii, carried.pairs):
-            x, r, pairs = np.asarray(positions, np.float64), np.asarray(radii, np.float64), np.asarray(carried.pairs)
+        if many_body and all_concrete(carried.start_positions, radii, carried.pairs):
+            x, r = np.asarray(carried.start_positions, np.float64), np.asarray(radii, np.float64)
+            pairs = np.asarray(carried.pairs)
             gap = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
             far = gap > 1e-6 * np.minimum(r[pairs[:, 0]], r[pairs[:, 1]])
             if far.any():
@@ -344,10 +378,25 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
     # leaves out the motions the balance does not fix, in the norm sum_i (sum_j w_ij) |u_i|^2 (module docstring)
     trace = jnp.zeros(positions.shape[:1], positions.dtype).at[i].add(weights).at[j].add(weights)
     usable = movable & (trace[:, None] > 0)
-    inverse_diagonal = jnp.where(usable, 1.0 / jnp.where(usable, trace[:, None], 1.0), 1.0)
-    u, _ = jax.scipy.sparse.linalg.cg(operator, rhs, tol=tol, atol=0.0, M=lambda r: inverse_diagonal * r)
+    scale = jnp.where(usable, trace[:, None], 1.0)
+    inverse_diagonal = 1.0 / scale
+    maxiter = max(10 * positions.size, MIN_BALANCE_ITERATIONS)
+
+    def solve(matvec, b):
+        return jax.scipy.sparse.linalg.cg(matvec, b, tol=tol, atol=0.0, maxiter=maxiter,
+                                          M=lambda r: inverse_diagonal * r)[0]
+
+    # reverse mode solves the system against a cotangent that need not lie in its range (the free motions):
+    # there the drag that selects the solution is made finite, GRADIENT_DRAG times the dashpots
+    drag = max(GRADIENT_DRAG, float(jnp.finfo(positions.dtype).eps) ** 0.5) * jnp.where(movable, scale, 0.0)
+
+    def transpose_solve(matvec, b):
+        return solve(lambda v: matvec(v) + drag * v, b)
+
+    u = jax.lax.custom_linear_solve(operator, rhs, solve, transpose_solve)
     residual = jnp.linalg.norm(rhs - operator(u))
-    return u, residual > 10.0 * tol * jnp.linalg.norm(rhs)
+    converged = (residual <= 10.0 * tol * jnp.linalg.norm(rhs)) & jnp.all(jnp.isfinite(u))
+    return u, ~converged
 
 
 def balance_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, positions, radii, end_temperature,
@@ -379,8 +428,8 @@ def balance_table_necks(spec: Sintering, params: dict, carried: NeckState, neck,
 def neck_statistics(state) -> dict:
     """Mean and largest neck ratio ``a / min(r_i, r_j)`` over the contacts, and the mean linear shrinkage
     ``(h - h_0) / (r_i + r_j)`` (module docstring) of a :class:`sintercond.simulate.SimState` with sintering:
-    ``h`` the approach ``H(a)`` of the neck (independent contacts), or ``r_i + r_j - |x_i - x_j|`` of the
-    positions (many-body shrinkage).
+    ``h - h_0`` the change of the approach ``H(a)`` of the neck (independent contacts), or of the distance
+    ``|x_i - x_j|`` from the start positions (many-body shrinkage).
 
     Returns ``{"mean_neck_ratio", "max_neck_ratio", "shrinkage"}`` (scalars; 0 without contacts).
     """
@@ -390,13 +439,11 @@ def neck_statistics(state) -> dict:
     count = jnp.sum(valid.astype(radii.dtype))
     per = lambda x: jnp.sum(jnp.where(valid, x, 0.0)) / jnp.maximum(count, 1.0)  # noqa: E731
     ratio = contacts.neck / jnp.minimum(r_lo, r_hi)
-    if state.sintering.supports is None:
-        approach = contacts.overlap
+    if state.sintering.start_positions is None:
+        approach = contacts.overlap - state.sintering.start_overlap
     else:
-        x = state.particles.positions
-        separation = jnp.where(valid[..., None], x[hi] - x[lo], 1.0)  # padding: no 0/0 in the gradient
-        approach = r_lo + r_hi - jnp.linalg.norm(separation, axis=-1)
-    approach = approach - state.sintering.start_overlap
+        distance = lambda x: jnp.linalg.norm(jnp.where(valid[..., None], x[hi] - x[lo], 1.0), axis=-1)  # noqa: E731
+        approach = distance(state.sintering.start_positions) - distance(state.particles.positions)
     return {"mean_neck_ratio": per(ratio), "max_neck_ratio": jnp.max(jnp.where(valid, ratio, 0.0), initial=0.0),
             "shrinkage": per(approach / (r_lo + r_hi))}
 

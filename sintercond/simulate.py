@@ -216,7 +216,8 @@ class Physics:
         prescribed ``motion``, ``conduction.conducting_walls=0`` (walls are
         ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
       sintering: :class:`sintercond.neck_growth.Sintering`, necks that grow with each contact's temperature
-        history (first stage: the packing does not move; :mod:`sintercond.neck_growth`). Needs
+        history (:mod:`sintercond.neck_growth`: contacts on their own on a packing that does not move, or
+        many-body shrinkage that moves the particles). Needs
         ``contacts="static"``, ``conduction.conductance="lifted"``, the explicit integrator, the
         ``"volume_conserving"`` neck model, no mechanics, ``Params.sintering`` and ``SimState.sintering``.
         None: the necks stay.
@@ -1087,7 +1088,7 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
             raise ValueError("Physics.sintering needs SimState.sintering (simulate.init_state(..., "
                              "sintering=neck_growth.neck_state(contacts, temperature)))")
         neck_growth.validate_sintering(sim.physics.sintering, params.sintering, state.contacts, p.radii,
-                                       state.sintering, p.positions)
+                                       state.sintering)
     if sim.physics.mechanics is None:
         return
     if params.mechanics is None:

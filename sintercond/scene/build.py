@@ -279,7 +279,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     if physics.sintering is not None:
         many_body = physics.sintering.shrinkage == "many_body"
         necks = neck_growth.neck_state(contacts, particles.temperature,
-                                       supports=wall_supports(scene, centres, radii) if many_body else None)
+                                       supports=wall_supports(scene, centres, radii) if many_body else None,
+                                       positions=particles.positions if many_body else None)
     # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
     limiting = contacts if necks is None else neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts,
                                                                       particles.radii)
@@ -420,11 +421,13 @@ FEW_WALL_CONTACTS = 0.5
 
 
 def wall_supports(scene, centres, radii) -> np.ndarray:
-    """``[n, 3]`` bool: the displacement components the walls hold in a many-body sintering run, each wall's axis
-    for the particles that touch it (:func:`sintercond.neck_growth.neck_state`)."""
+    """``[n, 3]`` bool: the displacement components held in a many-body sintering run: the vertical one of the
+    particles resting on a floor (a wall on axis 2, side min); the packing shrinks away from other walls
+    (:func:`sintercond.neck_growth.neck_state`)."""
     supports = np.zeros((len(radii), 3), bool)
     for wall, plane in zip(_walls(scene), scene_walls(scene, centres, radii)):
-        supports[:, wall["axis"]] |= np.asarray(plane.penetration(centres, radii)) >= 0
+        if wall["axis"] == 2 and wall["side"] == "min":
+            supports[:, 2] |= np.asarray(plane.penetration(centres, radii)) >= 0
     return supports
 
 

@@ -230,7 +230,8 @@ _SCHEMA = {
         "shrinkage": Key(str, _choice("independent", "many_body"), False, default="independent",
                          doc="independent: the packing stays, each contact's approach H(a) recorded (first stage); "
                              "many_body: the overdamped balance of the contacts' sintering forces and dashpots moves "
-                             "the particles at each neck update, those touching a wall held along its normal "
+                             "the particles at each neck update, those resting on a floor (a wall on axis 2, side min) held "
+                             "vertically "
                              "(sintercond.neck_growth)"),
         "k_star_axis": Key(int, _choice(0, 1, 2), False,
                            doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
