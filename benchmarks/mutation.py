@@ -38,13 +38,10 @@ CSV = ROOT / "benchmarks" / "results" / "mutation.csv"
 
 # Known survivors: mutant name -> why it is equivalent or left (listed in RESULTS.md).
 EXPLAINED = {
-    "safe_sqrt grad": "equivalent: the inner where's safe argument 0 makes d sqrt = inf * 0 = NaN on the entries "
-                      "not taken, but the same where then selects 0 for them, in reverse and forward mode; the "
-                      "safe value matters only where no inner where guards it (see the mutant 'no inner where')",
-    "finite check": "equivalent: every float key of the scene schema has a bounded range (_within, TEMPERATURE, "
-                    "FRACTION), and inf or NaN fails a bounded comparison, so the range check refuses them anyway",
-    "beam clip": "equivalent: jnp.interp already clamps to the first and last waypoints, so the beam stops at the "
-                 "end of its path (and waits at the start for t < 0) with or without the clip",
+    "safe_sqrt grad": "equivalent: the NaN of d sqrt at the safe 0 falls on entries the same where then sets to 0 "
+                      "(the safe value matters where no inner where guards: mutant 'no inner where')",
+    "finite check": "equivalent: every float key has a bounded range, which inf and NaN fail anyway",
+    "beam clip": "equivalent: jnp.interp already clamps to the path's first and last waypoints",
 }
 
 T = "tests/"
@@ -448,7 +445,7 @@ MUTANTS = [
     ("sintering force at the start neck", "sintercond/neck_growth.py", "law.force(0.5 * (a_start + a_free), ",
      "law.force(a_start, ", [T + "test_shrinkage.py"]),
     ("balance never flagged", "sintercond/neck_growth.py",
-     "    return u, residual > 10.0 * tol * jnp.linalg.norm(rhs)", "    return u, residual < 0.0",
+     "    return u, ~converged\n", "    return u, converged & False\n",
      [T + "test_shrinkage.py"]),
     ("particles not moved", "sintercond/simulate.py", "                positions = positions + displacement\n",
      "                positions = positions + 0.0 * displacement\n", [T + "test_shrinkage.py"]),

@@ -165,13 +165,11 @@ def main():
     print(cost, "\n\n", error, "\n\n", whole)
     if not args.no_write:
         write_section("sintering_step", command_line(), "## Sintering step: cost against conduction, error against N\n\n"
-                      f"{args.steps} steps of a simple cubic lattice, jitted, minimum of 5 (ratios within one run). "
-                      "Sintering: each contact's grain-boundary neck grown once per update (4 nodes, 2 Newton "
-                      "steps), the conductance law on the grown necks at every step; many-body: the force balance solved at each "
-                      "update by Jacobi-preconditioned conjugate gradients (balance_tol 1e-8), the bottom layer on "
-                      "a plate.\n\n" + cost + "\n\nError of "
-                      "a pulsed three-sphere chain's necks after 0.24 s (dt 1 ms), updated every N steps, against "
-                      "N = 1 with the law tier's 8 nodes and 4 Newton steps:\n\n" + error + "\n\n" + whole)
+                      f"{args.steps} steps of a simple cubic lattice, jitted, minimum of 5. Sintering: necks grown "
+                      "per update (4 nodes, 2 Newton steps), the conductance law at every step; many-body: the "
+                      "balance solved per update by preconditioned CG (tol 1e-8), the bottom layer held.\n\n"
+                      + cost + "\n\nError of a pulsed three-sphere chain's necks after 0.24 s (dt 1 ms), updated "
+                      "every N steps, against N = 1 with 8 nodes and 4 Newton steps:\n\n" + error + "\n\n" + whole)
 
 
 if __name__ == "__main__":

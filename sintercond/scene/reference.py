@@ -74,11 +74,13 @@ def scene_reference() -> str:
     table("[softening]", _SCHEMA["softening"],
           "Thermal softening of Young's modulus (Eq. 42, MECHANICS.md erratum 6), with `physics.mechanics = true`.")
     table("[sintering]", _SCHEMA["sintering"],
-          "Necks that grow with each contact's temperature history (`sintercond.neck_growth`; issue 26's first "
-          "stage): the packing does not move, each contact's volume-conserving neck (Rojek et al. 2022, Eqs. 23-27) "
-          "grows by the kinetic law, and the conductance law is applied to the grown neck at every step. Touching "
+          "Necks that grow with each contact's temperature history (`sintercond.neck_growth`): each contact's "
+          "volume-conserving neck (Rojek et al. 2022, Eqs. 23-27) grows by the kinetic law, and the conductance "
+          "law is applied to the grown neck at every step; with `shrinkage = \"many_body\"` the contacts' force "
+          "balance also moves the particles (else the packing stays). Touching "
           "spheres (a lattice with `radius = spacing/2`) start from point contacts. `history.csv` gains the mean "
-          "and largest neck ratio a/min(r_i, r_j) and the mean linear shrinkage (H(a) - h_0)/(r_i + r_j); the "
+          "and largest neck ratio a/min(r_i, r_j) and the mean linear shrinkage (h - h_0)/(r_i + r_j) of the "
+          "contacts (h their approach H(a), or from the positions with many-body shrinkage); the "
           "VTP frames each particle's mean neck ratio. The automatic time step is taken on the necks at the law's "
           "cap (they only grow).")
     table("[sintering.params]", _SINTERING_PARAMS, "Keys the chosen law takes: " + "; ".join(

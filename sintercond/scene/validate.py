@@ -251,7 +251,7 @@ def _largest_lattice_radius(model, spacing):
 
 
 def _check_sintering(scene):
-    """``[sintering]``: its law's parameters, and the physics the first stage grows necks on; ``[preheating]``."""
+    """``[sintering]``: its law's parameters, and the physics necks grow on; ``[preheating]``."""
     if "preheating" in scene:
         ramp = scene["preheating"]
         floor = "floor_temperature" in scene.get("boundary", {})
@@ -270,7 +270,7 @@ def _check_sintering(scene):
     _check_law_params("sintering.params", s.get("params", {}), KINETIC_LAWS[s["law"]], _SINTERING_PARAMS,
                       "kinetic law")
     if scene["physics"]["mechanics"]:
-        raise SceneError("[sintering] grows necks on a packing that does not move (the first stage): it needs "
+        raise SceneError("[sintering] grows necks without the elastic mechanics in this version: it needs "
                          "physics.mechanics = false")
     model = conduction.get("neck_model", CONDUCTANCE_LAWS[conduction["law"]].neck_model)
     if model != "volume_conserving":
