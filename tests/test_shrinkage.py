@@ -346,3 +346,23 @@ def test_gradients_of_positions_equal_central_differences_and_are_zero_when_noth
     # no contact grows in an update (the Arrhenius factor underflows to 0, every weight 0): zero gradients, no NaN
     cold = jax.jit(jax.grad(positions, argnums=(0, 1)))(jnp.log(1e-16), 20000.0)
     assert all(np.isfinite(float(g)) and float(g) == 0.0 for g in cold)
+
+
+@pytest.mark.slow
+def test_float32_many_body_shrinkage_agrees_with_float64_to_its_stated_accuracy():
+    """docs/simulator.md: necks to about 1e-6 relative; displacements to a few 1e-5 of themselves (the float32
+    positions round each update's small displacement to their own spacing)."""
+    x, radii, temperature = hexagon((1300.0, 900.0))
+    sim, state, params = packing(x, radii, temperature, every=5, dt=2e-4, neck_ratio=0.05)
+    single = jax.tree_util.tree_map(lambda a: a.astype(jnp.float32) if a.dtype == jnp.float64 else a, state)
+    params32 = simulate.Params(conductivity=jnp.array([KAPPA], jnp.float32), specific_heat=jnp.array([HEAT], jnp.float32),
+                               sintering={k: jnp.float32(v) for k, v in KINETICS.items()})
+    end64, end32 = run(sim, state, params, 500), run(sim, single, params32, 500)
+    assert end32.particles.positions.dtype == end32.contacts.neck.dtype == jnp.float32
+    assert not bool(end32.sintering.unbalanced)
+    necks64, necks32 = np.asarray(end64.contacts.neck), np.asarray(end32.contacts.neck, np.float64)
+    np.testing.assert_allclose(necks32, necks64, rtol=0, atol=1e-6 * necks64.max())
+    u64 = np.asarray(end64.particles.positions) - x
+    u32 = np.asarray(end32.particles.positions, np.float64) - x
+    assert np.abs(u64).max() > 1e-7  # the ring did move (m)
+    np.testing.assert_allclose(u32, u64, rtol=0, atol=2e-4 * np.abs(u64).max())
