@@ -209,29 +209,37 @@ def test_an_insulated_many_body_run_conserves_heat_and_its_necks_grow_monotone()
     assert not bool(states[-1].sintering.unbalanced)
 
 
+GRADIENT_POINT = (float(np.log(1e-16)), 100.0)  # ln A (A in m^4 K/s), Q (kJ/mol)
+
+
+def kinetic_params(log_a, q):
+    return simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],
+                           sintering={"A": jnp.exp(log_a), "activation_energy": q})
+
+
+def assert_gradients_equal_central_differences(f, point=GRADIENT_POINT, steps=(1e-3, 1e-2)):
+    """``jax.grad`` of ``f(ln A, Q)`` against Richardson-extrapolated central differences (error O(step^4)), 1e-6."""
+    grads = jax.jit(jax.grad(f, argnums=(0, 1)))(*point)
+    f = jax.jit(f)
+    for k, step in enumerate(steps):
+        def at(delta, k=k):
+            args = list(point)
+            args[k] = args[k] + delta
+            return float(f(*args))
+        d1 = (at(step) - at(-step)) / (2 * step)
+        d2 = (at(2 * step) - at(-2 * step)) / (4 * step)
+        np.testing.assert_allclose(float(grads[k]), (4 * d1 - d2) / 3, rtol=1e-6)
+
+
 @pytest.mark.slow
 def test_the_gradient_of_the_shrinkage_by_the_kinetic_parameters_equals_central_differences():
     x, radii, temperature = hexagon()
     sim, state, params = packing(x, radii, temperature, held=True, every=5, dt=1e-3, neck_ratio=0.05)
 
     def shrinkage(log_a, q):
-        p = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],
-                            sintering={"A": jnp.exp(log_a), "activation_energy": q})
-        return neck_growth.neck_statistics(simulate.rollout(sim, state, p, 20)[0])["shrinkage"]
+        return neck_growth.neck_statistics(simulate.rollout(sim, state, kinetic_params(log_a, q), 20)[0])["shrinkage"]
 
-    point = (jnp.log(1e-16), 100.0)
-    grads = jax.jit(jax.grad(shrinkage, argnums=(0, 1)))(*point)
-    f = jax.jit(shrinkage)
-    for k, step in ((0, 1e-3), (1, 1e-2)):
-        def at(delta, k=k):
-            args = list(point)
-            args[k] = args[k] + delta
-            return float(f(*args))
-        # Richardson-extrapolated central difference (error O(step^4))
-        d1 = (at(step) - at(-step)) / (2 * step)
-        d2 = (at(2 * step) - at(-2 * step)) / (4 * step)
-        expected = (4 * d1 - d2) / 3
-        np.testing.assert_allclose(float(grads[k]), expected, rtol=1e-6)
+    assert_gradients_equal_central_differences(shrinkage)
 
 
 def test_many_body_shrinkage_refuses_a_state_without_supports_and_a_contact_across_a_boundary():
@@ -327,22 +335,10 @@ def test_gradients_of_positions_equal_central_differences_and_are_zero_when_noth
     sim, state, params = packing(x, radii, temperature, held=True, every=5, dt=1e-3, neck_ratio=0.05)
 
     def positions(log_a, q):
-        p = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],
-                            sintering={"A": jnp.exp(log_a), "activation_energy": q})
-        end = simulate.rollout(sim, state, p, 10)[0]
+        end = simulate.rollout(sim, state, kinetic_params(log_a, q), 10)[0]
         return end.particles.positions[1, 0] + 0.3 * end.particles.positions[2, 1]
 
-    point = (jnp.log(1e-16), 100.0)
-    grads = jax.jit(jax.grad(positions, argnums=(0, 1)))(*point)
-    f = jax.jit(positions)
-    for k, step in ((0, 1e-3), (1, 1e-2)):
-        def at(delta, k=k):
-            args = list(point)
-            args[k] = args[k] + delta
-            return float(f(*args))
-        d1 = (at(step) - at(-step)) / (2 * step)
-        d2 = (at(2 * step) - at(-2 * step)) / (4 * step)
-        np.testing.assert_allclose(float(grads[k]), (4 * d1 - d2) / 3, rtol=1e-6)
+    assert_gradients_equal_central_differences(positions)
     # no contact grows in an update (the Arrhenius factor underflows to 0, every weight 0): zero gradients, no NaN
     cold = jax.jit(jax.grad(positions, argnums=(0, 1)))(jnp.log(1e-16), 20000.0)
     assert all(np.isfinite(float(g)) and float(g) == 0.0 for g in cold)
