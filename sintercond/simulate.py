@@ -610,6 +610,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
 
     def prepare_fn(state: SimState, params: Params) -> Prepared:
         particles, contacts = state.particles, state.contacts
+        params = params_in_precision(params, particles.temperature.dtype)
         capacity = heat_capacity(particles, params.specific_heat)
         wall_k = wall_t = None
         if physics.conduction.conductance == "table":
@@ -803,6 +804,21 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         return advance_fn(state, prepare_fn(state, params))
 
     return Simulator(physics, step_fn, prepare_fn, advance_fn, heat_power_fn)
+
+
+def params_in_precision(params: Params, dtype) -> Params:
+    """``params`` with every floating leaf (Python floats included) in ``dtype``, the state's float type, when that
+    is narrower than float64: a float32 state with parameters written as Python floats would otherwise be promoted
+    to float64 in the step (and refused by the scan that carries it). Float64 states take their parameters as
+    given."""
+    if jnp.dtype(dtype) == jnp.float64:
+        return params
+
+    def cast(leaf):
+        floating = isinstance(leaf, float) or (hasattr(leaf, "dtype") and jnp.issubdtype(leaf.dtype, jnp.floating))
+        return jnp.asarray(leaf, dtype) if floating else leaf
+
+    return jax.tree_util.tree_map(cast, params)
 
 
 def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_conductance=None):

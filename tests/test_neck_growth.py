@@ -313,3 +313,35 @@ def test_a_one_sided_table_and_an_extrapolating_conductivity_table_are_refused()
     with pytest.raises(ValueError, match="must clamp at its ends"):
         simulate.rollout(simulate.simulator(physics), dataclasses.replace(state, sintering=None),
                          dataclasses.replace(params, conductivity=table, sintering=None), 2)
+
+
+@pytest.mark.parametrize("physics", [
+    simulate.Physics.create(law="rojek"),
+    simulate.Physics.create(law="rojek", conductance="lifted"),
+    simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted",
+                            sintering=neck_growth.Sintering(every=2)),
+], ids=["table", "lifted", "sintering"])
+def test_a_float32_state_runs_with_parameters_written_as_python_floats(physics):
+    """A float32 state with ``Params(conductivity=[7.0], ...)`` was promoted to float64 in the step and refused by
+    the scan (a TypeError naming lax.dynamic_update_slice or cond branches): the parameters now take the state's
+    precision, and the run agrees with float64 to float32's accuracy."""
+    radii = np.array([40e-6, 30e-6, 35e-6])
+    x = np.zeros((3, 3))
+    x[1:, 0] = np.cumsum(radii[:-1] + radii[1:]) * (1 - 1e-3)
+    particles = particle_state(x, radii, np.array([1000.0, 1100.0, 1050.0]), DENSITY)
+    if physics.conduction.conductance == "table":
+        from sintercond.network import contact_table
+        contacts = simulate.table_contacts(contact_table(x, radii, KAPPA, "rojek"))
+    else:
+        contacts = simulate.lifted_contacts(physics, x, radii)
+    necks = neck_growth.neck_state(contacts, particles.temperature) if physics.sintering else None
+    state = simulate.init_state(particles, contacts, 1e-4, sintering=necks)
+    params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],
+                             sintering=dict(KINETICS) if physics.sintering else None)
+    single = jax.tree_util.tree_map(lambda a: a.astype(jnp.float32) if a.dtype == jnp.float64 else a, state)
+    sim = simulate.simulator(physics)
+    end32 = simulate.rollout(sim, single, params, 20)[0]
+    end64 = simulate.rollout(sim, state, params, 20)[0]
+    assert end32.particles.temperature.dtype == jnp.float32
+    np.testing.assert_allclose(np.asarray(end32.particles.temperature, np.float64),
+                               np.asarray(end64.particles.temperature), rtol=1e-6)
