@@ -3,7 +3,7 @@
 Usage: python benchmarks/bed_build.py [--beds 3k 10k] [--seed 1] [--json FILE]
 
 Each bed is built in a fresh process (so each first call pays its compilations, as a user's would):
-'deposit' is ``deposit_spheres``; 'pair list' the host pair-list builds inside ``relax_under_gravity``
+'deposit' is ``deposit_spheres``; 'pair list' the host pair-list builds inside ``settle.relax_under_gravity``
 (count); 'dynamics' the compiled relax chunks (count, steps); 'figures' ``_bed`` (coordination, surface height);
 'total' the whole ``powder_bed`` call. Quality: packing fraction, mean coordination, isolated spheres, mean surface
 height over the asked height, residual force over weight, largest overlap. No RESULTS.md section exists for beds:
@@ -56,12 +56,12 @@ def child(name, seed):
     """Build one bed in this process; print its figures as one JSON line."""
     import numpy as np
 
-    from sintercond import packing
+    from sintercond import packing, settle
 
     lateral, height, diameters = BEDS[name]
     log = {}
-    for fn in ("deposit_spheres", "_pair_list", "_damped_chunk", "_bed"):
-        _timed(packing, fn, log)
+    for module, fn in ((packing, "deposit_spheres"), (settle, "_pair_list"), (settle, "_damped_chunk"), (packing, "_bed")):
+        _timed(module, fn, log)
     start = time.perf_counter()
     bed = packing.powder_bed(lateral, height, diameters, seed=seed, max_particles=200_000)
     total = time.perf_counter() - start

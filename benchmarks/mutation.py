@@ -125,7 +125,7 @@ MUTANTS = [
      "upper = _hashin_shtrikman(k_hi, k_lo, v_hi)", [T + "test_effective.py"]),
     ("maxwell 2v", "sintercond/effective.py", "3 * k_matrix + (1 + 2 * inclusion_fraction) * d",
      "3 * k_matrix + (1 + inclusion_fraction) * d", [T + "test_effective.py"]),
-    # --- sintercond/tortuosity.py, geometry.py, packing.py
+    # --- sintercond/tortuosity.py, geometry.py, packing.py, settle.py
     ("gamma 2x", "sintercond/tortuosity.py", "return (diameter - 2.0 * x) / diameter", "return (diameter - x) / diameter",
      [T + "test_tortuosity.py"]),
     ("tau2 exponent", "sintercond/tortuosity.py", "n ** (1.0 - phi)", "n ** (1.0 + phi)", [T + "test_tortuosity.py"]),
@@ -136,7 +136,7 @@ MUTANTS = [
      "return 0.5 * (x * np.sqrt(np.maximum(r * r - 0.99 * x * x, 0.0))", [T + "test_geometry.py"]),
     ("coordination", "sintercond/geometry.py", "np.bincount(pairs.ravel(), minlength=len(radii))",
      "np.bincount(pairs[:, 0], minlength=len(radii))", [T + "test_geometry.py"]),
-    ("bed gravity", "sintercond/packing.py", "return force.at[:, 2].add(-weight)", "return force.at[:, 2].add(weight)",
+    ("bed gravity", "sintercond/settle.py", "return force.at[:, 2].add(-weight)", "return force.at[:, 2].add(weight)",
      [T + "test_packing.py"]),
     ("deposit misses the bins to the left", "sintercond/packing.py", "around = np.arange(-1, 2)",
      "around = np.arange(0, 2)", [T + "test_packing.py::test_the_deposit_grid_finds_what_the_full_search_finds"]),
@@ -281,7 +281,7 @@ MUTANTS = [
      "if bool(new.overflow):", [T + "test_rollout.py"]),
     ("host loop hands on an unchecked state", "sintercond/rollout.py", "        check(new)\n", "        pass\n",
      [T + "test_rollout.py"]),
-    ("settling stops one chunk late", "sintercond/packing.py",
+    ("settling stops one chunk late", "sintercond/settle.py",
      'return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol',
      'return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol and int(s.step) > 2 * check_every',
      [T + "test_rollout.py::test_settling_runs_on_the_host_loop", T + "test_packing.py"]),

@@ -85,7 +85,7 @@ def static_overlap(load, radius, modulus, nu):
 EXAMPLE_5_3 = dict(particles=10_000, radius_mean=3e-3, radius_std=0.667e-3, truncation=3.0, lateral_size=0.1,
                    conductivity=100.0, specific_heat=100.0, density=1000.0, hot=1000.0, cold=300.0,
                    initial_temperature=300.0, duration=350.0, theta_star_softened=300.0)
-"""The data of Example 5.3 (SI units); the contact material is :class:`sintercond.packing.DemMaterial`'s default."""
+"""The data of Example 5.3 (SI units); the contact material is :class:`sintercond.settle.DemMaterial`'s default."""
 
 
 def example_5_3_radii(n, seed=0):
@@ -100,14 +100,14 @@ def example_5_3_bed(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["latera
                     **settle):
     """The settled bed of Example 5.3: :func:`example_5_3_radii` poured by :func:`sintercond.packing.pour`.
 
-    Example 5.3's contact material (:class:`sintercond.packing.DemMaterial`'s
+    Example 5.3's contact material (:class:`sintercond.settle.DemMaterial`'s
     default) in an open box of side ``lateral_size`` (m); ``settle``: the
-    keyword arguments of :func:`sintercond.packing.dem_settle`. Returns a
+    keyword arguments of :func:`sintercond.settle.dem_settle`. Returns a
     :class:`sintercond.packing.Packing` with its ``settle`` report.
     """
-    from sintercond import packing
+    from sintercond import packing, settle as settling
 
-    return packing.pour(example_5_3_radii(n, seed), lateral_size, packing.DemMaterial(), seed=seed, start=start,
+    return packing.pour(example_5_3_radii(n, seed), lateral_size, settling.DemMaterial(), seed=seed, start=start,
                         **settle)
 
 
@@ -220,7 +220,7 @@ def example_5_3(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_si
                 iterations=2, start="relaxed", duration=EXAMPLE_5_3["duration"], **settle) -> Example53:
     """Example 5.3: pour ``n`` spheres into an open box, settle them, heat from the ``x`` walls, read ``k*``.
 
-    The data (:data:`EXAMPLE_5_3`, :class:`sintercond.packing.DemMaterial`):
+    The data (:data:`EXAMPLE_5_3`, :class:`sintercond.settle.DemMaterial`):
     radii N(3 mm, 0.667 mm) truncated at 3 sigma, k = 100 W/(m K),
     C = 100 J/(kg K), rho = 1000 kg/m^3, E = 1 MPa, nu = 0.3, mu = 0.05 and
     mu_r = 0.2 between particles, 0 at the walls, xi_con = xi_fric = 1,
@@ -252,7 +252,7 @@ def example_5_3(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_si
     Returns:
       :class:`Example53`.
     """
-    from sintercond import effective, packing
+    from sintercond import effective, packing, settle as settling
 
     d = EXAMPLE_5_3
     seconds = {}
@@ -268,12 +268,12 @@ def example_5_3(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_si
     history = []
     if softening:
         t0 = time.perf_counter()
-        material = packing.DemMaterial(theta_star=d["theta_star_softened"])
+        material = settling.DemMaterial(theta_star=d["theta_star_softened"])
         centres = bed.centres
-        settle = {"v_rel": math.sqrt(2.0 * packing.GRAVITY * 2.0 * float(np.mean(radii))), **settle}
+        settle = {"v_rel": math.sqrt(2.0 * settling.GRAVITY * 2.0 * float(np.mean(radii))), **settle}
         for _ in range(iterations):
-            result = packing.dem_settle(centres, radii, packing.box_walls(lateral_size), material, temperature,
-                                        softening=True, **settle)
+            result = settling.dem_settle(centres, radii, settling.box_walls(lateral_size), material, temperature,
+                                         softening=True, **settle)
             centres = result.centres
             soft_bed = dataclasses.replace(packing._bed(centres, radii, lateral_size), settle=result.report,
                                            residual_force=result.report.force_ratio)

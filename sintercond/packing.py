@@ -1,4 +1,4 @@
-"""Random sphere packings: gravity deposition, then settling under gravity, checked.
+"""Random sphere packings: sampled sizes, gravity deposition, lattices, and the beds built on them, checked.
 
 A powder bed is built in two steps:
 
@@ -9,31 +9,13 @@ A powder bed is built in two steps:
    sphere, which fills the pile's hollows: solid fraction ~0.45, about 1.4
    times the asked height (a single drop: ~0.17, 3.6 times), so the pile
    has less to fall and settles in ~2.5 times fewer steps.
-2. :func:`relax_under_gravity` lets the pile settle: damped dynamics of
-   gravity plus stiff harmonic repulsion between overlapping spheres and with
-   the floor and side walls (frictionless, so the pile collapses to a dense
-   random packing), on a pair list rebuilt on the host whenever a sphere
-   has moved half the skin, until the net force on every sphere is below
-   ``force_tol`` of its weight. Contacts end up as small overlaps (the weight
-   of the pile over the stiffness, ~1e-3 of a radius), which
-   :func:`sintercond.geometry.contacts` counts as contacts. A pile that has
-   not settled within the step budget raises :class:`PackingError`; it is
-   never returned half-fallen.
-
-With ``method="dem"`` (:func:`pour`, :func:`dem_settle`) step 2 is the real
-thermo-mechanical DEM of :mod:`sintercond.mechanics` instead: Hertz contacts
-with damping, Mindlin friction with history, rolling resistance, gravity and
-the plane walls of the box (:func:`box_walls`), stepped by
-:mod:`sintercond.simulate` at the automatic time step of
-:func:`sintercond.mechanics.mechanical_time_step`, until the kinetic energy and
-the largest net force over a sphere's weight are below stated thresholds
-(:data:`KINETIC_TOL`, :data:`FORCE_TOL`), reported in a :class:`SettleReport`
-(``packing.settle``). The contact material is a :class:`DemMaterial`
-(default: Quintana-Ruiz & Campello 2020, Example 5.3, E = 1 MPa: soft
-contacts keep the step large and the pour cheap; nothing is stiffened or
-softened behind the user's back). It costs ~1e3-1e4 DEM steps from a
-relaxed pile, ~1e5 from the loose deposit, so ``"relax"`` stays the default
-of :func:`powder_bed` and scenes.
+2. The pile settles under gravity (:mod:`sintercond.settle`):
+   :func:`sintercond.settle.relax_under_gravity` (frictionless damped harmonic
+   contacts, the default), or with ``method="dem"`` (:func:`pour`) the real
+   thermo-mechanical DEM, :func:`sintercond.settle.dem_settle`, whose
+   :class:`sintercond.settle.SettleReport` the bed keeps (``packing.settle``).
+   A pile that has not settled raises :class:`PackingError`; it is never
+   returned half-fallen.
 
 Everything here runs in float64 (NumPy, and JAX inside ``jax.enable_x64``)
 whatever precision the thermal model uses: the packing of a scene does not
@@ -44,18 +26,21 @@ coordination, isolated particles); :func:`rev_box` cuts a cubic
 representative volume out of the bed's interior, away from floor and walls,
 as Rizza & Galati (2024, Sect. 3.3) did for their 150 um PB cube with
 45-150 um particles.
+
+The settling moved to :mod:`sintercond.settle` (issue 24); its names still
+resolve from here for one release, with a ``DeprecationWarning``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import time
-import typing
 
-import jax
-import jax.numpy as jnp
 import numpy as np
+
+from sintercond import settle as _settle
+from sintercond._deprecation import old_names
+from sintercond.settle import PackingError
 
 FILL_FRACTION = 0.62
 """Solid fraction assumed to size a bed: ``n = FILL_FRACTION L^2 H / mean volume`` spheres."""
@@ -67,9 +52,8 @@ kept (a 3,290-sphere bed: solid fraction 0.44 instead of 0.17, 167k relax steps 
 MAX_PARTICLES = 20_000
 """Largest bed :func:`powder_bed` builds (memory and settling time grow with it; a scene refuses beyond)."""
 
-
-class PackingError(ValueError):
-    """A bed that cannot be built or did not settle; the message says which quantity and its range."""
+_DEFAULT_MATERIAL = _settle.DemMaterial()
+"""The contact material of a pour unless one is given: Example 5.3's (:class:`sintercond.settle.DemMaterial`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,7 +72,7 @@ class Packing:
       coordination: mean number of sphere-sphere contacts per sphere.
       isolated: spheres touching neither another sphere nor the floor or a wall (0 when settled).
       residual_force: largest net force on a sphere over its weight at the end of the settling.
-      settle: the :class:`SettleReport` of a DEM settle (``method="dem"``), else None.
+      settle: the :class:`sintercond.settle.SettleReport` of a DEM settle (``method="dem"``), else None.
     """
 
     centres: np.ndarray
@@ -100,10 +84,10 @@ class Packing:
     coordination: float = math.nan
     isolated: int = 0
     residual_force: float = math.nan
-    settle: SettleReport | None = None
+    settle: _settle.SettleReport | None = None
 
     def summary(self) -> dict:
-        """The bed's figures as a flat dict (for a run summary); a DEM bed adds its :class:`SettleReport`'s."""
+        """The bed's figures as a flat dict (for a run summary); a DEM bed adds its :class:`sintercond.settle.SettleReport`'s."""
         figures = {"particles": len(self.radii), "bed_height_m": self.height, "bed_top_m": float(self.container[1][2]),
                    "packing_fraction": self.packing_fraction, "coordination": self.coordination,
                    "isolated_particles": self.isolated}
@@ -237,436 +221,6 @@ def deposit_spheres(radii, lateral_size, rng, tries=1):
     return centres[:n]
 
 
-def _pair_list(x, r, skin, capacity=0):
-    """Pairs ``i < j`` closer than ``r_i + r_j + skin``, sorted by ``(i, j)``, padded to a power of two.
-
-    From the host cell list (:func:`sintercond.neighbors.cell_list_pairs`, O(n)) with a relative reach
-    covering the skin for the smallest pair, then the exact test: the pairs (and their order) the O(n^2) search
-    found, which took most of a 3,290-sphere bed's build.
-    """
-    from sintercond.neighbors import cell_list_pairs
-
-    i, j = cell_list_pairs(x, r, tolerance=skin / (2.0 * float(np.min(r))))
-    near = np.sum((x[i] - x[j]) ** 2, axis=-1) < (r[i] + r[j] + skin) ** 2
-    i, j = i[near], j[near]
-    size = max(capacity, 1 << max(int(len(i)) - 1, 1).bit_length())
-    pad = size - len(i)
-    mask = np.concatenate([np.ones(len(i), bool), np.zeros(pad, bool)])
-    return np.concatenate([i, np.zeros(pad, int)]), np.concatenate([j, np.zeros(pad, int)]), mask
-
-
-def _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_damping):
-    """Gravity (g = 1) plus damped harmonic repulsion of overlapping pairs, floor and side walls, ``[n, 3]``.
-
-    Each contact is a spring ``stiffness * overlap`` and a normal dashpot
-    ``2 zeta sqrt(stiffness m*)`` (``zeta = contact_damping``, ``m*`` the reduced
-    mass; the walls take the sphere's mass): impacts lose energy, as they must
-    for a pile to come to rest with a finite time step.
-    """
-    d = x[i] - x[j]
-    dist2 = jnp.sum(d**2, axis=1)
-    safe = jnp.where(dist2 > 0, dist2, 1.0)
-    n_ij = d / jnp.sqrt(safe)[:, None]
-    in_contact = mask & (dist2 > 0) & (r[i] + r[j] > jnp.sqrt(safe))
-    overlap = jnp.where(in_contact, r[i] + r[j] - jnp.sqrt(safe), 0.0)
-    m_star = mass[i] * mass[j] / (mass[i] + mass[j])
-    closing = jnp.sum((v[i] - v[j]) * n_ij, axis=1)
-    dashpot = jnp.where(in_contact, 2.0 * contact_damping * jnp.sqrt(stiffness * m_star) * closing, 0.0)
-    f = (stiffness * overlap - dashpot)[:, None] * n_ij
-    force = jnp.zeros_like(x).at[i].add(f).at[j].add(-f)
-    gamma = (2.0 * contact_damping * jnp.sqrt(stiffness * mass))[:, None]
-    lo = r[:, None] - x  # > 0: overlaps the floor (z) or the x = 0, y = 0 walls, pushed +
-    hi = (x + r[:, None] - size).at[:, 2].set(-1.0)  # > 0: overlaps a far wall, pushed -; no lid
-    force = force + jnp.where(lo > 0, stiffness * lo - gamma * v, 0.0) - jnp.where(hi > 0, stiffness * hi + gamma * v, 0.0)
-    return force.at[:, 2].add(-weight)
-
-
-@jax.jit
-def _damped_chunk(x, v, r, mass, weight, i, j, mask, size, stiffness, damping, contact_damping, dt, steps):
-    def step(_, carry):
-        x, v = carry
-        force = _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_damping)
-        v = v + dt * (force / mass[:, None] - damping * v)
-        return x + dt * v, v
-
-    x_new, v_new = jax.lax.fori_loop(0, steps, step, (x, v))  # steps traced: one compilation per capacity
-    static = _net_force(x_new, jnp.zeros_like(v_new), r, mass, weight, i, j, mask, size, stiffness, contact_damping)
-    residual = jnp.max(jnp.linalg.norm(static, axis=1) / weight)
-    moved = jnp.max(jnp.linalg.norm(x_new - x, axis=1))
-    return x_new, v_new, residual, moved
-
-
-def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=None, damping=0.3, contact_damping=0.3,
-                        force_tol=2e-3, skin=1.0, progress=None):
-    """Let spheres settle under gravity; returns ``(settled centres, residual force over weight)``.
-
-    Damped dynamics (semi-implicit Euler, viscous damping ``damping`` per unit
-    time) of gravity plus damped harmonic contacts (:func:`_net_force`) with
-    the other spheres, the floor and the side walls, in float64 whatever the JAX default. Lengths are scaled by
-    the mean radius inside, weights by the cube of the radius, gravity is 1; the inertia of a sphere is its
-    weight, or a mean sphere's if larger (the settled packing does not depend on it; the step does);
-    ``stiffness`` is the contact stiffness over the weight of a mean sphere per
-    radius (default ``1e4`` per ten layers of the pile), so overlaps are about
-    (layers above) / stiffness radii. The pair list holds pairs within
-    ``skin`` mean radii of contact and is rebuilt whenever a sphere may have
-    moved half of it. Stops when the net force on every sphere is below
-    ``force_tol`` of its weight. ``progress(phase, steps, max_steps, figure, target)`` is called after every
-    chunk with the largest net force over a weight (``figure``) and ``force_tol`` (``target``).
-
-    Raises:
-      PackingError: the pile did not settle within ``max_steps`` (default:
-        enough for the pile to fall its own height three times and settle).
-    """
-    radii = np.asarray(radii, dtype=np.float64)
-    scale = float(np.mean(radii))
-    r_np = radii / scale
-    x_np = np.asarray(centres, dtype=np.float64) / scale
-    size = float(lateral_size) / scale
-    top = float(np.max(x_np[:, 2] + r_np))
-    if stiffness is None:
-        stiffness = 1e4 * max(1.0, top / 20.0)
-    # the static packing does not depend on the inertia: spheres lighter than a mean one move as a mean one,
-    # so the smallest spheres no longer set the step (20-60 um: 1.8 times larger)
-    inertia = np.maximum(r_np**3, 1.0)
-    # stable for the lightest inertia with 12 contacts: springs need dt sqrt(12 k / m) < 2, dashpots
-    # dt 12 (2 zeta sqrt(k m / 2)) / m < 2; dt = sqrt(m_min / k) / 4 keeps both below 1.3
-    dt = 0.25 * float(np.sqrt(np.min(inertia) / stiffness))
-    if max_steps is None:  # terminal speed g / damping: fall the pile's height three times, then 200 damping times
-        max_steps = int((3 * top / (1.0 / damping) + 200.0 / damping) / dt)
-    with jax.enable_x64(True):
-        r, mass, weight = jnp.asarray(r_np), jnp.asarray(inertia), jnp.asarray(r_np**3)
-        x, v = jnp.asarray(x_np), jnp.zeros((len(r_np), 3), jnp.float64)
-        args = tuple(jnp.float64(a) for a in (size, stiffness, damping, contact_damping, dt))
-        done, capacity, residual = 0, 0, math.inf
-        chunk = 64
-        while done < max_steps:
-            i, j, mask = _pair_list(np.asarray(x), r_np, skin, capacity)
-            capacity = len(i)
-            x_new, v_new, residual, moved = _damped_chunk(x, v, r, mass, weight, jnp.asarray(i), jnp.asarray(j),
-                                                          jnp.asarray(mask), *args, jnp.int32(chunk))
-            if float(moved) > 0.5 * skin and chunk > 1:  # a pair may have been missed: redo it shorter
-                chunk //= 2
-                continue
-            x, v, done = x_new, v_new, done + chunk
-            residual = float(residual)
-            if progress is not None:
-                progress("relaxing", done, max_steps, residual, force_tol)
-            if residual < force_tol:
-                break
-            chunk = min(2 * chunk, 4096) if float(moved) < 0.2 * skin else chunk
-        settled = np.asarray(x) * scale
-    if not residual < force_tol:
-        raise PackingError(f"the bed did not settle within {max_steps} steps: the largest net force is "
-                           f"{residual:.3g} of a sphere's weight (allowed < {force_tol:g})")
-    return settled, residual
-
-
-# --------------------------------------------------------------------------
-# settling with the thermo-mechanical DEM (Quintana-Ruiz & Campello 2020)
-
-
-@dataclasses.dataclass(frozen=True)
-class DemMaterial:
-    """Contact material of a DEM pour (SI units); the defaults are Example 5.3's.
-
-    Quintana-Ruiz & Campello (2020), Sect. 5.3: rho = 1000 kg/m^3, E = 1 MPa,
-    nu = 0.3, mu = 0.05 and mu_r = 0.2 between particles, 0 against the walls,
-    xi_con = xi_fric = 1, xi_rol = 0.2. The laws are those of
-    :mod:`sintercond.mechanics` (Hertz with damping, Eqs. 2-6; Mindlin
-    stick-slip with its spring, Eqs. 7-13; rolling resistance, Eqs. 15-20;
-    rigid walls of Remark 1).
-
-    Attributes:
-      density: kg/m^3, > 0.
-      E: Young's modulus (Pa), > 0; with ``theta_star`` the modulus below the
-        softening onset (Eq. 42, erratum 6 of MECHANICS.md: rate 1, no floor).
-      nu: Poisson ratio, in [0, 0.5).
-      mu, mu_r: friction and rolling-resistance coefficients between particles, >= 0.
-      mu_wall, mu_r_wall: the same against the walls, >= 0.
-      xi_con, xi_fric, xi_rol: damping ratios of Eqs. 6, 11, 18, >= 0.
-      theta_star: softening onset (K), > 0; used only when settling with ``softening=True``.
-    """
-
-    density: float = 1000.0
-    E: float = 1e6
-    nu: float = 0.3
-    mu: float = 0.05
-    mu_r: float = 0.2
-    mu_wall: float = 0.0
-    mu_r_wall: float = 0.0
-    xi_con: float = 1.0
-    xi_fric: float = 1.0
-    xi_rol: float = 0.2
-    theta_star: float = 400.0
-
-    def __post_init__(self):
-        ranges = {"density": (0.0, False), "E": (0.0, False), "theta_star": (0.0, False)}
-        for field in dataclasses.fields(self):
-            value = getattr(self, field.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-                    or not math.isfinite(value):
-                raise PackingError(f"DemMaterial.{field.name} must be a finite number; got {value!r}")
-            low, closed = ranges.get(field.name, (0.0, True))
-            if value < low or (value == low and not closed):
-                raise PackingError(f"DemMaterial.{field.name} must be {'>=' if closed else '>'} {low:g}; got {value!r}")
-        if not self.nu < 0.5:
-            raise PackingError(f"DemMaterial.nu must be in [0, 0.5); got {self.nu!r}")
-
-    def mechanical_params(self):
-        """The :class:`sintercond.mechanics.MechanicalParams` of this material (float64 scalars)."""
-        from sintercond.mechanics import MechanicalParams
-
-        f = lambda x: jnp.asarray(float(x), jnp.float64)  # noqa: E731
-        return MechanicalParams(E0=f(self.E), nu=f(self.nu), xi_con=f(self.xi_con), xi_fric=f(self.xi_fric),
-                                xi_rol=f(self.xi_rol), mu=f(self.mu), mu_r=f(self.mu_r), mu_wall=f(self.mu_wall),
-                                mu_r_wall=f(self.mu_r_wall), theta_star=f(self.theta_star), rate=f(1.0), E_min=f(0.0))
-
-
-KINETIC_TOL = 1e-5
-"""Default settled threshold on kinetic energy (translation + rotation) over ``sum_i m_i g r_i``."""
-
-FORCE_TOL = 0.05
-"""Default settled threshold on ``max_i |F_i| / (m_i g)``, the net force on a sphere over its weight."""
-
-
-@dataclasses.dataclass(frozen=True)
-class SettleReport:
-    """How a DEM settle ended; returned with every packing it builds (all SI).
-
-    Attributes:
-      steps: DEM steps taken; time: simulated time (s); dt: the step (s).
-      kinetic_ratio: kinetic energy (translation + rotation) over ``sum_i m_i g r_i``
-        at the end; ``kinetic_tol`` the threshold it met.
-      force_ratio: ``max_i |F_i| / (m_i g)`` at the end, ``F_i`` the net force
-        (contacts, walls, gravity) taken from one probe step as ``m_i dv_i / dt``
-        (exact for symplectic Euler); ``force_tol`` the threshold it met.
-      max_overlap: largest sphere-sphere or sphere-wall overlap over the radius.
-      step_overlap: overlap (m) the time step was sized for (:func:`sintercond.mechanics.mechanical_time_step`).
-      v_rel: approach speed (m/s) the time step was sized for.
-      reallocations: neighbour-list reallocations; wall_seconds: run time (s).
-    """
-
-    steps: int
-    time: float
-    dt: float
-    kinetic_ratio: float
-    kinetic_tol: float
-    force_ratio: float
-    force_tol: float
-    max_overlap: float
-    step_overlap: float
-    v_rel: float
-    reallocations: int
-    wall_seconds: float
-
-    def summary(self) -> dict:
-        """The figures as a flat dict with units in the keys."""
-        return {"settle_steps": self.steps, "settle_time_s": self.time, "settle_dt_s": self.dt,
-                "settle_kinetic_ratio": self.kinetic_ratio, "settle_kinetic_tol": self.kinetic_tol,
-                "settle_force_ratio": self.force_ratio, "settle_force_tol": self.force_tol,
-                "settle_max_overlap": self.max_overlap, "settle_wall_s": self.wall_seconds}
-
-
-class DemSettled(typing.NamedTuple):
-    """A settled DEM state and what continues it (``sim``, ``params``, ``neighbor_fns`` for :func:`sintercond.rollout.advance`).
-
-    The state is float64 (the settle runs under ``jax.enable_x64`` whatever
-    the default); continue it with 64-bit floats on.
-    """
-
-    centres: np.ndarray
-    state: typing.Any
-    sim: typing.Any
-    params: typing.Any
-    neighbor_fns: typing.Any
-    report: SettleReport
-
-
-def box_walls(lateral_size):
-    """The five insulated walls of an open square box ``[0, L]^2`` with its floor at ``z = 0``.
-
-    Order: floor, ``x = 0``, ``x = L``, ``y = 0``, ``y = L``
-    (:class:`sintercond.walls.PlaneWall`, normals into the box).
-    """
-    from sintercond.walls import PlaneWall
-
-    L = float(lateral_size)
-    return (PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), PlaneWall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),
-            PlaneWall((L, 0.0, 0.0), (-1.0, 0.0, 0.0)), PlaneWall((0.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
-            PlaneWall((0.0, L, 0.0), (0.0, -1.0, 0.0)))
-
-
-def dem_physics(walls, softening=False, wall_friction=True, wall_rolling=True):
-    """The :class:`sintercond.simulate.Physics` of a DEM settle: Hertz, Mindlin, rolling, gravity ``-9.81 e_z``, ``walls``.
-
-    Conduction is the paper's (``law="conductivity"``, Hertz contact radius,
-    Eqs. 32-35); while settling every particle is held at its temperature, so
-    no heat moves. ``wall_friction``/``wall_rolling`` False: frictionless
-    walls (``Mechanics.wall_friction``; :func:`dem_settle` sets them from
-    ``DemMaterial.mu_wall``/``mu_r_wall``).
-    """
-    from sintercond import simulate
-
-    return simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
-                                   mechanics=True, walls=tuple(walls), gravity=(0.0, 0.0, -GRAVITY), friction=True,
-                                   rolling=True, wall_friction=wall_friction, wall_rolling=wall_rolling,
-                                   softening=softening, held=True)
-
-
-GRAVITY = 9.81
-"""m/s^2."""
-
-
-def _hertz_plane_overlap(load, radius, modulus, nu):
-    """Overlap (m) of a sphere pressed on a rigid plane by ``load`` (N), ``(3 F / (4 E* sqrt(r)))^(2/3)``, E* = E/(1-nu^2)."""
-    return (3.0 * load / (4.0 * modulus / (1.0 - nu**2) * math.sqrt(radius))) ** (2.0 / 3.0)
-
-
-def _overlaps(centres, radii, walls):
-    """Largest sphere-sphere and sphere-wall overlap over the (smaller) radius."""
-    i, j, real = _pair_list(centres, radii, 0.0)
-    i, j = i[real], j[real]
-    pair = (radii[i] + radii[j] - np.linalg.norm(centres[i] - centres[j], axis=1)) / np.minimum(radii[i], radii[j])
-    wall = [np.asarray(w.penetration(centres, radii)) / radii for w in walls]
-    return float(max(np.max(pair, initial=0.0), *(np.max(w, initial=0.0) for w in wall)))
-
-
-def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0, softening=False, *,
-               kinetic_tol=KINETIC_TOL, force_tol=FORCE_TOL, max_time=2.0, check_every=1000, skin_fraction=0.1,
-               v_rel=None, progress=None) -> DemSettled:
-    """Let spheres fall and settle under gravity with the real contact laws; returns a :class:`DemSettled`.
-
-    The coupled step of :mod:`sintercond.simulate` (``Physics(mechanics=Mechanics(...))``,
-    :func:`dem_physics`): Hertz normal force with damping, Mindlin friction
-    with history, rolling resistance, gravity ``g = 9.81 m/s^2 (-z)`` and the
-    plane ``walls``, symplectic Euler, in compiled chunks of ``check_every``
-    steps (the loop of :func:`sintercond.rollout.advance`, with the settled
-    figures computed in the same compiled chunk;
-    a neighbour list that overflowed is reallocated with
-    :func:`sintercond.simulate.reallocate_neighbors` and the chunk redone).
-    Every particle is held at
-    ``temperature`` (K, scalar or ``[n]``): no heat moves; with
-    ``softening`` the moduli follow Eq. 42 at those temperatures.
-
-    The time step is automatic: :func:`sintercond.mechanics.mechanical_time_step`
-    (Eq. 47 and the tangential and rolling bounds, erratum 8) at the approach
-    speed ``v_rel`` (default: free fall from the highest sphere to the floor,
-    at least over one mean diameter) and at the larger of that collision's
-    overlap and the Hertz overlap of the largest sphere on a plane under the
-    weight of a solid column of the pile's height on its cross-section
-    ``(2 r_max)^2`` (the static load at the bottom).
-
-    Settled means, checked every ``check_every`` steps: kinetic energy
-    (translation and rotation) below ``kinetic_tol * sum_i m_i g r_i`` and
-    every net force below ``force_tol`` of that sphere's weight (the net
-    force is read off one probe step, ``m dv/dt``). ``progress(phase, steps, max_steps, figure, 1.0)``, if
-    given, is called at every check with the larger of the two figures over its threshold.
-
-    Args:
-      centres: ``[n, 3]`` start positions (m), at rest, no sphere below the floor.
-      radii: ``[n]`` (m).
-      walls: :class:`sintercond.walls.PlaneWall` s (e.g. :func:`box_walls`).
-      material: :class:`DemMaterial`.
-      max_time: simulated time (s) allowed to settle.
-
-    Raises:
-      PackingError: bad input (naming it), or not settled within ``max_time``
-        (naming the quantity that missed its threshold and its value).
-    """
-    from sintercond import mechanics, simulate
-    from sintercond.rollout import ListOverflow, advance
-    from sintercond.state import particle_state
-
-    if not isinstance(material, DemMaterial):
-        raise PackingError(f"material must be a DemMaterial; got {type(material).__name__}")
-    for name, value in (("kinetic_tol", kinetic_tol), ("force_tol", force_tol), ("max_time", max_time),
-                        ("skin_fraction", skin_fraction)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise PackingError(f"{name} must be a finite number > 0; got {value!r}")
-    if not (isinstance(check_every, int) and check_every >= 1):
-        raise PackingError(f"check_every must be an int >= 1; got {check_every!r}")
-    start = time.perf_counter()
-    centres = np.asarray(centres, np.float64)
-    radii = np.broadcast_to(np.asarray(radii, np.float64), (len(centres),))
-    with jax.enable_x64(True):
-        temperature = np.broadcast_to(np.asarray(temperature, np.float64), radii.shape)
-        try:
-            particles = particle_state(centres, radii, temperature, material.density, fixed=True)
-        except ValueError as err:
-            raise PackingError(str(err)) from None
-        physics = dem_physics(walls, softening, material.mu_wall > 0, material.mu_r_wall > 0)
-        mp = material.mechanical_params()
-        r_max = float(radii.max())
-        contacts, fns = simulate.dynamic_contacts(centres, radii, skin_fraction * float(radii.mean()),
-                                                  capacity_multiplier=1.5, margin=np.full(3, 2.0 * r_max))
-        top = float(np.max(centres[:, 2] + radii))
-        if v_rel is None:
-            v_rel = math.sqrt(2.0 * GRAVITY * max(top - float(np.min(centres[:, 2] - radii)), 4.0 * float(radii.mean())))
-        column = material.density * GRAVITY * top * (2.0 * r_max) ** 2
-        static = _hertz_plane_overlap(column, r_max, material.E, material.nu)
-        from sintercond.forces import effective_mass, hertz_collision_overlap
-
-        m_max = 4.0 / 3.0 * math.pi * r_max**3 * material.density
-        collision = float(hertz_collision_overlap(r_max, effective_mass(m_max, jnp.inf), material.E / (1 - material.nu**2),
-                                                  v_rel))
-        step_overlap = max(static, collision)
-        step_fn = mechanics.mechanical_time_step
-        dt = float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, step_overlap))
-        dt = min(dt, float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, None)))
-        params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
-        state = simulate.init_state(particles, contacts, dt,
-                                    mechanics=mechanics.mechanical_state(physics.mechanics, centres, contacts))
-        sim = simulate.simulator(physics, fns)
-        energy_scale = float(jnp.sum(particles.mass * GRAVITY * particles.radii))
-        max_steps = check_every * int(math.ceil(max_time / dt / check_every))
-        figures = {"kinetic": math.inf, "force": math.inf}
-
-        def settled(s, measured):
-            kinetic, force = measured
-            figures.update(kinetic=float(kinetic) / energy_scale, force=float(force))
-            if progress is not None:  # settled when both are below their thresholds: the larger ratio below 1
-                progress("settling (DEM)", int(s.step), max_steps,
-                         max(figures["kinetic"] / kinetic_tol, figures["force"] / force_tol), 1.0)
-            return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
-
-        try:
-            state, loop = advance(sim, state, params, max_steps, check_every, settled,
-                                  reallocate=simulate.reallocate_neighbors(fns), check=_finite_positions,
-                                  measure=_settle_figures)
-        except ListOverflow:
-            raise PackingError("the DEM neighbour list keeps overflowing") from None
-        final = np.asarray(state.particles.positions)
-    if not (figures["kinetic"] < kinetic_tol and figures["force"] < force_tol):
-        missed = []
-        if not figures["kinetic"] < kinetic_tol:
-            missed.append(f"kinetic energy {figures['kinetic']:.3g} of sum m g r (allowed < {kinetic_tol:g})")
-        if not figures["force"] < force_tol:
-            missed.append(f"largest net force {figures['force']:.3g} of a sphere's weight (allowed < {force_tol:g})")
-        raise PackingError(f"the DEM bed did not settle within {max_time:g} s ({int(state.step)} steps of "
-                           f"{dt:.3g} s): " + " and ".join(missed))
-    report = SettleReport(int(state.step), float(state.time), dt, figures["kinetic"], float(kinetic_tol),
-                          figures["force"], float(force_tol), _overlaps(final, radii, physics.mechanics.walls), step_overlap,
-                          float(v_rel), loop.reallocations, time.perf_counter() - start)
-    return DemSettled(final, state, sim, params, fns, report)
-
-
-
-
-def _settle_figures(sim, state, params):
-    """:func:`dem_settle`'s figures of a chunk's end state, from one probe step: ``((kinetic energy (J), largest net
-    force over weight), the probe step overflowed)``; the net force is ``m dv/dt`` over that step."""
-    probe = sim.step_fn(state, params)
-    p, v, w = state.particles, state.mechanics.velocity, state.mechanics.spin
-    kinetic = 0.5 * jnp.sum(p.mass[:, None] * v**2) + 0.5 * jnp.sum(0.4 * p.mass[:, None] * p.radii[:, None]**2 * w**2)
-    force = p.mass[:, None] * (probe.mechanics.velocity - v) / state.dt
-    return (kinetic, jnp.max(jnp.linalg.norm(force, axis=1) / (p.mass * GRAVITY))), probe.overflow
-
-
-def _finite_positions(state):
-    if not bool(jnp.all(jnp.isfinite(state.particles.positions))):
-        raise PackingError(f"non-finite positions at DEM step {int(state.step)}")
-
-
 def _surface_height(centres, radii, lateral_size, points=64):
     """Mean over a lateral grid of the highest sphere surface above each point (0 where none)."""
     g = (np.arange(points) + 0.5) * lateral_size / points
@@ -687,16 +241,16 @@ STARTS = ("relaxed", "deposit")
 """Where a DEM pour starts: the harmonically relaxed pile, or the loose ballistic deposit itself."""
 
 
-def pour(radii, lateral_size, material=DemMaterial(), seed=0, start="relaxed", temperature=300.0, walls=None,
+def pour(radii, lateral_size, material=_DEFAULT_MATERIAL, seed=0, start="relaxed", temperature=300.0, walls=None,
          progress=None, **settle) -> Packing:
-    """Pour spheres into an open square box ``[0, L]^2`` and settle them with the DEM (:func:`dem_settle`).
+    """Pour spheres into an open square box ``[0, L]^2`` and settle them with the DEM (:func:`sintercond.settle.dem_settle`).
 
     The spheres are first dropped one by one (:func:`deposit_spheres`, a loose
     pile several times the bed's height). ``start="deposit"``: the DEM settles
     that pile itself (a real pour: the pile collapses under gravity with
     Hertz, Mindlin friction, rolling resistance and the walls; it takes
     ~0.3 s of simulated time, ~1e4-1e5 steps). ``start="relaxed"`` (cheaper):
-    the pile is first collapsed by :func:`relax_under_gravity` (frictionless
+    the pile is first collapsed by :func:`sintercond.settle.relax_under_gravity` (frictionless
     harmonic contacts), then the DEM settles it from there under the real
     laws; the result meets the same thresholds, but its structure comes from
     a frictionless collapse (denser than a frictional pour would give).
@@ -704,17 +258,17 @@ def pour(radii, lateral_size, material=DemMaterial(), seed=0, start="relaxed", t
     Args:
       radii: ``[n]`` (m), ``2 max(radii) < lateral_size``.
       lateral_size: box side (m).
-      material: :class:`DemMaterial` (default: Example 5.3's).
+      material: :class:`sintercond.settle.DemMaterial` (default: Example 5.3's).
       seed: random seed of the deposit (reproducible).
       start: one of :data:`STARTS`.
       temperature: K, while settling (no heat moves).
-      walls: the box's :class:`~sintercond.walls.PlaneWall` s (default :func:`box_walls`).
+      walls: the box's :class:`~sintercond.walls.PlaneWall` s (default :func:`sintercond.settle.box_walls`).
       progress: ``progress(phase, steps, max_steps, figure, target)`` after every chunk of the relaxed start and
-        of the DEM settle (:func:`relax_under_gravity`, :func:`dem_settle`), or None.
-      settle: keyword arguments of :func:`dem_settle` (``kinetic_tol``, ``force_tol``, ``max_time``, ...).
+        of the DEM settle (:func:`sintercond.settle.relax_under_gravity`, :func:`sintercond.settle.dem_settle`), or None.
+      settle: keyword arguments of :func:`sintercond.settle.dem_settle` (``kinetic_tol``, ``force_tol``, ``max_time``, ...).
 
     Returns:
-      :class:`Packing` with its :class:`SettleReport` (``packing.settle``).
+      :class:`Packing` with its :class:`sintercond.settle.SettleReport` (``packing.settle``).
 
     Raises:
       PackingError: bad input, or a bed that did not settle (naming what missed its threshold).
@@ -723,7 +277,7 @@ def pour(radii, lateral_size, material=DemMaterial(), seed=0, start="relaxed", t
 
 
 def _pour(radii, lateral_size, material, seed, start, temperature, walls, progress=None, **settle):
-    """:func:`pour`, also returning the :class:`DemSettled` state."""
+    """:func:`pour`, also returning the :class:`sintercond.settle.DemSettled` state."""
     if start not in STARTS:
         raise PackingError(f"start must be one of {list(STARTS)}; got {start!r}")
     radii = np.asarray(radii, np.float64)
@@ -734,13 +288,13 @@ def _pour(radii, lateral_size, material, seed, start, temperature, walls, progre
     rng = np.random.default_rng(seed)
     centres = deposit_spheres(radii, lateral_size, rng)
     if start == "relaxed":
-        centres, _ = relax_under_gravity(centres, radii, lateral_size, progress=progress)
+        centres, _ = _settle.relax_under_gravity(centres, radii, lateral_size, progress=progress)
         centres[:, 2] = np.maximum(centres[:, 2], radii)  # start off the floor: no sphere inside a wall
         centres[:, :2] = np.clip(centres[:, :2], radii[:, None], lateral_size - radii[:, None])
-    walls = box_walls(lateral_size) if walls is None else tuple(walls)
+    walls = _settle.box_walls(lateral_size) if walls is None else tuple(walls)
     if start == "relaxed" and "v_rel" not in settle:  # a sphere may drop into a gap: one mean diameter
-        settle = {**settle, "v_rel": math.sqrt(2.0 * GRAVITY * 2.0 * float(np.mean(radii)))}
-    settled = dem_settle(centres, radii, walls, material, temperature, progress=progress, **settle)
+        settle = {**settle, "v_rel": math.sqrt(2.0 * _settle.GRAVITY * 2.0 * float(np.mean(radii)))}
+    settled = _settle.dem_settle(centres, radii, walls, material, temperature, progress=progress, **settle)
     bed = _bed(settled.centres, radii, lateral_size)
     return dataclasses.replace(bed, residual_force=settled.report.force_ratio, settle=settled.report), settled
 
@@ -748,7 +302,7 @@ def _pour(radii, lateral_size, material, seed, start, temperature, walls, progre
 def _bed(centres, radii, lateral_size) -> Packing:
     """A :class:`Packing` of settled spheres in ``[0, L]^2`` with its figures (height, fraction, coordination)."""
     n = len(radii)
-    i, j, real = _pair_list(centres, radii, 0.0)
+    i, j, real = _settle._pair_list(centres, radii, 0.0)
     i, j = i[real], j[real]
     d = np.linalg.norm(centres[i] - centres[j], axis=1)
     overlap = (radii[i] + radii[j] - d) / (radii[i] + radii[j])
@@ -778,15 +332,15 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
       max_particles: refuse beds needing more spheres.
       height_tolerance: refuse a settled bed whose mean surface height is off
         ``height`` by more than this fraction.
-      method: ``"relax"`` (:func:`relax_under_gravity`, any unit of length) or
+      method: ``"relax"`` (:func:`sintercond.settle.relax_under_gravity`, any unit of length) or
         ``"dem"`` (:func:`pour` with ``material``, SI units: metres).
-      material: :class:`DemMaterial` for ``method="dem"`` (default: Example 5.3's).
+      material: :class:`sintercond.settle.DemMaterial` for ``method="dem"`` (default: Example 5.3's).
       progress: ``progress(phase, steps, max_steps, figure, target)`` as the bed settles (:func:`pour`), or None.
       settle: keyword arguments of :func:`pour` for ``method="dem"`` (``start``, ``kinetic_tol``, ...).
 
     Returns:
       :class:`Packing`, with its height, packing fraction, coordination and
-      isolated spheres (and the :class:`SettleReport` for ``"dem"``).
+      isolated spheres (and the :class:`sintercond.settle.SettleReport` for ``"dem"``).
 
     Raises:
       PackingError: invalid sizes (:func:`check_bed`) or method, or a bed that did not settle.
@@ -800,10 +354,10 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
     rng = np.random.default_rng(seed)
     radii = sample_diameters(n, low, high, rng) / 2
     if method == "dem":
-        bed = pour(radii, lateral_size, DemMaterial() if material is None else material, seed=rng, progress=progress,
+        bed = pour(radii, lateral_size, _settle.DemMaterial() if material is None else material, seed=rng, progress=progress,
                    **settle)
     else:
-        centres, residual = relax_under_gravity(deposit_spheres(radii, lateral_size, rng, DEPOSIT_TRIES), radii,
+        centres, residual = _settle.relax_under_gravity(deposit_spheres(radii, lateral_size, rng, DEPOSIT_TRIES), radii,
                                                 lateral_size, progress=progress)
         bed = dataclasses.replace(_bed(centres, radii, lateral_size), residual_force=residual)
     if bed.isolated or abs(bed.height / height - 1.0) > height_tolerance:
@@ -816,7 +370,7 @@ def from_scene(p, progress=None) -> Packing:
     """The packing of a validated scene's ``[packing]`` table (radii after ``sinter_swelling``).
 
     ``powder_bed``: :func:`powder_bed` with ``method`` (``"relax"`` by default,
-    or ``"dem"`` with the :class:`DemMaterial` keys of an optional ``dem``
+    or ``"dem"`` with the :class:`sintercond.settle.DemMaterial` keys of an optional ``dem``
     table), radii then grown by ``sinter_swelling`` (settled contacts become necks). ``simple_cubic``: centres
     ``radius + spacing * (i, j, k)``, container ``[0, (counts - 1) spacing + 2 radius]``; its packing fraction
     the infinite lattice's (a sphere less the 6 caps its neighbours cut, over the cell ``spacing^3``), its
@@ -836,7 +390,7 @@ def from_scene(p, progress=None) -> Packing:
         coordination = 2 * bonds / counts.prod() if 2 * r >= a else 0.0  # touching: point contacts (sintering)
         return Packing(centres, radii, (np.zeros(3), hi), overlap, float(hi[2]), fraction, float(coordination))
     method = p.get("method", "relax")
-    material = DemMaterial(**p["dem"]) if method == "dem" and "dem" in p else None
+    material = _settle.DemMaterial(**p["dem"]) if method == "dem" and "dem" in p else None
     bed = powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0), method=method,
                      material=material, progress=progress)
     return dataclasses.replace(bed, radii=bed.radii * (1.0 + p.get("sinter_swelling", 0.0)))
@@ -864,3 +418,9 @@ def rev_box(packing: Packing, size, floor_clearance=None):
     nearest = np.clip(packing.centres, lo, hi)
     touching = np.linalg.norm(packing.centres - nearest, axis=1) < packing.radii
     return packing.centres[touching], packing.radii[touching], (lo, hi)
+
+
+# the settling moved to sintercond.settle (issue 24): relaxation and DEM
+__getattr__ = old_names("sintercond.packing", {name: ("sintercond.settle", name) for name in (
+    "relax_under_gravity", "DemMaterial", "KINETIC_TOL", "FORCE_TOL", "SettleReport", "DemSettled", "box_walls",
+    "dem_physics", "GRAVITY", "dem_settle")})

@@ -24,7 +24,7 @@ LAYERS = {
     "lifts": ["network", "mechanics", "thermal", "neck_growth"],
     "drive": ["simulate", "steady", "rollout", "guards"],
     "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.build", "observe",
-            "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
+            "settle", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
 }
 RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}
 
@@ -158,3 +158,20 @@ def test_the_model_build_and_history_moved_out_of_run_resolve_with_a_deprecation
         warnings.simplefilter("error")
         assert run.build_model is importlib.import_module("sintercond.scene.build").build_model
         assert run.read_history is importlib.import_module("sintercond.observe").read_history
+
+
+@pytest.mark.parametrize("old", ["relax_under_gravity", "dem_settle", "DemMaterial", "SettleReport", "DemSettled",
+                                 "box_walls", "dem_physics", "GRAVITY", "KINETIC_TOL", "FORCE_TOL"])
+def test_the_settling_moved_out_of_packing_resolves_with_a_deprecation_warning(old):
+    """The settling (relaxation and DEM) moved to ``sintercond.settle``; ``packing`` keeps the geometry and the beds
+    built on it, and its own error (``PackingError``, the same class as ``settle``'s), without a warning."""
+    from sintercond import packing, settle
+
+    with pytest.warns(DeprecationWarning, match=f"sintercond.packing.{old} moved to sintercond.settle.{old}"):
+        assert getattr(packing, old) is getattr(settle, old)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert packing.PackingError is settle.PackingError
+        assert packing.powder_bed is not None and packing.pour is not None and packing.from_scene is not None
+        with pytest.raises(AttributeError, match="has no attribute 'no_such_function'"):
+            packing.no_such_function  # noqa: B018

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from sintercond import geometry, packing
+from sintercond import geometry, packing, settle
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +102,7 @@ def test_refused_beds_say_why():
     rng = np.random.default_rng(0)
     radii = packing.sample_diameters(50, 20.0, 60.0, rng) / 2
     with pytest.raises(packing.PackingError, match=r"did not settle within 100 steps"):
-        packing.relax_under_gravity(packing.deposit_spheres(radii, 200.0, rng), radii, 200.0, max_steps=100)
+        settle.relax_under_gravity(packing.deposit_spheres(radii, 200.0, rng), radii, 200.0, max_steps=100)
 
 
 @pytest.mark.slow
@@ -135,8 +135,8 @@ def dem_bed():
 @pytest.mark.slow
 def test_dem_bed_meets_the_stated_thresholds(dem_bed):
     report = dem_bed.settle
-    assert report.kinetic_tol == packing.KINETIC_TOL and report.force_tol == packing.FORCE_TOL
-    assert report.kinetic_ratio < packing.KINETIC_TOL and report.force_ratio < packing.FORCE_TOL
+    assert report.kinetic_tol == settle.KINETIC_TOL and report.force_tol == settle.FORCE_TOL
+    assert report.kinetic_ratio < settle.KINETIC_TOL and report.force_ratio < settle.FORCE_TOL
     assert dem_bed.residual_force == report.force_ratio
     assert report.steps * report.dt == pytest.approx(report.time)
     summary = dem_bed.summary()
@@ -155,15 +155,15 @@ def _hertz_wall_force(penetration, radius, material):
 def test_dem_bed_is_in_static_equilibrium_with_its_walls(dem_bed):
     # frictionless side walls (Example 5.3: mu = mu_r = 0 at the walls) carry no vertical load: the floor's Hertz
     # reactions, from the penetrations alone, must carry the whole weight; the x walls push equally
-    material = packing.DemMaterial()
+    material = settle.DemMaterial()
     c, r = dem_bed.centres, dem_bed.radii
-    weight = np.sum(4.0 / 3.0 * np.pi * r**3 * material.density) * packing.GRAVITY
-    floor, x_lo, x_hi = packing.box_walls(DEM_BOX)[:3]
+    weight = np.sum(4.0 / 3.0 * np.pi * r**3 * material.density) * settle.GRAVITY
+    floor, x_lo, x_hi = settle.box_walls(DEM_BOX)[:3]
     reaction = np.sum(_hertz_wall_force(np.asarray(floor.penetration(c, r)), r, material))
-    assert reaction == pytest.approx(weight, rel=packing.FORCE_TOL)
+    assert reaction == pytest.approx(weight, rel=settle.FORCE_TOL)
     push_lo = np.sum(_hertz_wall_force(np.asarray(x_lo.penetration(c, r)), r, material))
     push_hi = np.sum(_hertz_wall_force(np.asarray(x_hi.penetration(c, r)), r, material))
-    assert abs(push_lo - push_hi) < packing.FORCE_TOL * weight
+    assert abs(push_lo - push_hi) < settle.FORCE_TOL * weight
     assert push_lo > 0  # the pile leans on its walls
 
 
@@ -186,11 +186,11 @@ def test_dem_bed_that_does_not_settle_says_what_missed():
 
 def test_dem_inputs_are_checked_before_compiling():
     with pytest.raises(packing.PackingError, match=r"DemMaterial.E must be > 0"):
-        packing.DemMaterial(E=0.0)
+        settle.DemMaterial(E=0.0)
     with pytest.raises(packing.PackingError, match=r"DemMaterial.nu must be in \[0, 0.5\)"):
-        packing.DemMaterial(nu=0.5)
+        settle.DemMaterial(nu=0.5)
     with pytest.raises(packing.PackingError, match=r"DemMaterial.mu must be >= 0"):
-        packing.DemMaterial(mu=-0.1)
+        settle.DemMaterial(mu=-0.1)
     with pytest.raises(packing.PackingError, match=r"start must be one of"):
         packing.pour(np.full(5, 1e-3), 0.01, start="shaken")
     with pytest.raises(packing.PackingError, match=r"lateral_size must exceed the largest diameter"):

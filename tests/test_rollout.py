@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import packing, rollout, simulate
+from sintercond import packing, rollout, settle, simulate
 from sintercond.state import ParticleState
 
 
@@ -120,15 +120,15 @@ def test_a_state_that_fails_its_check_is_not_handed_on():
 
 @pytest.mark.slow
 def test_settling_runs_on_the_host_loop():
-    """packing.dem_settle's chunks are rollout.advance's (measure: kinetic energy and net force of a probe step)."""
+    """settle.dem_settle's chunks are rollout.advance's (measure: kinetic energy and net force of a probe step)."""
     r = np.full(2, 1e-3)
     centres = np.array([[2e-3, 2e-3, 1.0e-3], [2e-3, 2e-3, 3.2e-3]])
-    settled = packing.dem_settle(centres, r, packing.box_walls(4e-3), check_every=500, max_time=0.5)
+    settled = settle.dem_settle(centres, r, settle.box_walls(4e-3), check_every=500, max_time=0.5)
     assert settled.report.steps % 500 == 0
     # resting one on the other on the floor: the centres sit near r and 3 r, less the Hertz overlaps
     z = np.sort(settled.centres[:, 2])
     assert z[0] == pytest.approx(1e-3, rel=2e-3) and z[1] - z[0] == pytest.approx(2e-3, rel=2e-3)
     # the settling criterion stops at the first chunk that meets it: a settled pile settles again in one chunk
-    again = packing.dem_settle(settled.centres, r, packing.box_walls(4e-3), check_every=500, max_time=0.5)
+    again = settle.dem_settle(settled.centres, r, settle.box_walls(4e-3), check_every=500, max_time=0.5)
     assert again.report.steps == 500 and settled.report.steps > 500
     assert again.report.kinetic_ratio < again.report.kinetic_tol and again.report.force_ratio < again.report.force_tol

@@ -12,7 +12,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, simulate, thermal, walls
+from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, restitution_damping_ratio)
 from sintercond.state import particle_state
@@ -173,11 +173,11 @@ def mechanical_params(scene) -> mechanics.MechanicalParams | None:
         rate=f(soft["rate"] if soft else 1.0), E_min=f(soft["min_modulus"] if soft else 0.0))
 
 
-def dem_material(scene) -> packing.DemMaterial:
+def dem_material(scene) -> settle.DemMaterial:
     """The contact material a poured packing settles with: :func:`contact_material` and ``material.density``."""
     c = contact_material(scene)
-    return packing.DemMaterial(density=scene["material"]["density"], **{("E" if k == "E0" else k): float(v)
-                                                                        for k, v in c.items()})
+    return settle.DemMaterial(density=scene["material"]["density"], **{("E" if k == "E0" else k): float(v)
+                                                                       for k, v in c.items()})
 
 
 def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
