@@ -345,6 +345,12 @@ def grow_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, ra
     return _on_table(carried, a), _on_table(carried, sintering.neck_overlap(a, radii[i], radii[j]))
 
 
+def _pair_normals(pairs, positions):
+    """``[c, 3]`` unit vectors ``n_ij`` from ``i`` to ``j`` of the contacts ``pairs`` ``[c, 2]`` at ``positions``."""
+    separation = positions[pairs[:, 1]] - positions[pairs[:, 0]]
+    return separation / jnp.linalg.norm(separation, axis=1, keepdims=True)
+
+
 def balance_displacements(pairs, positions, weights, free_approach, supports, tol):
     """Displacements ``[n, 3]`` (m) of the many-body balance ``sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0``
     on the components that are not ``supports`` (module docstring), and whether its solve fell short.
@@ -360,8 +366,7 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
       ``(u, unbalanced)``: the displacements, and a bool scalar set when the residual exceeds ``10 tol``.
     """
     i, j = pairs[:, 0], pairs[:, 1]
-    separation = positions[j] - positions[i]
-    normal = separation / jnp.linalg.norm(separation, axis=1, keepdims=True)
+    normal = _pair_normals(pairs, positions)
     movable = ~supports
 
     def on_particles(per_pair):  # [c] -> [n, 3]: + along n_ij on i, - on j
@@ -417,8 +422,7 @@ def balance_table_necks(spec: Sintering, params: dict, carried: NeckState, neck,
                         / jnp.maximum(free, jnp.where(growing, STIFF_CONTACT_RATIO * fastest, 1.0)), 0.0)
     tol = max(spec.balance_tol, 50.0 * float(jnp.finfo(positions.dtype).eps))
     u, unbalanced = balance_displacements(carried.pairs, positions, weights, free, carried.supports, tol)
-    separation = positions[j] - positions[i]
-    approach = jnp.sum((u[i] - u[j]) * separation, axis=1) / jnp.linalg.norm(separation, axis=1)
+    approach = jnp.sum((u[i] - u[j]) * _pair_normals(carried.pairs, positions), axis=1)
     cap = jnp.minimum(law.cap(r_i, r_j, params), jnp.minimum(r_i, r_j))
     h = jnp.clip(h_start + approach, h_start, sintering.neck_overlap(cap, r_i, r_j))
     a = jnp.clip(neck_radius(r_i, r_j, h), a_start, cap)
