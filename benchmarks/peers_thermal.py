@@ -154,6 +154,44 @@ def lammps_executable(given):
     return lmp, env
 
 
+def write_scene(directory, side, steps):
+    """The same run as a scene file for ``sintercond run``: the lattice (and its start field) as a table of
+    ``x, y, z, r, T`` rows read with ``initial.from_file``, LAMMPS's law, the common step, one output at the end."""
+    g = np.arange(side) * SPACING
+    centres = np.array(np.meshgrid(g, g, g, indexing="ij")).reshape(3, -1).T
+    table = directory / f"lattice_{side}.csv"
+    np.savetxt(table, np.column_stack([centres, np.full(len(centres), RADIUS),
+                                       np.repeat(layer_temperatures(side), side * side)]),
+               delimiter=",", header="x,y,z,r,T", comments="", fmt="%.17g")
+    dt = float(time_step())
+    scene = directory / f"lattice_{side}.toml"
+    scene.write_text(f"""[packing]
+kind = "file"
+path = "{table.name}"
+
+[material]
+density = {DENSITY!r}
+specific_heat = {SPECIFIC_HEAT!r}
+conductivity = {CONDUCTIVITY!r}
+
+[conduction]
+law = "batchelor_obrien"
+neck_model = "hertz"
+
+[initial]
+temperature = {T_COLD!r}
+from_file = true
+
+[run]
+dt = {dt!r}
+duration = {steps * dt!r}
+output_every = {steps}
+checkpoint_every = {steps}
+formats = ["lammps"]
+""")
+    return scene
+
+
 def write_data(path, side):
     """The lattice as a LAMMPS/LIGGGHTS data file (``id type diameter density x y z``), ids in sintercond's order."""
     g = np.arange(side) * SPACING
@@ -299,6 +337,23 @@ def main():
                 best, phases, final = wall, json.loads(stdout.strip().splitlines()[-1]), np.load(out)
         return best, phases, final
 
+    def sintercond_run(side):
+        """The whole ``sintercond run`` of :func:`write_scene` (scene read, packing file, network, compile, steps,
+        history, dump, checkpoint, summary; no pictures); best of the repeats, final temperatures from the
+        checkpoint."""
+        scene = write_scene(work, side, args.steps)
+        cli = pathlib.Path(sys.executable).parent / "sintercond"
+        command = [str(cli)] if cli.exists() else [sys.executable, "-c", "from sintercond.cli import main; main()"]
+        best = (np.inf,)
+        for _ in range(args.repeats):
+            out = work / f"run_{side}"
+            wall, _ = timed(command + ["run", str(scene), "--out", str(out), "--no-progress", "--no-pictures"],
+                            env=env_py, cwd=work)
+            if wall < best[0]:
+                summary = json.loads((out / "summary.json").read_text())
+                best = (wall, {"steps": summary["wall_s"]}, np.load(out / "checkpoint.npz")["temperature"])
+        return best
+
     for n in args.sizes:
         side = round(n ** (1 / 3))
         count = side**3
@@ -307,6 +362,7 @@ def main():
             results[f"sintercond ({peer} law)"] = sintercond(side, peer, "off")
         results["sintercond, JAX cache cold"] = sintercond(side, "lammps", "cold")
         results["sintercond, JAX cache warm"] = sintercond(side, "lammps", "warm")
+        results["`sintercond run` (scene file)"] = sintercond_run(side)
         for peer, found, make_input, binary in (("LAMMPS", lammps, lammps_input, lammps and lammps[0]),
                                                 ("LIGGGHTS", args.liggghts, liggghts_input, args.liggghts)):
             if not found:
@@ -326,6 +382,7 @@ def main():
                     best = (wall, {"loop": loop_time(log)}, read_dump(out, side))
             results[peer] = best
         compare = {"sintercond (lammps law)": "LAMMPS", "sintercond (liggghts law)": "LIGGGHTS",
+                   "`sintercond run` (scene file)": "LAMMPS",
                    "sintercond, JAX cache cold": "sintercond (lammps law)",
                    "sintercond, JAX cache warm": "sintercond (lammps law)",
                    "LAMMPS": "sintercond (lammps law)", "LIGGGHTS": "sintercond (liggghts law)"}
@@ -338,27 +395,25 @@ def main():
             print(*rows[-1], sep="\t", flush=True)
         if "LAMMPS" in results:
             notes.append(f"{count:,}: sintercond / LAMMPS whole process = "
-                         f"{results['sintercond (lammps law)'][0] / results['LAMMPS'][0]:.2f}")
+                         f"{results['sintercond (lammps law)'][0] / results['LAMMPS'][0]:.2f}, `sintercond run` / "
+                         f"LAMMPS = {results['`sintercond run` (scene file)'][0] / results['LAMMPS'][0]:.2f}")
     shutil.rmtree(work, ignore_errors=True)
     body = (
         "## Peers: whole-process time of a 100-step conduction run\n\n"
-        f"Simple-cubic lattice, spacing 100 um, radius 0.51 spacing (6 sintered contacts each), Ti6Al4V-like "
-        f"(rho 4430, c_p 560, kappa 7), T0 = 300 + 700 (x/L)^2 K, insulated, explicit Euler, {args.steps} steps at "
-        f"the same dt = {time_step():.4g} s, final temperatures written to a file. Time from process start to exit, "
-        f"best of {args.repeats} (cold cache: a new directory each time; warm: after one run that fills it). "
-        "sintercond phases are its driver's own clock (import "
-        "includes JAX; build = packing + `contact_table`; compile = `jit(...).lower().compile()` of "
-        "`simulate.simulate_table`); LAMMPS/LIGGGHTS 'loop' is their reported loop time; 'rest' is the whole process less the "
-        "phases (interpreter or executable start-up, reading the input, exit). 'max |dT|' compares the final "
-        "temperatures (K) with the peer that runs the same law (sintercond rows) or with sintercond (peer rows): "
-        "LAMMPS `heat radius` is `2 kappa a_Hertz` = sintercond `batchelor_obrien` + `neck_model='hertz'`; "
-        "LIGGGHTS `heat/gran/conduction` is `2 sqrt(pi) kappa a_lens` = `batchelor_obrien`, slope 4/sqrt(pi), "
-        "`neck_model='intersection'`. All serial (LAMMPS/LIGGGHTS one MPI rank, OMP_NUM_THREADS=1; JAX uses "
-        "its default CPU threads). The peers read the lattice from a data file written beforehand (not timed); "
-        "sintercond builds it in its driver (timed). `sintercond run` is not in the table: a scene's initial "
-        "temperature is uniform, so the same run cannot be written as a TOML scene. LAMMPS and LIGGGHTS are DEM "
-        "codes: their loop also evaluates the (here zero-stiffness) contact forces of every pair and checks "
-        "their neighbour lists each step; sintercond's static run evaluates the heat flow only.\n\n"
+        f"Simple-cubic lattice, spacing 100 um, radius 0.51 spacing, Ti6Al4V-like (rho 4430, c_p 560, kappa 7), "
+        f"T0 = 300 + 700 (x/L)^2 K, insulated, explicit Euler, {args.steps} steps of dt = {time_step():.4g} s, final "
+        f"temperatures written. Process start to exit, best of {args.repeats}. `sintercond run` (scene file): the "
+        "command a user runs (`--no-progress --no-pictures`) on a scene whose packing file (x, y, z, r, T rows, "
+        "`initial.from_file`) holds the lattice and its start field; it writes history.csv, a LAMMPS dump, a "
+        "checkpoint and the summary; 'steps' is its stepping loop. The other sintercond rows are a driver on the "
+        "public API (import includes JAX; build = packing + `contact_table`; compile = `jit(...).lower()."
+        "compile()`; cold/warm: JAX's persistent cache empty or filled). LAMMPS/LIGGGHTS 'loop' is their loop "
+        "time; 'rest' is the process less the phases. The last column compares final temperatures (K) with the "
+        "peer of the same law: LAMMPS `heat radius` (`2 kappa a_Hertz`) is `batchelor_obrien` + `neck_model="
+        "'hertz'`; LIGGGHTS `heat/gran/conduction` (`2 sqrt(pi) kappa a_lens`) is `batchelor_obrien`, slope "
+        "4/sqrt(pi), `neck_model='intersection'`. Serial peers (one MPI rank, OMP_NUM_THREADS=1), reading a data "
+        "file written beforehand, as `sintercond run` reads its table; their loops also evaluate (zero-stiffness) "
+        "contact forces and check neighbour lists.\n\n"
         + markdown_table(("particles", "code", "whole process (s)", "phases (s)", "max abs(dT) (K) against"), rows)
         + ("\n\n" + "; ".join(notes) if notes else "") + "\n\n" + plot(rows)
     )

@@ -60,7 +60,7 @@ def rojek_reference() -> dict:
 
 
 def powder_bed_450():
-    """``packing.powder_bed(450.0, 420.0, diameter_range=(45.0, 150.0), seed=0)`` as settled once (lengths in um).
+    """``packing.powder_bed(450.0, 420.0, diameter_range=(45.0, 150.0), seed=0, method="relax")`` as settled once (lengths in um).
 
     A :class:`sintercond.packing.Packing` read from ``powder_bed_450um.json``. Settling the pile is chaotic:
     another processor's round-off settles another bed, so notebooks that show one bed load this one.

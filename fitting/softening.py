@@ -517,7 +517,7 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
         raise ValueError(f"capacity_multiplier (spare room of the heating run's contact lists) must be >= 1; got "
                          f"{capacity_multiplier!r}")
     if bed is None:
-        pile = packing.powder_bed(lateral_size, height, diameter_range, seed=seed)
+        pile = packing.powder_bed(lateral_size, height, diameter_range, seed=seed, method="relax")
         x, r = pile.centres, pile.radii
     else:
         x, r = (np.asarray(v, dtype=np.float64) for v in bed)

@@ -54,8 +54,8 @@ __version__ = "0.1.0"
 _SUBMODULES = frozenset({
     "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "guards", "heat_sources",
     "io", "materials", "mechanics", "neck", "neck_growth", "neighbors", "network", "observe", "packing",
-    "packing_files", "pair_list", "plots", "rollout", "run", "scene", "settle", "simulate", "sintering", "state", "steady",
-    "sweep", "thermal", "tortuosity", "walls",
+    "packing_files", "pair_list", "plots", "rolling", "rollout", "run", "scene", "settle", "simulate", "sintering",
+    "state", "steady", "sweep", "thermal", "tortuosity", "walls",
 })
 
 

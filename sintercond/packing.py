@@ -1,21 +1,28 @@
 """Random sphere packings: sampled sizes, gravity deposition, lattices, and the beds built on them, checked.
 
-A powder bed is built in two steps:
+A powder bed is built in one of three ways (``method``, :data:`METHODS`):
 
-1. :func:`deposit_spheres` drops spheres one by one at random lateral
-   positions onto the floor or the pile (ballistic deposition, NumPy, on a
-   lateral bin grid): no overlaps, every sphere resting on one support.
-   :func:`powder_bed` keeps the lowest of :data:`DEPOSIT_TRIES` drops of each
-   sphere, which fills the pile's hollows: solid fraction ~0.45, about 1.4
-   times the asked height (a single drop: ~0.17, 3.6 times), so the pile
-   has less to fall and settles in ~2.5 times fewer steps.
-2. The pile settles under gravity (:mod:`sintercond.settle`):
-   :func:`sintercond.settle.relax_under_gravity` (frictionless damped harmonic
-   contacts, the default), or with ``method="dem"`` (:func:`pour`) the real
-   thermo-mechanical DEM, :func:`sintercond.settle.dem_settle`, whose
-   :class:`sintercond.settle.SettleReport` the bed keeps (``packing.settle``).
-   A pile that has not settled raises :class:`PackingError`; it is never
-   returned half-fallen.
+- ``"roll"`` (the default): :func:`sintercond.rolling.roll_deposit` drops the
+  spheres one by one and lets each roll down the pile to a stable rest on
+  three supports or the floor (sequential deposition with rolling, in closed
+  form, O(n): a 1e4-sphere bed in seconds). The bed is a stable frictional
+  powder's: solid fraction ~0.6, coordination ~5.4-5.5, its contacts at the
+  relative overlap :data:`ROLL_OVERLAP`.
+- ``"relax"``: :func:`deposit_spheres` drops spheres one by one at random
+  lateral positions onto the floor or the pile (ballistic deposition, NumPy,
+  on a lateral bin grid) and keeps the lowest of :data:`DEPOSIT_TRIES` drops
+  of each (solid fraction ~0.45, about 1.4 times the asked height); the pile
+  then collapses without friction under gravity,
+  :func:`sintercond.settle.relax_under_gravity` (damped harmonic contacts),
+  into a denser random packing (~0.66). Its damped dynamics take ~1e5 steps
+  whatever the bed's width (a 1e4-sphere bed ~15 min on two cores).
+- ``"dem"`` (:func:`pour`): the real thermo-mechanical DEM,
+  :func:`sintercond.settle.dem_settle`, settles a rolled, relaxed or
+  ballistic deposit; the bed keeps its :class:`sintercond.settle.SettleReport`
+  (``packing.settle``).
+
+A pile that has not settled raises :class:`PackingError`; it is never
+returned half-fallen.
 
 Everything here runs in float64 (NumPy, and JAX inside ``jax.enable_x64``)
 whatever precision the thermal model uses: the packing of a scene does not
@@ -38,6 +45,7 @@ import math
 
 import numpy as np
 
+from sintercond import rolling as _rolling
 from sintercond import settle as _settle
 from sintercond._deprecation import old_names
 from sintercond.settle import PackingError
@@ -50,7 +58,16 @@ DEPOSIT_TRIES = 16
 kept (a 3,290-sphere bed: solid fraction 0.44 instead of 0.17, 167k relax steps instead of 437k)."""
 
 MAX_PARTICLES = 20_000
-"""Largest bed :func:`powder_bed` builds (memory and settling time grow with it; a scene refuses beyond)."""
+"""Largest bed :func:`powder_bed` settles by ``"relax"`` or ``"dem"`` (their settling time grows with it; a scene
+refuses beyond)."""
+
+MAX_ROLLED_PARTICLES = 1_000_000
+"""Largest bed :func:`powder_bed` builds by ``"roll"`` (O(n): ~2 ms a sphere on one core)."""
+
+ROLL_OVERLAP = 1e-4
+"""Relative overlap ``1 - d / (r_i + r_j)`` at which a rolled sphere rests on its supports (and on the floor and
+walls, over its radius): the contacts' small overlaps, as a relaxed bed's (median 8e-5, mean 1.4e-4 of the sum of
+radii on the 3,290-sphere bed of ``benchmarks/bed_build.py``), so the pipe network sees them."""
 
 _DEFAULT_MATERIAL = _settle.DemMaterial()
 """The contact material of a pour unless one is given: Example 5.3's (:class:`sintercond.settle.DemMaterial`)."""
@@ -71,8 +88,10 @@ class Packing:
       packing_fraction: solid volume over ``lateral_size^2 * height``.
       coordination: mean number of sphere-sphere contacts per sphere.
       isolated: spheres touching neither another sphere nor the floor or a wall (0 when settled).
-      residual_force: largest net force on a sphere over its weight at the end of the settling.
+      residual_force: largest net force on a sphere over its weight at the end of the settling (NaN for a
+        rolled bed: each sphere came to rest on its supports when it was placed; nothing is integrated).
       settle: the :class:`sintercond.settle.SettleReport` of a DEM settle (``method="dem"``), else None.
+      roll: the :class:`sintercond.rolling.RollReport` of a rolled bed (``method="roll"``), else None.
     """
 
     centres: np.ndarray
@@ -85,6 +104,7 @@ class Packing:
     isolated: int = 0
     residual_force: float = math.nan
     settle: _settle.SettleReport | None = None
+    roll: _rolling.RollReport | None = None
 
     def summary(self) -> dict:
         """The bed's figures as a flat dict (for a run summary); a DEM bed adds its :class:`sintercond.settle.SettleReport`'s."""
@@ -234,11 +254,13 @@ def _surface_height(centres, radii, lateral_size, points=64):
     return float(best.mean())
 
 
-METHODS = ("relax", "dem")
-"""How :func:`powder_bed` settles: the harmonic relaxation (fast, the default) or the thermo-mechanical DEM."""
+METHODS = ("roll", "relax", "dem")
+"""How :func:`powder_bed` makes its bed: sequential deposition with rolling (the default, O(n)), the frictionless
+harmonic relaxation of a ballistic deposit, or the thermo-mechanical DEM (:func:`pour`)."""
 
-STARTS = ("relaxed", "deposit")
-"""Where a DEM pour starts: the harmonically relaxed pile, or the loose ballistic deposit itself."""
+STARTS = ("rolled", "relaxed", "deposit")
+"""Where a DEM pour starts: the rolled deposit (each sphere at rest on its supports, point contacts), the
+harmonically relaxed pile, or the loose ballistic deposit itself."""
 
 
 def pour(radii, lateral_size, material=_DEFAULT_MATERIAL, seed=0, start="relaxed", temperature=300.0, walls=None,
@@ -286,13 +308,16 @@ def _pour(radii, lateral_size, material, seed, start, temperature, walls, progre
     if not (math.isfinite(lateral_size) and 2 * radii.max() < lateral_size):
         raise PackingError(f"lateral_size must exceed the largest diameter {2 * radii.max():g} m; got {lateral_size!r}")
     rng = np.random.default_rng(seed)
-    centres = deposit_spheres(radii, lateral_size, rng)
+    if start == "rolled":
+        centres, _ = _rolling.roll_deposit(radii, lateral_size, rng, overlap=0.0)
+    else:
+        centres = deposit_spheres(radii, lateral_size, rng)
     if start == "relaxed":
         centres, _ = _settle.relax_under_gravity(centres, radii, lateral_size, progress=progress)
         centres[:, 2] = np.maximum(centres[:, 2], radii)  # start off the floor: no sphere inside a wall
         centres[:, :2] = np.clip(centres[:, :2], radii[:, None], lateral_size - radii[:, None])
     walls = _settle.box_walls(lateral_size) if walls is None else tuple(walls)
-    if start == "relaxed" and "v_rel" not in settle:  # a sphere may drop into a gap: one mean diameter
+    if start != "deposit" and "v_rel" not in settle:  # a sphere may drop into a gap: one mean diameter
         settle = {**settle, "v_rel": math.sqrt(2.0 * _settle.GRAVITY * 2.0 * float(np.mean(radii)))}
     settled = _settle.dem_settle(centres, radii, walls, material, temperature, progress=progress, **settle)
     bed = _bed(settled.centres, radii, lateral_size)
@@ -319,8 +344,8 @@ def _bed(centres, radii, lateral_size) -> Packing:
                    float(2 * np.sum(touching) / n), isolated)
 
 
-def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_particles=MAX_PARTICLES,
-               height_tolerance=0.25, method="relax", material=None, progress=None, **settle):
+def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_particles=None,
+               height_tolerance=0.25, method="roll", material=None, progress=None, overlap=ROLL_OVERLAP, **settle):
     """A settled random bed of polydisperse spheres filling a square container to about ``height``.
 
     Args:
@@ -329,18 +354,23 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
         bed gets ``FILL_FRACTION * lateral_size^2 * height`` of solid volume.
       diameter_range: ``(low, high)`` diameters, uniform by volume.
       seed: random seed (the result is reproducible, and the same in float32 and float64 JAX).
-      max_particles: refuse beds needing more spheres.
+      max_particles: refuse beds needing more spheres (default :data:`MAX_ROLLED_PARTICLES` for ``"roll"``,
+        :data:`MAX_PARTICLES` for the others).
       height_tolerance: refuse a settled bed whose mean surface height is off
         ``height`` by more than this fraction.
-      method: ``"relax"`` (:func:`sintercond.settle.relax_under_gravity`, any unit of length) or
-        ``"dem"`` (:func:`pour` with ``material``, SI units: metres).
+      method: ``"roll"`` (:func:`sintercond.rolling.roll_deposit`, any unit of length), ``"relax"``
+        (:func:`sintercond.settle.relax_under_gravity`, any unit of length) or ``"dem"`` (:func:`pour` with
+        ``material``, SI units: metres).
       material: :class:`sintercond.settle.DemMaterial` for ``method="dem"`` (default: Example 5.3's).
-      progress: ``progress(phase, steps, max_steps, figure, target)`` as the bed settles (:func:`pour`), or None.
+      progress: ``progress(phase, steps, max_steps, figure, target)`` as the bed is made (spheres down for
+        ``"roll"``, steps for the settling ones), or None.
+      overlap: the relative overlap of a rolled bed's contacts (``method="roll"``), in ``[0, 0.01]``.
       settle: keyword arguments of :func:`pour` for ``method="dem"`` (``start``, ``kinetic_tol``, ...).
 
     Returns:
       :class:`Packing`, with its height, packing fraction, coordination and
-      isolated spheres (and the :class:`sintercond.settle.SettleReport` for ``"dem"``).
+      isolated spheres (and the :class:`sintercond.rolling.RollReport` for ``"roll"``, the
+      :class:`sintercond.settle.SettleReport` for ``"dem"``).
 
     Raises:
       PackingError: invalid sizes (:func:`check_bed`) or method, or a bed that did not settle.
@@ -349,11 +379,26 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
         raise PackingError(f"method must be one of {list(METHODS)}; got {method!r}")
     if settle and method != "dem":
         raise PackingError(f"{sorted(settle)} apply to method='dem' only")
+    if method != "roll" and overlap != ROLL_OVERLAP:
+        raise PackingError("overlap applies to method='roll' only")
+    if max_particles is None:
+        max_particles = MAX_ROLLED_PARTICLES if method == "roll" else MAX_PARTICLES
     n = check_bed(lateral_size, height, diameter_range, max_particles)
     low, high = (float(v) for v in diameter_range)
     rng = np.random.default_rng(seed)
     radii = sample_diameters(n, low, high, rng) / 2
-    if method == "dem":
+    if method == "roll":  # dropped until the surface reaches the height: a rolled bed is looser than FILL_FRACTION
+        radii = np.concatenate([radii, sample_diameters(n, low, high, rng) / 2])
+        expected = None if progress is None else (  # the count the bed is sized for, not the spare radii
+            lambda phase, down, _, figure, target: progress(phase, down, max(n, down), down, max(n, down)))
+        centres, report = _rolling.roll_deposit(radii, lateral_size, rng, overlap, progress=expected,
+                                                fill_height=height)
+        if len(centres) > max_particles:
+            raise PackingError(f"the bed needed {len(centres)} spheres to reach height {height:g}; the limit is "
+                               f"{max_particles}")
+        radii = radii[:len(centres)]
+        bed = dataclasses.replace(_bed(centres, radii, lateral_size), roll=report)
+    elif method == "dem":
         bed = pour(radii, lateral_size, _settle.DemMaterial() if material is None else material, seed=rng, progress=progress,
                    **settle)
     else:
@@ -369,7 +414,7 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_p
 def from_scene(p, progress=None) -> Packing:
     """The packing of a validated scene's ``[packing]`` table (radii after ``sinter_swelling``).
 
-    ``powder_bed``: :func:`powder_bed` with ``method`` (``"relax"`` by default,
+    ``powder_bed``: :func:`powder_bed` with ``method`` (``"roll"`` by default,
     or ``"dem"`` with the :class:`sintercond.settle.DemMaterial` keys of an optional ``dem``
     table), radii then grown by ``sinter_swelling`` (settled contacts become necks). ``simple_cubic``: centres
     ``radius + spacing * (i, j, k)``, container ``[0, (counts - 1) spacing + 2 radius]``; its packing fraction
@@ -389,7 +434,7 @@ def from_scene(p, progress=None) -> Packing:
         bonds = 3 * counts.prod() - (counts[1] * counts[2] + counts[0] * counts[2] + counts[0] * counts[1])
         coordination = 2 * bonds / counts.prod() if 2 * r >= a else 0.0  # touching: point contacts (sintering)
         return Packing(centres, radii, (np.zeros(3), hi), overlap, float(hi[2]), fraction, float(coordination))
-    method = p.get("method", "relax")
+    method = p.get("method", "roll")
     material = _settle.DemMaterial(**p["dem"]) if method == "dem" and "dem" in p else None
     bed = powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p.get("seed", 0), method=method,
                      material=material, progress=progress)

@@ -12,6 +12,10 @@ in metres (``length_unit`` scales the file's numbers). The formats:
 ``lammps_dump``
     A LAMMPS or LIGGGHTS text dump (``ITEM: ATOMS`` with column names): ``radius`` or ``diameter``, and ``x y z``,
     unwrapped ``xu yu zu``, or scaled ``xs ys zs`` (with the frame's box); the last frame, rows sorted by ``id``.
+
+A table or a dump may also carry each particle's temperature (K), read by :func:`read_temperatures`: a table's
+header column ``T``, ``temp`` or ``temperature``; a dump's column ``temperature`` (LAMMPS's granular heat model),
+``f_Temp`` or ``f_Temp[0]`` (LIGGGHTS's ``property/atom`` Temp), or ``temp``.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ from pathlib import Path
 import numpy as np
 
 FORMATS = ("table", "lammps_data", "lammps_dump")
+TEMPERATURE_COLUMNS = ("t", "temp", "temperature", "f_temp", "f_temp[0]")
+"""Column names (any case) that hold a particle's temperature (K)."""
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
 
 
@@ -43,17 +49,10 @@ def guess_format(path) -> str:
 
 def read_packing(path, format="auto", length_unit="m") -> tuple[np.ndarray, np.ndarray]:
     """``(centres [n, 3], radii [n])`` (m) of the packing in ``path`` (see the module docstring)."""
-    path = Path(path)
-    if format == "auto":
-        format = guess_format(path)
-    if format not in FORMATS:
-        raise PackingFileError(f"format must be one of {list(FORMATS)} or 'auto'; got {format!r}")
+    path, format = _checked(path, format)
     if length_unit not in LENGTH_UNITS:
         raise PackingFileError(f"length_unit must be one of {list(LENGTH_UNITS)}; got {length_unit!r}")
-    if not path.is_file():
-        raise PackingFileError(f"{str(path)!r} does not exist")
-    stat = path.stat()
-    centres, radii = _read_cached(str(path.resolve()), stat.st_mtime_ns, stat.st_size, format)
+    centres, radii, _ = _read(path, format)
     scale = LENGTH_UNITS[length_unit]
     centres, radii = centres * scale, radii * scale
     bad = ~(np.all(np.isfinite(centres), axis=1) & np.isfinite(radii) & (radii > 0))
@@ -64,24 +63,60 @@ def read_packing(path, format="auto", length_unit="m") -> tuple[np.ndarray, np.n
     return centres, radii
 
 
+def read_temperatures(path, format="auto") -> np.ndarray:
+    """``[n]`` temperatures (K) of the particles in ``path``, in :func:`read_packing`'s order, from the column
+    named as :data:`TEMPERATURE_COLUMNS` says; raises :class:`PackingFileError` if there is none or a value is not
+    finite and > 0."""
+    path, format = _checked(path, format)
+    temperature = _read(path, format)[2]
+    if temperature is None:
+        where = {"table": "a header column T or temperature", "lammps_dump": "a column temperature or f_Temp",
+                 "lammps_data": "nothing: a data file of atom_style sphere carries no temperature"}[format]
+        raise PackingFileError(f"{path}: no temperature column; read as {format!r} it takes {where}")
+    bad = ~(np.isfinite(temperature) & (temperature > 0))
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise PackingFileError(f"{path}: particle {k} has temperature {float(temperature[k])!r}; temperatures must be "
+                               "finite and > 0 (K)")
+    return temperature
+
+
+def _checked(path, format):
+    path = Path(path)
+    if format == "auto":
+        format = guess_format(path)
+    if format not in FORMATS:
+        raise PackingFileError(f"format must be one of {list(FORMATS)} or 'auto'; got {format!r}")
+    if not path.is_file():
+        raise PackingFileError(f"{str(path)!r} does not exist")
+    return path, format
+
+
+def _read(path, format):
+    stat = path.stat()
+    return _read_cached(str(path.resolve()), stat.st_mtime_ns, stat.st_size, format)
+
+
 @functools.lru_cache(maxsize=8)
 def _read_cached(path, mtime, size, format):
-    """The file read once per version (validation and the build both ask), in the file's units."""
+    """The file read once per version (validation and the build both ask), in the file's units:
+    ``(centres, radii, temperatures or None)``."""
     text = Path(path).read_text(errors="replace")
     reader = {"table": _read_table, "lammps_data": _read_lammps_data, "lammps_dump": _read_lammps_dump}[format]
-    centres, radii = reader(text, path)
+    centres, radii, temperature = reader(text, path)
     if len(radii) == 0:
         raise PackingFileError(f"{path}: no particles found (read as {format!r})")
-    centres.setflags(write=False)
-    radii.setflags(write=False)
-    return centres, radii
+    for array in (centres, radii, temperature):
+        if array is not None:
+            array.setflags(write=False)
+    return centres, radii, temperature
 
 
 def _read_table(text, path):
     lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
     rows = [(k + 1, line.replace(",", " ").replace(";", " ").split()) for k, line in enumerate(lines) if line]
     if not rows:
-        return np.zeros((0, 3)), np.zeros(0)
+        return np.zeros((0, 3)), np.zeros(0), None
     columns = {"x": 0, "y": 1, "z": 2, "r": 3}
     diameter = False
     first = rows[0][1]
@@ -100,19 +135,31 @@ def _read_table(text, path):
                 break
         else:
             raise PackingFileError(f"{path}: the header {first} names no radius column (r, radius, d or diameter)")
+        heat = [names.index(key) for key in TEMPERATURE_COLUMNS if key in names]
+        if heat:
+            columns["t"] = heat[0]
         rows = rows[1:]
     width = max(columns.values()) + 1
-    values = np.empty((len(rows), 4))
-    for k, (line, fields) in enumerate(rows):
-        if len(fields) < width:
-            raise PackingFileError(f"{path}, line {line}: {len(fields)} columns, expected at least {width} "
-                                   "(x y z r)")
+    counts = {len(fields) for _, fields in rows}
+    values = None
+    if len(counts) == 1 and min(counts) >= width:  # every row alike: one parse of all numbers
         try:
-            values[k] = [float(fields[columns[c]]) for c in "xyzr"]
+            table = np.array([v for _, fields in rows for v in fields], dtype=np.float64).reshape(len(rows), -1)
+            values = table[:, [columns[c] for c in columns]]
         except ValueError:
-            raise PackingFileError(f"{path}, line {line}: {fields} are not all numbers") from None
+            values = None
+    if values is None:  # find the row at fault
+        values = np.empty((len(rows), len(columns)))
+        for k, (line, fields) in enumerate(rows):
+            if len(fields) < width:
+                raise PackingFileError(f"{path}, line {line}: {len(fields)} columns, expected at least {width} "
+                                       "(x y z r)")
+            try:
+                values[k] = [float(fields[columns[c]]) for c in columns]
+            except ValueError:
+                raise PackingFileError(f"{path}, line {line}: {fields} are not all numbers") from None
     radii = values[:, 3] / 2 if diameter else values[:, 3]
-    return values[:, :3].copy(), radii.copy()
+    return values[:, :3].copy(), radii.copy(), values[:, 4].copy() if "t" in columns else None
 
 
 def _read_lammps_data(text, path):
@@ -140,7 +187,7 @@ def _read_lammps_data(text, path):
         rows.append([float(v) for v in fields[:7]])
     data = np.asarray(rows).reshape(-1, 7)
     data = data[np.argsort(data[:, 0], kind="stable")]
-    return data[:, 4:7].copy(), data[:, 2] / 2
+    return data[:, 4:7].copy(), data[:, 2] / 2, None
 
 
 def _read_lammps_dump(text, path):
@@ -161,6 +208,7 @@ def _read_lammps_dump(text, path):
     if data.shape[1] != len(names):
         raise PackingFileError(f"{path}: {data.shape[1]} columns for the {len(names)} names {names}")
     column = {name: data[:, k] for k, name in enumerate(names)}
+    heat = next((data[:, k] for k, name in enumerate(names) if name.lower() in TEMPERATURE_COLUMNS), None)
     if "radius" in column:
         radii = column["radius"]
     elif "diameter" in column:
@@ -180,7 +228,7 @@ def _read_lammps_dump(text, path):
     else:
         raise PackingFileError(f"{path}: the dump has no x y z (or xu yu zu, xs ys zs) columns (columns: {names})")
     order = np.argsort(column["id"], kind="stable") if "id" in column else np.arange(len(radii))
-    return centres[order].copy(), radii[order].copy()
+    return centres[order].copy(), radii[order].copy(), None if heat is None else heat[order].copy()
 
 
 def write_table(path, centres, radii, length_unit="m"):

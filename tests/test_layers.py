@@ -24,7 +24,7 @@ LAYERS = {
     "lifts": ["network", "mechanics", "thermal", "neck_growth"],
     "drive": ["simulate", "steady", "rollout", "guards"],
     "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.build", "observe",
-            "settle", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
+            "settle", "rolling", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
 }
 RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}
 

@@ -140,3 +140,53 @@ def test_a_bad_packing_file_is_named(tmp_path):
     with pytest.raises(SceneError, match=r"particle 1 \(row 2\) .* radii > 0"):
         load_scene(_scene_file(tmp_path, negative))
     assert math.isfinite(_expected_k_star(1.0))
+
+
+def _heated_files(tmp_path):
+    """A table and a LIGGGHTS dump of the lattice carrying each particle's temperature (rows in file order)."""
+    centres, radii = _lattice()
+    temperature = 300.0 + 500.0 * centres[:, 0] / centres[:, 0].max()
+    table = tmp_path / "heated.csv"
+    np.savetxt(table, np.column_stack([temperature, centres, radii]), delimiter=",", header="T,x,y,z,radius",
+               comments="", fmt="%.17g")
+    dump = tmp_path / "heated.dump"
+    ids = np.arange(len(radii))[::-1] + 1  # written in descending id; read back by id
+    rows = "\n".join(f"{i} {x!r} {y!r} {z!r} {r!r} {t!r}" for i, (x, y, z), r, t in
+                     zip(ids, centres.tolist(), radii.tolist(), temperature.tolist()))
+    dump.write_text(f"ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n"
+                    f"0 1\nITEM: ATOMS id x y z radius f_Temp[0]\n{rows}\n")
+    return table, dump, centres, temperature
+
+
+def test_a_table_and_a_dump_carry_each_particles_temperature(tmp_path):
+    table, dump, centres, temperature = _heated_files(tmp_path)
+    np.testing.assert_array_equal(packing_files.read_temperatures(table), temperature)
+    np.testing.assert_array_equal(packing_files.read_temperatures(dump), temperature[::-1])  # in id order
+    np.testing.assert_array_equal(packing_files.read_packing(dump)[0], centres[::-1])
+    data, _, _ = _write(tmp_path, "lammps_data")
+    with pytest.raises(packing_files.PackingFileError, match="no temperature column.*atom_style sphere"):
+        packing_files.read_temperatures(data)
+    cold = tmp_path / "cold.csv"
+    cold.write_text("x y z r temperature\n0 0 0 1 300\n2 0 0 1 -5\n")
+    with pytest.raises(packing_files.PackingFileError, match=r"particle 1 has temperature -5.0.*> 0 \(K\)"):
+        packing_files.read_temperatures(cold)
+
+
+def test_a_scene_starts_from_the_files_temperatures(tmp_path):
+    """``initial.from_file``: each particle starts at its file temperature (before: one uniform temperature, so a
+    field from another code or a measurement could not be continued)."""
+    from sintercond.scene.build import build_model
+
+    table, _, _, temperature = _heated_files(tmp_path)
+    scene_path = _scene_file(tmp_path, table)
+    text = scene_path.read_text().replace('length_unit = "mm"', 'length_unit = "m"')
+    scene_path.write_text(text.replace("temperature = 300.0\n", "temperature = 300.0\nfrom_file = true\n"))
+    model = build_model(load_scene(scene_path))
+    held = np.asarray(model.state.particles.fixed)
+    got = np.asarray(model.state.particles.temperature)
+    np.testing.assert_array_equal(got[~held], temperature[~held])
+    assert np.all(got[held] == 500.0)  # the held floor overrides
+    no_column = _scene_file(tmp_path, _write(tmp_path, "lammps_data")[0])
+    no_column.write_text(no_column.read_text().replace("temperature = 300.0\n", "temperature = 300.0\nfrom_file = true\n"))
+    with pytest.raises(SceneError, match=r"initial\.from_file: .*no temperature column"):
+        load_scene(no_column)

@@ -116,6 +116,7 @@ ELSEWHERE = {
     "run.formats": "test_scene_run.py: the formats written",
     "run.vtp_encoding": "test_io.py: both encodings read back by VTK (binary is the default a run writes)",
     "run.override_limits": "test_bad_input.py: the limits refused and overridden",
+    "initial.from_file": "test_packing_files.py: test_a_scene_starts_from_the_files_temperatures",
     **{f"sintering.{key}": "test_sintering_scene.py: test_the_sintering_keys_reach_the_model (no mechanics)"
        for key in ("law", "every", "params")},
     "sintering.shrinkage": "test_sintering_scene.py: test_many_body_shrinkage_holds_the_bottom_layer_on_its_floor...",

@@ -45,6 +45,7 @@ from sintercond.scene.schema import (  # noqa: F401
     _SCHEMA,
     _WALL,
     file_packing,
+    file_temperatures,
     restitution_damping_ratio,
 )
 from sintercond.scene.validate import (  # noqa: F401
@@ -70,6 +71,6 @@ __all__ = [
     'BEAM_STEP_FRACTION', 'FRACTION', 'Key', 'MAX_FRAMES', 'MAX_LATTICE_PARTICLES', 'MAX_LISTED_SPHERES',
     'MAX_MEMORY_BYTES', 'MAX_OUTPUT_BYTES', 'MAX_POURED_PARTICLES', 'MAX_STEPS', 'MECHANICAL_FIELDS', 'PACKING_KINDS',
     'PACKING_METHODS', 'ROUGH_BED_PENETRATION', 'RunEstimate', 'SceneError', 'TEMPERATURE', 'WALL_STEP_FRACTION',
-    'advance_speed', 'beam_step', 'builtin_scenes', 'default_penetration', 'estimate_run', 'file_packing',
+    'advance_speed', 'beam_step', 'builtin_scenes', 'default_penetration', 'estimate_run', 'file_packing', 'file_temperatures',
     'load_scene', 'restitution_damping_ratio', 'scene_reference', 'validate_scene',
 ]

@@ -14,7 +14,7 @@ import numpy as np
 
 from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
-                              default_penetration, file_packing, restitution_damping_ratio)
+                              default_penetration, file_packing, file_temperatures, restitution_damping_ratio)
 from sintercond.state import particle_state
 
 
@@ -61,7 +61,8 @@ PROGRESS_EVERY_S = 5.0
 class SettlingProgress:
     """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.packing`: a line through ``log``
     at most every :data:`PROGRESS_EVERY_S` seconds with the steps taken, the settling figure against its target
-    and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially)."""
+    and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially); a
+    rolled bed (phase ``"rolling"``) gives the spheres down and the time left at their rate."""
 
     def __init__(self, log, particles):
         self.log, self.particles = log, particles
@@ -73,6 +74,12 @@ class SettlingProgress:
         if now - self.last < PROGRESS_EVERY_S:
             return
         self.last = now
+        if phase == "rolling":  # spheres placed at a steady rate: the time left in proportion
+            left = f", about {(now - self.start) * (max_steps - steps) / max(steps, 1):.0f} s left" \
+                if steps < max_steps else ""
+            self.log(f"packing: rolling {max_steps:,} spheres down the pile: {steps:,} down, "
+                     f"{now - self.start:.0f} s{left}")
+            return
         self.points.append((now - self.start, math.log(max(figure, 1e-300))))
         left = ""
         if len(self.points) >= 2:
@@ -84,6 +91,14 @@ class SettlingProgress:
                 f"kinetic energy and net force at {figure:.3g} times their thresholds")
         self.log(f"packing: {phase} {self.particles:,} spheres: {steps:,} steps (at most {max_steps:,}), {what} "
                  f"(settled below {target:g}), {now - self.start:.0f} s{left}")
+
+
+def initial_temperatures(scene):
+    """The particles' start temperatures (K): ``initial.temperature``, or with ``initial.from_file`` the packing
+    file's temperature column (:func:`sintercond.packing_files.read_temperatures`)."""
+    if scene["initial"]["from_file"]:
+        return np.array(file_temperatures(scene["packing"]))
+    return scene["initial"]["temperature"]
 
 
 def build_packing(scene, log=None):
@@ -265,7 +280,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     lifted = physics.conduction.conductance == "lifted"
     physics = dataclasses.replace(physics, conduction=dataclasses.replace(
         physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
-    particles = particle_state(centres, radii, scene["initial"]["temperature"], m["density"], m["specific_heat"],
+    particles = particle_state(centres, radii, initial_temperatures(scene), m["density"], m["specific_heat"],
                                fixed=fixed_mask, fixed_temperature=fixed_temperature)
     if not lifted:
         k_wall, t_wall = _merged_wall_conductance(scene, centres, radii, conducting)
@@ -364,6 +379,7 @@ def _highest_temperature(scene) -> float:
     temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in _walls(scene) if "temperature" in w]
     temperatures += [scene[k]["environment_temperature"] for k in ("convection", "radiation") if k in scene]
     temperatures += [scene["preheating"]["end_temperature"]] if "preheating" in scene else []
+    temperatures += [float(np.max(file_temperatures(scene["packing"])))] if scene["initial"]["from_file"] else []
     return float(max(temperatures))
 
 

@@ -10,7 +10,8 @@ from typing import NamedTuple
 import numpy as np
 
 from sintercond.scene.schema import (
-    MAX_FRAMES, MAX_MEMORY_BYTES, MAX_OUTPUT_BYTES, MAX_STEPS, SceneError, file_packing, restitution_damping_ratio,
+    MAX_FRAMES, MAX_MEMORY_BYTES, MAX_OUTPUT_BYTES, MAX_STEPS, SceneError, file_packing, file_temperatures,
+    restitution_damping_ratio,
 )
 
 
@@ -68,6 +69,8 @@ def estimate_run(scene) -> RunEstimate:
         kappa * math.pi * math.sqrt(r * h))
     g = 0.0
     temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in scene["walls"] if "temperature" in w]
+    if scene["initial"].get("from_file"):
+        temperatures.append(float(np.max(file_temperatures(packing))))
     if "convection" in scene:
         c = scene["convection"]
         nusselt = c["nusselt"] if "nusselt" in c else (

@@ -30,7 +30,8 @@ def scene_reference() -> str:
         lines.append("")
 
     table("[packing] kind = \"powder_bed\"", _PACKING["powder_bed"],
-          "A random bed settled under gravity (`sintercond.packing.powder_bed`), at most 20000 particles.")
+          "A random bed at rest under gravity (`sintercond.packing.powder_bed`): rolled, at most 1,000,000 particles "
+          "(the default); relaxed or DEM-poured, at most 20,000.")
     table("[packing] kind = \"simple_cubic\"", _PACKING["simple_cubic"],
           "Sphere centres at `radius + spacing * (i, j, k)`.")
     table("[packing] kind = \"poured\"", _PACKING["poured"],

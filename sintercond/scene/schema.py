@@ -61,8 +61,9 @@ TEMPERATURE = _within(1.0, 1e4, "K")
 PACKING_KINDS = ("powder_bed", "simple_cubic", "spheres", "poured", "file")
 
 
-PACKING_METHODS = ("relax", "dem")
-"""How a ``powder_bed`` is made (``packing.method``): harmonic relaxation, or poured with the DEM of [mechanics]."""
+PACKING_METHODS = ("roll", "relax", "dem")
+"""How a ``powder_bed`` is made (``packing.method``): rolled down the pile (the default), harmonic relaxation, or
+poured with the DEM of [mechanics]."""
 
 
 MAX_POURED_PARTICLES = 20_000
@@ -122,7 +123,13 @@ _SCHEMA = {
                           doc="neck (contact) radius the law takes"),
         "params": Key(dict, None, False, default="the law's", doc="the law's parameters, see [conduction.params]"),
     },
-    "initial": {"temperature": Key(float, TEMPERATURE, True, "K", doc="initial temperature of every particle")},
+    "initial": {"temperature": Key(float, TEMPERATURE, True, "K",
+                                   doc="initial temperature of every particle (with from_file: of held particles "
+                                       "that take it, and of the settling)"),
+                "from_file": Key(bool, None, False, default=False,
+                                 doc="true: each particle starts at the temperature of the packing file's "
+                                     "temperature column (packing.kind = \"file\": a table's header column T or "
+                                     "temperature, a dump's temperature or f_Temp)")},
     "boundary": {"floor_temperature": Key(float, TEMPERATURE, False, "K",
                                           doc="shorthand for a held wall at the bottom (axis 2, min)")},
     "beam": {
@@ -280,14 +287,19 @@ _PACKING = {
         "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
         "lateral_size": Key(float, _within(1e-7, 1.0, "m"), True, "m", doc="side of the square container"),
         "height": Key(float, _within(1e-7, 1.0, "m"), True, "m",
-                      doc="bed height to fill, >= the largest diameter; the bed holds 0.62 of this volume"),
+                      doc="bed height to fill, >= the largest diameter: a rolled bed is dropped until its mean surface "
+                          "height reaches it; a relaxed or DEM bed holds 0.62 of this volume"),
         "diameter_range": Key(list, ("a list [low, high] of numbers in [1e-08, 1] m", lambda v: True), True, "m",
                               doc="[low, high] diameters, uniform by volume, 1e-8 <= low <= high < lateral_size"),
         "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed"),
-        "method": Key(str, _choice(*PACKING_METHODS), False, default="relax",
-                      doc="how the bed is made: relax (spheres dropped and relaxed with harmonic repulsion, "
-                          "sintercond.packing.powder_bed) or dem (poured and settled with the contact laws of "
-                          "the [mechanics] section, which it then needs; sintercond.packing.pour; SI units)"),
+        "method": Key(str, _choice(*PACKING_METHODS), False, default="roll",
+                      doc="how the bed is made: roll (spheres dropped one by one that roll down the pile to rest "
+                          "on three supports, the bed of a poured frictional powder, solid fraction ~0.6; "
+                          "sintercond.rolling; up to 1e6 spheres), relax (a ballistic deposit collapsed without "
+                          "friction by damped harmonic repulsion, denser, ~0.66; its dynamics take ~1e5 steps, "
+                          "minutes for 1e3 spheres, ~15 min for 1e4; up to 20,000) or dem (poured and settled "
+                          "with the contact laws of the [mechanics] section, which it then needs; "
+                          "sintercond.packing.pour; SI units; up to 20,000)"),
         "sinter_swelling": Key(float, _within(0.0, 0.05), False, default=0.0,
                                doc="relative radius increase after settling that turns contacts into sintered "
                                    "necks (overlap h = 2 r s for equal spheres)"),
@@ -314,9 +326,11 @@ _PACKING = {
         "lateral_size": Key(float, _within(1e-5, 10.0, "m"), True, "m",
                             doc="side of the open square box [0, L]^2 the spheres are poured into, > 2 max radius"),
         "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed (radii and the deposit)"),
-        "start": Key(str, _choice("relaxed", "deposit"), False, default="relaxed",
+        "start": Key(str, _choice("relaxed", "deposit", "rolled"), False, default="relaxed",
                      doc="deposit: the DEM collapses the loose pile itself (a real pour); relaxed: the pile is "
-                         "first collapsed without friction, then the DEM settles it (cheaper, denser)"),
+                         "first collapsed without friction, then the DEM settles it (cheaper, denser); rolled: "
+                         "the spheres are first rolled down the pile to rest on their supports (point contacts, "
+                         "sintercond.rolling), then the DEM settles them"),
     },
     "file": {
         "kind": Key(str, _choice(*PACKING_KINDS), True, doc="the packing"),
@@ -467,6 +481,18 @@ def file_packing(packing):
         return read_packing(packing["path"], packing.get("format", "auto"), packing.get("length_unit", "m"))
     except PackingFileError as err:
         raise SceneError(f"packing.path: {err}") from None
+
+
+def file_temperatures(packing):
+    """``[n]`` start temperatures (K) of a ``kind = "file"`` packing's temperature column
+    (:func:`sintercond.packing_files.read_temperatures`); :class:`SceneError` naming ``initial.from_file`` if the file
+    has none."""
+    from sintercond.packing_files import PackingFileError, read_temperatures
+
+    try:
+        return read_temperatures(packing["path"], packing.get("format", "auto"))
+    except PackingFileError as err:
+        raise SceneError(f"initial.from_file: {err}") from None
 
 
 def restitution_damping_ratio(e):

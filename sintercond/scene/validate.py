@@ -17,8 +17,8 @@ from sintercond.sintering import KINETIC_LAWS
 from sintercond.scene.estimate import estimate_run
 from sintercond.scene.schema import (
     Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, SceneError, _LAW_PARAMS, _PACKING,
-    _REQUIRED_SECTIONS, _SCHEMA, _SECTIONS, _SINTERING_PARAMS, _WALL, _check_keys, _check_section, _describe,
-    _numbers, _suggest, _value, _within, file_packing,
+    TEMPERATURE, _REQUIRED_SECTIONS, _SCHEMA, _SECTIONS, _SINTERING_PARAMS, _WALL, _check_keys, _check_section,
+    _describe, _numbers, _suggest, _value, _within, file_packing, file_temperatures,
 )
 
 
@@ -185,7 +185,7 @@ def _check_mechanics(scene):
 
 def _check_packing(packing, conduction, sintering=False):
     from sintercond import neck
-    from sintercond.packing import PackingError, check_bed
+    from sintercond.packing import MAX_PARTICLES, MAX_ROLLED_PARTICLES, PackingError, check_bed
 
     if packing["kind"] == "file":
         packing["path"] = str(Path(packing["path"]).resolve())  # scene.json then finds it from anywhere
@@ -220,6 +220,7 @@ def _check_packing(packing, conduction, sintering=False):
                                              _within(1e-8, 1.0, "m"))
         try:
             check_bed(packing["lateral_size"], packing["height"], packing["diameter_range"],
+                      MAX_ROLLED_PARTICLES if packing["method"] == "roll" else MAX_PARTICLES,
                       names={k: f"packing.{k}" for k in ("lateral_size", "height", "diameter_range")})
         except PackingError as err:
             raise SceneError(str(err)) from None
@@ -311,6 +312,17 @@ def _check_details(scene):
                       _LAW_PARAMS, "law")
     _check_sintering(scene)
     _check_packing(scene["packing"], conduction, "sintering" in scene)
+    if scene["initial"]["from_file"]:
+        if scene["packing"]["kind"] != "file":
+            raise SceneError(f"initial.from_file = true takes the temperatures of a packing file (packing.kind = "
+                             f"\"file\"); this packing is {scene['packing']['kind']!r}")
+        temperatures = file_temperatures(scene["packing"])
+        if len(temperatures) != len(file_packing(scene["packing"])[1]):
+            raise SceneError("initial.from_file: the file's temperature column and its particles differ in length")
+        low, high = TEMPERATURE[0], TEMPERATURE[1]
+        outside = [float(t) for t in temperatures if not high(float(t))]
+        if outside:
+            raise SceneError(f"initial.from_file: the file's temperatures must be {low}; got {outside[0]:g} K")
     if "beam" in scene:
         beam = scene["beam"]
         needed = "attenuation" if beam["kind"] == "laser" else "max_depth"
