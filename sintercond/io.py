@@ -195,11 +195,11 @@ def lammps_frame(centres, radii, temperature, step, fields=None) -> str:
     lines = [f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
     lines += [f"{_number(lo[k])} {_number(hi[k])}\n" for k in range(3)]
     lines.append(" ".join(["ITEM: ATOMS id radius x y z temperature"] + _lammps_columns(fields)) + "\n")
-    extra = [v.reshape(len(radii), -1).tolist() for v in fields.values()]
-    for i, (r, (x, y, z), t) in enumerate(zip(radii.tolist(), centres.tolist(),
-                                              np.asarray(temperature, dtype=np.float64).tolist())):
-        more = "".join(f" {v!r}" for row in extra for v in row[i])
-        lines.append(f"{i + 1} {r!r} {x!r} {y!r} {z!r} {t!r}{more}\n")
+    columns = [radii, *centres.T, np.asarray(temperature, dtype=np.float64)]
+    columns += [c for v in fields.values() for c in np.asarray(v).reshape(len(radii), -1).T]
+    # column by column: repr of each number (the shortest that reads back exactly), then one join per row
+    text = [map(str, range(1, len(radii) + 1))] + [map(repr, c.tolist()) for c in columns]
+    lines.append("\n".join(map(" ".join, zip(*text))) + ("\n" if len(radii) else ""))
     return "".join(lines)
 
 

@@ -202,7 +202,7 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
     # one value per pair on both rows: the network is exactly symmetric, so
     # heat is conserved to round-off (touching with h = 0 has no neck: K = 0)
     neighbors, k = ell_table(len(radii), p.i, p.j, k_pairs)
-    return ContactTable(neighbors=jnp.asarray(neighbors, dtype=jnp.int32), conductance=jnp.asarray(k))
+    return ContactTable(neighbors=jnp.asarray(np.asarray(neighbors, np.int32)), conductance=jnp.asarray(k))
 
 
 def heat_inflow(temperature, table: ContactTable):

@@ -70,6 +70,13 @@ class Observation(NamedTuple):
     power: Any = None  # [n] net heat power into each particle from its contacts, walls and sources (W)
 
 
+def state_time(state) -> float:
+    """``step * dt`` (s) of ``state`` on the host: :attr:`sintercond.simulate.SimState.time`'s one multiplication in
+    NumPy (the same number; op by op, JAX would compile it)."""
+    dt = np.asarray(state.dt)
+    return float(np.asarray(state.step).astype(dt.dtype) * dt)
+
+
 def _probe_fn(model):
     """A jitted ``(state, params) -> (heat power [n] W, velocity after one step or None)`` for :func:`observe`."""
     sim = model.sim
@@ -112,7 +119,7 @@ def observe(scene, model, state, probe) -> Observation:
     planes = scene_walls(scene, np.asarray(model.state.particles.positions), radii)
     if model.physics.mechanics is not None:
         planes = list(model.physics.mechanics.walls)
-    t = float(state.time)
+    t = state_time(state)
     conducting_power = np.zeros(len(radii))
     wall_h = [_plane_penetration(plane, positions, radii, t) for plane in planes]
     flows = {}
@@ -160,7 +167,7 @@ def coordination(n, pairs):
 
 def _history_row(model, state, obs: Observation) -> str:
     t = np.asarray(state.particles.temperature)
-    values = [float(state.time), float(t.mean()), float(t.min()), float(t.max())]  # Python floats: plain repr
+    values = [state_time(state), float(t.mean()), float(t.min()), float(t.max())]  # Python floats: plain repr
     if model.physics.mechanics is not None:
         touching_walls = int(np.sum(np.any(obs.wall_overlap > 0, axis=0))) if len(obs.wall_overlap) else 0
         largest = float(max(np.max(obs.pair_overlap, initial=0.0), np.max(obs.wall_overlap, initial=0.0)))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import io as _io
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -113,6 +114,9 @@ def _read_cached(path, mtime, size, format):
 
 
 def _read_table(text, path):
+    fast = _read_uniform_table(text)
+    if fast is not None:
+        return fast
     lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
     rows = [(k + 1, line.replace(",", " ").replace(";", " ").split()) for k, line in enumerate(lines) if line]
     if not rows:
@@ -160,6 +164,49 @@ def _read_table(text, path):
                 raise PackingFileError(f"{path}, line {line}: {fields} are not all numbers") from None
     radii = values[:, 3] / 2 if diameter else values[:, 3]
     return values[:, :3].copy(), radii.copy(), values[:, 4].copy() if "t" in columns else None
+
+
+def _read_uniform_table(text):
+    """:func:`_read_table` of a table whose rows are all numbers of one width (NumPy's parser, no per-row
+    Python), or None for anything else (:func:`_read_table` then reads it row by row and names the row at fault)."""
+    body = text.replace(",", " ").replace(";", " ")
+    head, _, rest = body.lstrip().partition("\n")
+    head = head.split("#", 1)[0].split()
+    names = [v.lower() for v in head]
+    columns, diameter = {"x": 0, "y": 1, "z": 2, "r": 3}, False
+    if head and not all(_is_number(v) for v in head):
+        if not all(axis in names for axis in "xyz"):
+            return None
+        columns = {axis: names.index(axis) for axis in "xyz"}
+        for key, is_diameter in (("r", False), ("radius", False), ("d", True), ("diameter", True)):
+            if key in names:
+                columns["r"], diameter = names.index(key), is_diameter
+                break
+        else:
+            return None
+        heat = [names.index(key) for key in TEMPERATURE_COLUMNS if key in names]
+        if heat:
+            columns["t"] = heat[0]
+        body = rest
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # an empty or ragged table: the slow path says which row
+            table = np.loadtxt(_io.StringIO(body), comments="#", ndmin=2)
+    except (ValueError, UserWarning):
+        return None
+    if table.shape[0] == 0 or table.shape[1] < max(columns.values()) + 1 or table.shape[1] != len(head):
+        return None
+    values = table[:, [columns[c] for c in columns]]
+    radii = values[:, 3] / 2 if diameter else values[:, 3]
+    return values[:, :3].copy(), radii.copy(), values[:, 4].copy() if "t" in columns else None
+
+
+def _is_number(text):
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _read_lammps_data(text, path):

@@ -32,8 +32,11 @@ from sintercond.scene import SceneError, validate_scene
 
 from sintercond.scene.build import build_model
 from sintercond.observe import (Observation, _history_row, _probe_fn, contact_network, coordination, history_columns, observe,
-                                read_history)
+                                read_history, state_time)
 
+
+SLOW_OUTPUT_S = 2.0
+"""Seconds above which writing one output (frames, history row, checkpoint) is logged, with its time."""
 
 MAX_TEMPERATURE = 1e5
 """K; a run whose temperatures leave (0, MAX_TEMPERATURE] stops: no material of this field gets there."""
@@ -53,17 +56,17 @@ def physical_range_check(scene):
 
     def check(state):
         neck_growth.check_stable(state)
-        t = state.particles.temperature
-        bad = ~jnp.isfinite(t) | (t <= 0) | (t > MAX_TEMPERATURE)
-        if bool(jnp.any(bad)):
-            worst = float(jnp.max(jnp.where(jnp.isfinite(t), jnp.abs(t), jnp.inf)))
+        t = np.asarray(state.particles.temperature)  # on the host: op by op, JAX would compile each test
+        bad = ~np.isfinite(t) | (t <= 0) | (t > MAX_TEMPERATURE)
+        if bool(np.any(bad)):
+            worst = float(np.max(np.where(np.isfinite(t), np.abs(t), np.inf)))
             raise FloatingPointError(
                 f"temperature left the physical range (0, {MAX_TEMPERATURE:g}] K at step {int(state.step)} "
                 f"(|T| up to {worst:.3g} K); likely cause: {', '.join(causes)} too large for the time step")
         if melting is not None and not warned:
-            hottest = float(jnp.max(t))
+            hottest = float(np.max(t))
             if hottest > melting:
-                message = (f"T = {hottest:.6g} K at step {int(state.step)} (t = {float(state.time):.6g} s) is above "
+                message = (f"T = {hottest:.6g} K at step {int(state.step)} (t = {state_time(state):.6g} s) is above "
                            f"material.melting_point = {melting:g} K: the model has no melting (no latent heat, no "
                            "liquid), so what follows is not physical")
                 if scene["material"]["on_melting"] == "stop":
@@ -147,14 +150,22 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     def on_chunk(s):
         nonlocal chunks_done
         step = int(s.step)
+        if chunks_done == 0:  # the first chunk carries the compile
+            _log(f"compiled the step and ran steps {last[0]:,} to {step:,} in {time.perf_counter() - wall:.1f} s")
         crossed = step // run["checkpoint_every"] > last[0] // run["checkpoint_every"]  # an extension's steps
         last[0] = step  # are off the output grid: checkpoint once a multiple of checkpoint_every is passed
+        start = time.perf_counter()
         obs = observe(scene, model, s, probe)
         _write_outputs(scene, out, model, s, obs)
         with open(out / "history.csv", "a") as f:
             f.write(_history_row(model, s, obs))
         if crossed or step >= model.n_steps:
             save_checkpoint(out, s)  # the lists' capacities are the shapes of their leaves
+        writing = time.perf_counter() - start
+        if writing > SLOW_OUTPUT_S:
+            _log(f"outputs of step {step:,} written in {writing:.1f} s ({', '.join(scene['run']['formats'])}"
+                 f"{', checkpoint' if crossed or step >= model.n_steps else ''}); {scene['run']['output_every']:,} "
+                 "steps between outputs (run.output_every)")
         chunks_done += 1
         return stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps
 
@@ -165,7 +176,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
                            reallocate=model.reallocate, progress=bar.update, check=run_check(scene, model, state))
     finally:
         bar.close()
-    temperature = state.particles.temperature
+    temperature = np.asarray(state.particles.temperature)
     if int(state.step) < model.n_steps:
         return temperature, None
     elapsed = time.perf_counter() - wall
@@ -185,8 +196,11 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         summary.update({name: float(value) for name, value in neck_growth.neck_statistics(state).items()})
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     if pictures:
+        start = time.perf_counter()
         plots.write_run_pictures(out, np.asarray(state.particles.positions), model.radii, temperature, summary,
                                  history=read_history(out))
+        if time.perf_counter() - start > SLOW_OUTPUT_S:
+            _log(f"pictures drawn in {time.perf_counter() - start:.1f} s (--no-pictures skips them)")
     return temperature, summary
 
 
@@ -206,7 +220,7 @@ def _write_outputs(scene, out, model, state, obs: Observation):
     coordination (contacts per particle)."""
     formats = scene["run"]["formats"]
     step = int(state.step)
-    t = float(state.time)
+    t = state_time(state)
     temperature = state.particles.temperature
     positions = np.asarray(state.particles.positions)
     fields = {}

@@ -834,6 +834,12 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
         conduction = dataclasses.replace(sim.physics.conduction, conductivity_table=False)
         sim = simulator(dataclasses.replace(sim.physics, conduction=conduction))
         params = dataclasses.replace(params, conductivity=jnp.max(jnp.asarray(params.conductivity.values))[None])
+    # one compiled program: run op by op, its dozen small operations each cost an XLA compile on the host
+    return jax.jit(lambda st, p, g: _stable_step(sim, st, p, g))(state, params, source_conductance)
+
+
+def _stable_step(sim: Simulator, state: SimState, params: Params, source_conductance):
+    """:func:`thermal_time_step`'s limit, traced."""
     prep = sim.prepare_fn(state, params)
     conductance = prep.conductance
     if _per_step(sim.physics):
@@ -861,10 +867,14 @@ def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechani
     (:func:`sintercond.neck_growth.neck_state`).
     """
     dtype = particles.temperature.dtype
-    return SimState(particles=particles, contacts=contacts, step=jnp.asarray(step, jnp.int64 if jax.config.jax_enable_x64
-                                                                            else jnp.int32),
-                    dt=jnp.asarray(dt, dtype), overflow=jnp.zeros((), bool), mechanics=mechanics,
-                    sintering=sintering)
+
+    def scalar(value, kind):  # a Python number through NumPy: op by op, jnp.asarray(number, dtype) compiles
+        return jnp.asarray(np.asarray(value, kind)) if isinstance(value, (int, float, np.number)) else (
+            jnp.asarray(value, kind))
+
+    return SimState(particles=particles, contacts=contacts,
+                    step=scalar(step, jnp.int64 if jax.config.jax_enable_x64 else jnp.int32), dt=scalar(dt, dtype),
+                    overflow=jnp.asarray(np.zeros((), bool)), mechanics=mechanics, sintering=sintering)
 
 
 def table_contacts(table, wall_conductance=None, wall_temperature=None) -> TableContacts:

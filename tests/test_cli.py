@@ -45,3 +45,22 @@ def test_effective_on_a_powder_bed(tmp_path, capsys):
     assert "k* = Q L / (A dT)" in out and "mean surface height" in out
     # a sintered bed conducts, far below the solid and above nothing
     assert 0.02 * 12.6 < k_star < 0.6 * 12.6
+
+
+@pytest.mark.parametrize("argv, code, stream, text", [
+    (["scenes"], 0, "stdout", "ti6al4v_preheating_bed"),
+    (["run", "nowhere.toml"], 2, "stderr", "scene file 'nowhere.toml' does not exist"),
+    (["demo", "--kappa", "-3"], 2, "stderr", "--kappa must be finite and > 0"),
+    (["--help"], 0, "stdout", "usage: sintercond"),
+])
+def test_the_command_ends_with_its_exit_code_and_all_its_output(argv, code, stream, text):
+    """``cli.entry`` (the installed ``sintercond``) leaves through ``os._exit`` to skip the ~0.3 s of jaxlib's
+    shutdown: its exit code and every line it printed must still come out."""
+    script = f"import sys; sys.argv = ['sintercond', *{argv!r}]; from sintercond.cli import entry; entry()"
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert result.returncode == code
+    assert text in getattr(result, stream)
+    if argv == ["scenes"]:
+        from sintercond.scene import builtin_scenes
+
+        assert all(name in result.stdout for name in builtin_scenes())  # the last line too: flushed

@@ -238,3 +238,29 @@ def test_a_bed_that_settles_reports_its_progress_with_an_estimate(monkeypatch):
     assert len(relaxing) == len(calls)
     assert "settled below 0.002" in relaxing[-1] and "steps (at most" in relaxing[-1]
     assert any("s left at this rate" in line for line in relaxing)
+
+
+def test_a_rolled_bed_and_the_run_report_every_phase_with_its_time(monkeypatch, tmp_path):
+    """Issue 27: every phase that can take more than a few seconds says so: the rolled bed counts its spheres down
+    with the time left, the network and the compile give their times, and a slow output is named."""
+    from sintercond import rolling
+
+    monkeypatch.setattr(build, "PROGRESS_EVERY_S", 0.0)
+    monkeypatch.setattr(rolling, "PROGRESS_EVERY", 20)
+    monkeypatch.setattr(runner, "SLOW_OUTPUT_S", 0.0)
+    lines = []
+    monkeypatch.setattr(runner, "_log", lines.append)
+    scene = {"packing": {"kind": "powder_bed", "lateral_size": 3e-4, "height": 1.2e-4, "diameter_range": [30e-6, 50e-6]},
+             "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 7.0},
+             "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0}, "boundary": {"floor_temperature": 400.0},
+             "run": {"duration": 1e-2, "output_every": 2, "checkpoint_every": 2, "formats": ["lammps"]}}
+    _, summary = runner.run_scene(validate_scene(scene), tmp_path / "out", progress=False, pictures=False)
+    assert summary["steps"] > 4
+    rolled = [line for line in lines if line.startswith("packing: rolling")]
+    down = [int(line.split(": ")[2].split()[0].replace(",", "")) for line in rolled]
+    assert len(rolled) >= 2 and down == sorted(down) and all("s left" in line for line in rolled[:-1])
+    assert f"packing: {summary['particles']:,} particles in " in "\n".join(lines)
+    assert any(line.startswith(f"network: {summary['contacts']:,} contacts in ") for line in lines)
+    assert sum(line.startswith("compiled the step and ran steps 0 to 2 in ") for line in lines) == 1
+    written = [line for line in lines if line.startswith("outputs of step")]
+    assert len(written) == -(-summary["steps"] // 2) and "lammps" in written[-1] and "checkpoint" in written[-1]

@@ -9,6 +9,7 @@ import time
 import warnings
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -262,16 +263,22 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     bed = {}
     if centres is None:
         log("packing: building the scene's packing")
+        start = time.perf_counter()
         centres, radii, bed = build_packing(scene, log)
+        log(f"packing: {len(radii):,} particles in {time.perf_counter() - start:.1f} s")
     m, c = scene["material"], scene["conduction"]
     physics = scene_physics(scene)
-    log(f"network: contacts and conductances of {len(radii)} particles")
+    log(f"network: contacts and conductances of {len(radii):,} particles")
+    start = time.perf_counter()
     try:
         unit = physics.conduction.conductance == "table"
         table = network.contact_table(centres, radii, 1.0 if unit else m["conductivity"],
                                       c["law"], c.get("params"), c.get("neck_model"))
     except ValueError as err:
         raise SceneError(f"the packing does not fit the conduction model: {err}") from None
+    contact_count = len(table.pairs())
+    log(f"network: {contact_count:,} contacts in "
+        f"{time.perf_counter() - start:.1f} s")
     fixed_mask, fixed_temperature, conducting = _apply_walls(scene, centres, radii)
     if "preheating" in scene and scene["preheating"]["hold"] == "all":  # an isothermal cell on the ramp
         fixed_mask = np.ones(len(radii), bool)
@@ -301,7 +308,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                                                       particles.radii)
     state = simulate.init_state(particles, limiting, 1.0, sintering=necks)
     run = scene["run"]
-    sources = thermal.source_conductance(physics.sources, particles.radii, params, _highest_temperature(scene))
+    sources = jax.jit(thermal.source_conductance, static_argnums=0)(physics.sources, particles.radii, params,
+                                                                     _highest_temperature(scene))
     # every particle held (an isothermal cell on a ramp): no conduction to keep stable
     thermal_limit = np.inf if fixed_mask.all() else float(simulate.thermal_time_step(sim, state, params, sources))
     at_cap = " on the necks at the kinetic law's cap" if necks is not None else ""
@@ -358,7 +366,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
     state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
-    return Model(sim, params, state, n_steps, len(table.pairs()), limit, bed, reallocate,
+    return Model(sim, params, state, n_steps, contact_count, limit, bed, reallocate,
                  _wall_heat_specs(scene, centres, radii),
                  {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None,
                  scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
