@@ -376,7 +376,7 @@ MUTANTS = [
      "        s = run_steps(s, every)\n        return s, observe(s)", "        return run_steps(s, every), observe(s)",
      [T + "test_observable_times.py"]),
     ("history time from the previous step", "sintercond/observe.py",
-     "values = [float(state.time), float(t.mean())", "values = [float(state.time - state.dt), float(t.mean())",
+     "values = [state_time(state), float(t.mean())", "values = [state_time(state) - float(state.dt), float(t.mean())",
      [T + "test_observable_times.py"]),
     ("tangential damping key ignored", "sintercond/scene/build.py", 'xi_fric=m["tangential_damping"]',
      'xi_fric=1.0', [T + "test_scene_keys.py"]),
@@ -453,6 +453,24 @@ MUTANTS = [
      '            supports[:, 2] |= np.asarray(plane.penetration(centres, radii)) >= 0',
      '            supports[:, 2] |= np.asarray(plane.penetration(centres, radii)) > 1.0',
      [T + "test_sintering_scene.py"]),
+    # --- rolled beds, packing-file temperatures, the forces on the network's lines (issue 27)
+    ("three supports always stable", "sintercond/rolling.py", "                if np.all(lam >= -_TOL):\n",
+     "                if True:\n", [T + "test_rolling.py"]),
+    ("no support ever pulls", "sintercond/rolling.py", "                        if lam_at[a] == 0.0:\n",
+     "                        lam_at[a] = np.inf\n                        if lam_at[a] == 0.0:\n",
+     [T + "test_rolling.py"]),
+    ("rolled past the equator", "sintercond/rolling.py", "phi_low = math.atan2(u[2], -w[2])  # the equator",
+     "phi_low = 1.2 * math.atan2(u[2], -w[2])  # the equator", [T + "test_rolling.py"]),
+    ("overlap ignored by the walls", "sintercond/rolling.py", "offsets = _wall_offsets(R * shrink, L)",
+     "offsets = _wall_offsets(R, L)", [T + "test_rolling.py"]),
+    ("fill past the height", "sintercond/rolling.py", "float(surface.mean()) >= fill_height",
+     "float(surface.mean()) >= 1.1 * fill_height", [T + "test_rolling.py"]),
+    ("dump temperatures not by id", "sintercond/packing_files.py", "None if heat is None else heat[order].copy()",
+     "None if heat is None else heat.copy()", [T + "test_packing_files.py"]),
+    ("file temperatures dropped", "sintercond/scene/build.py", "        return np.array(file_temperatures(scene[\"packing\"]))",
+     "        return scene[\"initial\"][\"temperature\"]", [T + "test_packing_files.py"]),
+    ("normal force pulls", "sintercond/observe.py", '"normal_force": -np.sum(force', '"normal_force": np.sum(force',
+     [T + "test_contact_network.py"]),
 ]
 
 

@@ -193,15 +193,21 @@ def contact_network(model, state) -> tuple:
     ``fields``: ``neck_radius`` (m, the neck the conductance law takes), ``conductance`` (W/K) and ``heat_flow``
     (W, ``K (T_i - T_j)``: from ``i`` to ``j``); the contacts the static table lists (touching within the
     packing's tolerance, point contacts of a sintering lattice included), or the touching pairs of a moving
-    packing's list.
+    packing's list. With mechanics also ``force`` ``[p, 3]`` (N, on ``i`` from ``j``,
+    :func:`sintercond.simulate.contact_forces`) and ``normal_force`` (N, its component along the line of centres,
+    > 0 pushing the two apart): the force chains.
     """
     physics, p = model.physics, state.particles
     radii, temperature = np.asarray(p.radii), np.asarray(p.temperature)
     index, kappa = simulate.conductivity_lookup(physics, model.params, p)
     law = simulate.merged_law_params(physics, model.params)
+    forces = {}
     if physics.contacts == "dynamic":
         geometry = mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs)
         keep = np.asarray(geometry.touching & geometry.valid)
+        if physics.mechanics is not None:
+            force = np.asarray(jax.jit(simulate.contact_forces, static_argnums=0)(physics, state, model.params)[1])[keep]
+            forces = {"force": force, "normal_force": -np.sum(force * np.asarray(geometry.normal)[keep], axis=1)}
         pairs = np.stack([np.asarray(geometry.i), np.asarray(geometry.j)], axis=1)[keep]
         k = np.asarray(simulate.pair_conductance(physics, p.radii, index, geometry, kappa, law))[keep]
         overlap = np.asarray(geometry.overlap)[keep]
@@ -221,5 +227,5 @@ def contact_network(model, state) -> tuple:
             k = np.asarray(simulate.neck_conductance(physics, state, model.params))[lower]
             neck = np.asarray(state.contacts.neck)[lower]
     flow = k * (temperature[pairs[:, 0]] - temperature[pairs[:, 1]])
-    return pairs, {"neck_radius": neck, "conductance": k, "heat_flow": flow}
+    return pairs, {"neck_radius": neck, "conductance": k, "heat_flow": flow, **forces}
 

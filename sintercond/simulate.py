@@ -682,8 +682,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         positions, radii, mass, t = particles.positions, particles.radii, particles.mass, state.time
         contacts, motion, overflow = follow_contacts(neighbor_fn, positions, radii, contacts, state.mechanics)
         state = dataclasses.replace(state, overflow=state.overflow | overflow, contacts=contacts)
-        modulus = mechanics.particle_modulus(physics.mechanics, mp, particles.temperature, particles.material)
-        nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, positions.dtype))[particles.material], radii.shape)
+        modulus, nu = _elastic_constants(physics, mp, particles)
         index, kappa = conductivity_lookup(physics, params, particles)
         law_params = merged_law_params(physics, params)
         temperature = particles.temperature
@@ -819,6 +818,29 @@ def params_in_precision(params: Params, dtype) -> Params:
         return jnp.asarray(leaf, dtype) if floating else leaf
 
     return jax.tree_util.tree_map(cast, params)
+
+
+def _elastic_constants(physics: Physics, mp, particles: ParticleState):
+    """``(E [n], nu [n])`` of each particle: its modulus at its temperature (Eq. 42) and its material's Poisson ratio."""
+    modulus = mechanics.particle_modulus(physics.mechanics, mp, particles.temperature, particles.material)
+    nu = jnp.broadcast_to(jnp.atleast_1d(jnp.asarray(mp.nu, particles.positions.dtype))[particles.material],
+                          particles.radii.shape)
+    return modulus, nu
+
+
+def contact_forces(physics: Physics, state: SimState, params: Params):
+    """``(geometry, force [c, 3])`` of a mechanical state's listed pairs: the force on ``i`` from ``j`` (N) that the
+    step's contact laws give at this state (Hertz with damping, Mindlin friction and its spring, Quintana-Ruiz &
+    Campello 2020 Eqs. 2-13), ``geometry`` the :class:`sintercond.mechanics.PairGeometry` of the pairs."""
+    if physics.mechanics is None:
+        raise ValueError("contact_forces needs Physics.mechanics")
+    particles, motion, mp = state.particles, state.mechanics, params.mechanics
+    geometry = mechanics.pair_geometry(particles.positions, particles.radii, state.contacts.pairs.pairs)
+    modulus, nu = _elastic_constants(physics, mp, particles)
+    f, *_ = mechanics.pair_loads(physics.mechanics, mp, geometry, particles.radii, particles.mass, modulus, nu,
+                                 motion.velocity, motion.spin, motion.spring, motion.rolling, state.dt,
+                                 particles.positions.dtype)
+    return geometry, f
 
 
 def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_conductance=None):

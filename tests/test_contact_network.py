@@ -95,3 +95,37 @@ def test_no_network_unless_asked(tmp_path):
     scene["run"].update(contact_network=False)
     runner.run_scene(validate_scene(scene), tmp_path, progress=False, pictures=False)
     assert not list((tmp_path / "vtp").glob("network_*.vtp")) and not (tmp_path / "network.pvd").exists()
+
+
+def test_a_moving_packings_lines_carry_the_contact_forces(tmp_path):
+    """Issue 27's force on the network lines. Three unit-size spheres pressed in a row (overlap delta, at rest, no
+    springs yet): each line's normal force at the start is Hertz's 4/3 E* sqrt(R*) delta^(3/2) (Eq. 2, E* and R*
+    of two equal spheres); at every frame the forces of a particle's lines add up to the contact force its
+    particle frame reports (m dv/dt less gravity, the simulator's own step: no walls here)."""
+    r, delta, E, nu = 1e-3, 2e-5, 1e6, 0.3
+    scene = {
+        "packing": {"kind": "spheres", "centres": [[k * (2 * r - delta), 0.0, 0.0] for k in range(3)], "radii": r},
+        "material": {"density": 3000.0, "specific_heat": 100.0, "conductivity": 60.0},
+        "conduction": {"law": "conductivity", "neck_model": "hertz"}, "initial": {"temperature": 300.0},
+        "physics": {"mechanics": True, "impact_velocity": 0.1},
+        "mechanics": {"young_modulus": E, "poisson_ratio": nu, "friction": 0.4, "rolling_friction": 0.1},
+        "run": {"duration": 2e-4, "output_every": 3, "checkpoint_every": 6, "contact_network": True},
+    }
+    runner.run_scene(validate_scene(scene), tmp_path, progress=False, pictures=False)
+    frames, networks = (sorted((tmp_path / "vtp").glob(f"{kind}_*.vtp")) for kind in ("step", "network"))
+    assert len(frames) == len(networks) >= 3
+    first = io.read_vtp(networks[0])
+    hertz = 4.0 / 3.0 * (E / (2 * (1 - nu**2))) * np.sqrt(r / 2) * delta**1.5
+    np.testing.assert_allclose(first["normal_force"], hertz, rtol=1e-12)
+    np.testing.assert_allclose(first["force"][:, 0], -hertz, rtol=1e-12)  # on i (the left one) from j: to -x
+    for frame_file, network_file in zip(frames, networks):
+        frame, lines = io.read_vtp(frame_file), io.read_vtp(network_file)
+        reader = vtk.vtkXMLPolyDataReader()
+        reader.SetFileName(str(network_file))
+        reader.Update()
+        cells = reader.GetOutput().GetLines().GetConnectivityArray()
+        pairs = np.array([cells.GetValue(k) for k in range(cells.GetNumberOfValues())]).reshape(-1, 2)
+        total = np.zeros((3, 3))
+        np.add.at(total, pairs[:, 0], lines["force"])
+        np.add.at(total, pairs[:, 1], -lines["force"])
+        np.testing.assert_allclose(total, frame["force"], rtol=1e-9, atol=1e-9 * hertz)

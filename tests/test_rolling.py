@@ -36,6 +36,14 @@ def test_a_sphere_dropped_on_a_sphere_rolls_off_its_equator_to_the_floor():
     assert report.on_floor == 2 and report.unresolved == 0
 
 
+def test_a_small_sphere_leaves_a_large_one_at_its_equator_and_falls_straight_down():
+    """B (radius 1) dropped near the top of A (radius 3, on the floor) rolls down A's great circle and leaves it at
+    the equator of their contact sphere, 4 from A's axis at A's height; it then falls vertically to the floor (it
+    would land 2 sqrt(3) out had it kept rolling on A under the equator)."""
+    centres, _ = rolling.roll_deposit(np.array([3.0, 1.0]), 20.0, Drops([(10.0, 10.0), (10.5, 10.0)]))
+    assert centres[1] == pytest.approx([14.0, 10.0, 1.0], abs=1e-12)
+
+
 def test_a_sphere_comes_to_rest_in_the_pocket_of_three():
     """Three unit spheres on the floor at the corners of a triangle of side s: the fourth, dropped off centre, rests
     above the centroid at z = 1 + sqrt(4 - s^2 / 3) (it touches all three)."""
