@@ -98,6 +98,50 @@ def interpolate_table(theta, temperatures, values, extrapolate=False):
     return v_left + (theta - t_left) * (v_right - v_left) / (t_right - t_left)
 
 
+def _table_segments(temperatures, values, dtype):
+    """Nodes, values, each segment's slope and the integral up to each node of a clamped table, in ``dtype``."""
+    temperatures, values = as_float_arrays(temperatures, values)
+    temperatures, values = temperatures.astype(dtype), values.astype(dtype)
+    width = jnp.diff(temperatures)
+    slope = jnp.diff(values) / width
+    upto = jnp.concatenate([jnp.zeros(1, dtype), jnp.cumsum(0.5 * (values[1:] + values[:-1]) * width)])
+    return temperatures, values, slope, upto
+
+
+def integrate_table(theta, temperatures, values):
+    """``int_{T_0}^{theta} f dT`` of the clamped piecewise-linear ``f`` of :func:`interpolate_table` (``extrapolate``
+    False): exact, piecewise quadratic, continued along the end values outside (``f``'s unit times K).
+
+    With ``f`` a specific heat (J/(kg K)) it is the specific enthalpy above the first node (J/kg): what
+    :func:`sintercond.thermal.enthalpy_update` keeps. Differentiable in ``theta`` and the table.
+    """
+    theta = jnp.asarray(theta)
+    dtype = theta.dtype if jnp.issubdtype(theta.dtype, jnp.floating) else jnp.result_type(float)
+    theta = theta.astype(dtype)
+    temperatures, values, slope, upto = _table_segments(temperatures, values, dtype)
+    inside = jnp.clip(theta, temperatures[0], temperatures[-1])
+    k = jnp.clip(jnp.searchsorted(temperatures, inside, side="right") - 1, 0, temperatures.shape[0] - 2)
+    x = inside - temperatures[k]
+    return (upto[k] + values[k] * x + 0.5 * slope[k] * x * x + values[0] * jnp.minimum(theta - temperatures[0], 0.0)
+            + values[-1] * jnp.maximum(theta - temperatures[-1], 0.0))
+
+
+def invert_table_integral(integral, temperatures, values):
+    """The ``theta`` whose :func:`integrate_table` is ``integral`` (``f > 0``, so it increases): on the node's
+    segment the root of ``f_k x + (s_k / 2) x^2 = integral - I_k`` in its stable form
+    ``x = 2 d / (f_k + sqrt(f_k^2 + 2 s_k d))`` (the square root is ``f`` at the root, > 0), linear outside."""
+    integral = jnp.asarray(integral)
+    dtype = integral.dtype if jnp.issubdtype(integral.dtype, jnp.floating) else jnp.result_type(float)
+    integral = integral.astype(dtype)
+    temperatures, values, slope, upto = _table_segments(temperatures, values, dtype)
+    inside = jnp.clip(integral, upto[0], upto[-1])
+    k = jnp.clip(jnp.searchsorted(upto, inside, side="right") - 1, 0, temperatures.shape[0] - 2)
+    d = inside - upto[k]
+    x = 2.0 * d / (values[k] + jnp.sqrt(jnp.maximum(values[k] ** 2 + 2.0 * slope[k] * d, 0.0)))
+    return (temperatures[k] + x + jnp.minimum(integral - upto[0], 0.0) / values[0]
+            + jnp.maximum(integral - upto[-1], 0.0) / values[-1])
+
+
 @runtime_checkable
 class Property(Protocol):
     """A material property as a function of temperature: ``prop(theta) -> value``."""

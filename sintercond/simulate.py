@@ -117,6 +117,10 @@ class Conduction:
       conductivity_table: ``Params.conductivity`` is a :class:`sintercond.materials.Table`, the
         conductivity against temperature (one material): each particle conducts at its own temperature,
         and the conductances are evaluated at every step. Needs ``conductance="lifted"``.
+      specific_heat_table: ``Params.specific_heat`` is a :class:`sintercond.materials.Table`, the specific heat
+        against temperature (one material): each particle's capacity ``C_i = m_i c(T_i)`` at its temperature at
+        the start of every step (explicit Euler: ``sum_i C_i(T^n) (T_i^(n+1) - T_i^n)`` equals the heat in, so
+        the enthalpy ``sum_i m_i int c dT`` is kept to first order in the step). Needs the explicit integrator.
       held_ramp: the held particles follow a stepped ramp (``Params.held_ramp``,
         :class:`HeldRampParams`: Rizza & Galati 2024's Eq. 6 preheating) from their
         ``fixed_temperature``; needs ``held``.
@@ -133,6 +137,7 @@ class Conduction:
     conducting_walls: int = 0
     held_ramp: bool = False
     conductivity_table: bool = False
+    specific_heat_table: bool = False
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
@@ -148,6 +153,9 @@ class Conduction:
         if self.conductivity_table and (self.conductance != "lifted" or self.integrator != "explicit"):
             raise ValueError("Conduction.conductivity_table evaluates the law at every step: it needs "
                              "conductance='lifted' and the explicit integrator")
+        if self.specific_heat_table and self.integrator != "explicit":
+            raise ValueError("Conduction.specific_heat_table updates each capacity at every step: it needs the "
+                             "explicit integrator")
         if self.held_ramp and not self.held:
             raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
 
@@ -275,7 +283,7 @@ class Physics:
     def create(cls, law="rojek", neck_model=None, conductance="table", contacts="static", integrator="explicit",
                held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
                motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None, held_ramp=False,
-               conductivity_table=False, **mechanical) -> Physics:
+               conductivity_table=False, specific_heat_table=False, **mechanical) -> Physics:
         """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
 
         ``mechanics=True`` turns the coupled step on, with ``walls`` and the
@@ -298,7 +306,8 @@ class Physics:
         return cls(conduction=Conduction(law=law, neck_model=neck_model, conductance=conductance,
                                          integrator=integrator, implicit_tol=implicit_tol, held=bool(held),
                                          conducting_walls=conducting_walls, held_ramp=bool(held_ramp),
-                                         conductivity_table=bool(conductivity_table)),
+                                         conductivity_table=bool(conductivity_table),
+                                         specific_heat_table=bool(specific_heat_table)),
                    contacts=contacts, motion=motion,
                    sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
                                    pulse=bool(pulse), source=source),
@@ -518,6 +527,14 @@ def _wall_lift(physics, particles, contacts, params, law_params):
                                       kappa, law_params)
 
 
+def particle_capacity(physics: Physics, params: Params, particles: ParticleState):
+    """Heat capacities ``C_i = m_i c`` (J/K), Rojek et al. (2022) Eq. 1: ``c`` of each particle's material, or with
+    ``Conduction.specific_heat_table`` the table at each particle's temperature."""
+    if physics.conduction.specific_heat_table:
+        return particles.mass * params.specific_heat(particles.temperature)
+    return heat_capacity(particles, params.specific_heat)
+
+
 def conductivity_lookup(physics: Physics, params: Params, particles: ParticleState):
     """``(index [n], conductivity [k])``: particle ``i`` conducts at ``conductivity[index[i]]`` (W/(m K)).
 
@@ -611,7 +628,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
     def prepare_fn(state: SimState, params: Params) -> Prepared:
         particles, contacts = state.particles, state.contacts
         params = params_in_precision(params, particles.temperature.dtype)
-        capacity = heat_capacity(particles, params.specific_heat)
+        capacity = particle_capacity(physics, params, particles)
         wall_k = wall_t = None
         if physics.conduction.conductance == "table":
             conductance, scale = contacts.conductance, jnp.atleast_1d(jnp.asarray(params.conductivity))[0]
@@ -627,7 +644,8 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                 wall_k = _wall_lift(physics, particles, contacts, params, law_params)
                 wall_t = contacts.wall_temperature[:, None]
         rates = None
-        if physics.conduction.integrator == "explicit" and physics.contacts == "static" and physics.mechanics is None:
+        if (physics.conduction.integrator == "explicit" and physics.contacts == "static" and physics.mechanics is None
+                and not physics.conduction.specific_heat_table):
             # computed once per rollout: reverse mode then accumulates their cotangents per particle
             rates = thermal.conduction_rates(scale, capacity)
         return Prepared(params, capacity, conductance, scale, wall_k, wall_t, rates)
@@ -711,14 +729,29 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                                                  law_params)
                 power = power + k_w * (jnp.asarray(wall.temperature, power.dtype) - particles.temperature)
         power = power + thermal.source_power(physics.sources, state, params)
-        fixed = particles.fixed if physics.conduction.held else None
-        temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
-                                              held_temperature(state, prep))
+        temperature = explicit_heat(state, prep, power)
         positions, velocity, spin = mechanics.integrate(positions, loads.mechanics, loads.force, loads.torque, mass,
                                                         radii, state.dt)
         particles = dataclasses.replace(particles, positions=positions, temperature=temperature)
         motion = dataclasses.replace(loads.mechanics, velocity=velocity, spin=spin)
         return dataclasses.replace(state, particles=particles, mechanics=motion, step=state.step + 1)
+
+    def capacity_now(state: SimState, prep: Prepared):
+        """The capacities (J/K) at this step: the rollout's, or with a specific-heat table at today's temperatures."""
+        if physics.conduction.specific_heat_table:
+            return particle_capacity(physics, prep.params, state.particles)
+        return prep.capacity
+
+    def explicit_heat(state: SimState, prep: Prepared, power):
+        """The temperatures after an explicit step with heat power ``power`` (W) in: ``T + dt P / C``, or with a
+        specific-heat table the enthalpy's step (:func:`sintercond.thermal.enthalpy_update`)."""
+        particles = state.particles
+        fixed = particles.fixed if physics.conduction.held else None
+        if physics.conduction.specific_heat_table:
+            return thermal.enthalpy_update(particles.temperature, power, particles.mass, state.dt,
+                                           prep.params.specific_heat, fixed, held_temperature(state, prep))
+        return thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
+                                       held_temperature(state, prep))
 
     def held_temperature(state: SimState, prep: Prepared):
         """The held particles' temperatures at the end of the step (K): fixed, or on their ramp."""
@@ -733,7 +766,8 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         state, conductance, neighbors = current_network(state, prep)
         particles = state.particles
         fixed = particles.fixed if physics.conduction.held else None
-        if physics.conduction.integrator == "explicit" and physics.contacts == "static":
+        if (physics.conduction.integrator == "explicit" and physics.contacts == "static"
+                and not physics.conduction.specific_heat_table):
             # the network term inside the update, whose reverse mode is written for the CPU; the pulse apart (its
             # switch, a scalar, is what reverse mode stores per step) and no field of zeros without walls or sources
             terms, pulse = thermal.source_power_parts(physics.sources, state, prep.params)
@@ -745,8 +779,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                                                   pulse, prep.rates)
         elif physics.conduction.integrator == "explicit":
             power = heat_power_fn(state, prep, conductance, neighbors)
-            temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
-                                                  held_temperature(state, prep))
+            temperature = explicit_heat(state, prep, power)
         else:
             temperature = thermal.backward_euler_solve(
                 particles.temperature, lambda x: prep.scale * network_laplacian(conductance, neighbors, x),
@@ -784,7 +817,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                 total = total + prep.scale * jnp.sum(wall_k, axis=0)
             if physics.conduction.held:  # held particles are reset every step: their rows do not count
                 total = jnp.where(particles.fixed, 0.0, total)
-            limit = thermal.explicit_stability_limit(prep.capacity, total)
+            limit = thermal.explicit_stability_limit(capacity_now(state, prep), total)
             unstable = carried.unstable | jnp.any(state.dt > limit)
             return contacts, dataclasses.replace(carried, interval_temperature=particles.temperature,
                                                  interval_start=state.step, unstable=unstable), positions
@@ -852,10 +885,15 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
     no conductance. At or below it every new temperature is a convex
     combination of old ones and the sources' reference temperatures.
     """
-    if sim.physics.conduction.conductivity_table:  # the table's largest conductivity bounds it at every temperature
-        conduction = dataclasses.replace(sim.physics.conduction, conductivity_table=False)
+    conduction = sim.physics.conduction
+    if conduction.conductivity_table or conduction.specific_heat_table:
+        # the tables' largest conductivity and smallest specific heat bound it at every temperature
+        if conduction.conductivity_table:
+            params = dataclasses.replace(params, conductivity=jnp.max(jnp.asarray(params.conductivity.values))[None])
+        if conduction.specific_heat_table:
+            params = dataclasses.replace(params, specific_heat=jnp.min(jnp.asarray(params.specific_heat.values))[None])
+        conduction = dataclasses.replace(conduction, conductivity_table=False, specific_heat_table=False)
         sim = simulator(dataclasses.replace(sim.physics, conduction=conduction))
-        params = dataclasses.replace(params, conductivity=jnp.max(jnp.asarray(params.conductivity.values))[None])
     # one compiled program: run op by op, its dozen small operations each cost an XLA compile on the host
     return jax.jit(lambda st, p, g: _stable_step(sim, st, p, g))(state, params, source_conductance)
 
@@ -1065,6 +1103,29 @@ MAX_INITIAL_OVERLAP = 0.5
 (a small-strain law) would blow such spheres apart."""
 
 
+def _checked_property(name, value, tabulated, symbol, unit, bound, needs):
+    """``[n_materials]`` values of ``Params.<name>``, a :class:`sintercond.materials.Table` where the spec's
+    ``<name>_table`` says so (one material: its first node's value); raises ``ValueError`` naming the field."""
+    field = f"Params.{name}"
+    if tabulated:
+        if not isinstance(value, materials.Table):
+            raise ValueError(f"Conduction.{name}_table needs {field} as a sintercond.materials.Table "
+                             f"(materials.tabulated(T, {symbol})); got {value!r}")
+        if value.extrapolate:
+            raise ValueError(f"{field} (a table) must clamp at its ends (extrapolate=False): the stable step is "
+                             f"bounded by the table's {bound}")
+        nodes, values = np.asarray(value.temperatures, np.float64), np.asarray(value.values, np.float64)
+        require_positive(f"{field} table's temperatures (K)", nodes)
+        if nodes.ndim != 1 or nodes.shape != values.shape or len(nodes) < 2 or not np.all(np.diff(nodes) > 0):
+            raise ValueError(f"{field} (a table) needs >= 2 strictly increasing temperatures (K) and as many "
+                             f"values; got {nodes.tolist()} and {values.tolist()}")
+        require_positive(f"{field} table's values ({unit})", values)
+        return values[:1]  # one material
+    if isinstance(value, materials.Table):
+        raise ValueError(f"{field} is a table: set Conduction.{name}_table=True{needs}")
+    return np.atleast_1d(np.asarray(value, np.float64))
+
+
 def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     """Raise ``ValueError`` naming the field and the allowed range unless ``(state, params)`` can run on ``sim``.
 
@@ -1087,27 +1148,11 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     dt = np.asarray(state.dt, np.float64)
     if not (dt.shape == () and np.isfinite(dt) and dt > 0):
         raise ValueError(f"SimState.dt (the time step) must be finite and > 0 s; got {state.dt!r}")
-    table = params.conductivity
-    if sim.physics.conduction.conductivity_table:
-        if not isinstance(table, materials.Table):
-            raise ValueError("Conduction.conductivity_table needs Params.conductivity as a "
-                             f"sintercond.materials.Table (materials.tabulated(T, kappa)); got {table!r}")
-        if table.extrapolate:
-            raise ValueError("Params.conductivity (a table) must clamp at its ends (extrapolate=False): the stable "
-                             "step is bounded by the table's largest conductivity")
-        nodes, values = np.asarray(table.temperatures, np.float64), np.asarray(table.values, np.float64)
-        require_positive("Params.conductivity table's temperatures (K)", nodes)
-        if nodes.ndim != 1 or nodes.shape != values.shape or len(nodes) < 2 or not np.all(np.diff(nodes) > 0):
-            raise ValueError("Params.conductivity (a table) needs >= 2 strictly increasing temperatures (K) and as "
-                             f"many conductivities; got {nodes.tolist()} and {values.tolist()}")
-        require_positive("Params.conductivity table's conductivities (W/(m K))", values)
-        kappa = values[:1]  # one material
-    elif isinstance(table, materials.Table):
-        raise ValueError("Params.conductivity is a table: set Conduction.conductivity_table=True (with "
-                         "conductance='lifted')")
-    else:
-        kappa = np.atleast_1d(np.asarray(params.conductivity, np.float64))
-    heat = np.atleast_1d(np.asarray(params.specific_heat, np.float64))
+    conduction = sim.physics.conduction
+    kappa = _checked_property("conductivity", params.conductivity, conduction.conductivity_table, "kappa",
+                              "W/(m K)", "largest conductivity", " (with conductance='lifted')")
+    heat = _checked_property("specific_heat", params.specific_heat, conduction.specific_heat_table, "c",
+                             "J/(kg K)", "smallest specific heat", "")
     if kappa.ndim != 1 or heat.shape != kappa.shape:
         raise ValueError(f"Params.conductivity and Params.specific_heat must be [n_materials] each; got shapes "
                          f"{kappa.shape} and {heat.shape}")

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.sparse.linalg import cg
 
-from sintercond import heat_sources
+from sintercond import heat_sources, materials
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
 from sintercond._symmetric import linear_call
@@ -102,9 +102,30 @@ def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_tem
         # scale and capacity set the numbers; their derivative is that of the rates
         new = _conduction_update(temperature, power, field, switch, jax.lax.stop_gradient(capacity), dt,
                                  jax.lax.stop_gradient(scale), conductance, neighbors, rate, inverse_capacity)
+    return _held(new, fixed_mask, fixed_temperature)
+
+
+def _held(new, fixed_mask, fixed_temperature):
+    """``new`` with the held particles (``fixed_mask``, or none if None) reset to ``fixed_temperature``."""
     if fixed_mask is None:
         return new
     return jnp.where(fixed_mask, fixed_temperature, new)
+
+
+def enthalpy_update(temperature, power, mass, dt, specific_heat, fixed_mask=None, fixed_temperature=None):
+    """The explicit Euler step of the enthalpy with a specific heat against temperature: ``h(T') = h(T) + dt P / m``.
+
+    ``h(T) = int c dT`` of the clamped table ``specific_heat`` (a :class:`sintercond.materials.Table`,
+    :func:`sintercond.materials.integrate_table`), inverted in closed form on its quadratic pieces
+    (:func:`sintercond.materials.invert_table_integral`): each particle's enthalpy moves by exactly the heat
+    in, so a network's exchange (``sum_i P_i = 0``) keeps ``sum_i m_i h(T_i)`` to round-off, and the step is
+    Rojek et al. (2022) Eq. 2's ``C dT/dt = P`` with ``C = m c(T)`` at first order. ``power`` ``[n]`` (W),
+    ``mass`` ``[n]`` (kg); held particles reset to their values.
+    """
+    nodes, values = specific_heat.temperatures, specific_heat.values
+    enthalpy = materials.integrate_table(temperature, nodes, values) + dt * power / mass
+    new = materials.invert_table_integral(enthalpy, nodes, values).astype(temperature.dtype)
+    return _held(new, fixed_mask, fixed_temperature)
 
 
 def conduction_rates(scale, capacity):

@@ -122,6 +122,7 @@ ELSEWHERE = {
     "sintering.shrinkage": "test_sintering_scene.py: test_many_body_shrinkage_holds_the_bottom_layer_on_its_floor...",
     "run.contact_network": "test_contact_network.py: network frames written when asked, none otherwise",
     "material.conductivity_table": "test_conductivity_table.py: test_a_scenes_table_reaches_the_run",
+    "material.specific_heat_table": "test_specific_heat_table.py: test_a_scenes_table_reaches_the_run...",
     "sintering.k_star_axis": "test_sintering_scene.py: the SC cell's k_star_W_mK against K_pair / spacing",
     **{f"preheating.{key}": "test_sintering_scene.py: the SC cell on the ramp, test_a_held_wall_follows_the_ramp"
        for key in ("end_temperature", "duration", "steps", "hold")},

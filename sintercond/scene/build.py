@@ -152,7 +152,8 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
     return simulate.Physics(
         conduction=simulate.Conduction(
             law=c["law"], neck_model=c.get("neck_model"), conductance="lifted" if lifted else "table",
-            held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table),
+            held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table,
+            specific_heat_table="specific_heat_table" in scene["material"]),
         sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
                                  radiation="radiation" in scene),
         sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"],
@@ -222,7 +223,9 @@ def scene_params(scene) -> simulate.Params:
     return simulate.Params(
         mechanics=mechanical_params(scene),
         conductivity=f([m["conductivity"]]) if "conductivity_table" not in m else materials.tabulated(
-            *np.asarray(m["conductivity_table"], np.float64).T), specific_heat=f([m["specific_heat"]]),
+            *np.asarray(m["conductivity_table"], np.float64).T),
+        specific_heat=f([m["specific_heat"]]) if "specific_heat_table" not in m else materials.tabulated(
+            *np.asarray(m["specific_heat_table"], np.float64).T),
         law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
         sintering=None if "sintering" not in scene else {k: f(v) for k, v in
                                                          scene["sintering"].get("params", {}).items()},

@@ -80,7 +80,8 @@ def estimate_run(scene) -> RunEstimate:
     if "radiation" in scene:
         temperatures.append(scene["radiation"]["environment_temperature"])
         g += 16 * math.pi * scene["radiation"]["emissivity"] * STEFAN_BOLTZMANN * max(temperatures) ** 3 * r**2
-    capacity = material["density"] * material["specific_heat"] * 4 / 3 * math.pi * r**3
+    c_min = min([material["specific_heat"]] + [c for _, c in material.get("specific_heat_table", [])])
+    capacity = material["density"] * c_min * 4 / 3 * math.pi * r**3
     dt = 0.9 * capacity / (z * k_pair + g)
     if scene["physics"]["mechanics"]:
         wall_speed = max((advance_speed(w) for w in scene["walls"]), default=0.0)

@@ -101,7 +101,14 @@ MAX_MEMORY_BYTES = 8e9
 _SCHEMA = {
     "material": {
         "density": Key(float, _within(1.0, 1e5, "kg/m^3"), True, "kg/m^3", doc="solid density"),
-        "specific_heat": Key(float, _within(1.0, 1e5, "J/(kg K)"), True, "J/(kg K)", doc="specific heat capacity"),
+        "specific_heat": Key(float, _within(1.0, 1e5, "J/(kg K)"), True, "J/(kg K)",
+                             doc="specific heat capacity (with specific_heat_table: the one number the run's "
+                                 "estimate takes)"),
+        "specific_heat_table": Key(list, ("a list of at least 2 [T, c] pairs, T strictly increasing in (0, 1e5] K, "
+                                          "c in [1, 100000] J/(kg K)", lambda v: True), False, "K, J/(kg K)",
+                                   doc="c(T): each particle's capacity at its own temperature, piecewise linear "
+                                       "between the pairs and clamped beyond them; the run steps the enthalpy int c "
+                                       "dT, so heat is conserved to round-off (sintercond.thermal.enthalpy_update)"),
         "conductivity": Key(float, _within(1e-6, 1e4, "W/(m K)"), True, "W/(m K)",
                             doc="solid conductivity kappa (with conductivity_table: the one number sintercond "
                                 "effective and the run's estimate take)"),

@@ -289,24 +289,25 @@ def _check_law_params(section, params, law, keys, kind):
         params[key] = _value(f"{section}.{key}", value, keys[key])
 
 
-def _check_conductivity_table(material):
-    table = material.get("conductivity_table")
+def _check_property_table(material, key, symbol, low, high):
+    """``material.<key>``: at least 2 ``[T, value]`` pairs, T strictly increasing, values in ``[low, high]``."""
+    table = material.get(key)
     if table is None:
         return
-    rule = _SCHEMA["material"]["conductivity_table"].rule[0]
+    rule = _SCHEMA["material"][key].rule[0]
     if len(table) < 2:
-        raise SceneError(f"material.conductivity_table must be {rule}; got {table!r}")
-    rows = [_numbers(f"material.conductivity_table[{k}]", row, 2, ("a [T, kappa] pair of positive numbers",
-                                                                     lambda v: 0 < v <= 1e5)) for k, row in
-            enumerate(table)]
+        raise SceneError(f"material.{key} must be {rule}; got {table!r}")
+    rows = [_numbers(f"material.{key}[{k}]", row, 2, (f"a [T, {symbol}] pair of positive numbers",
+                                                      lambda v: 0 < v <= 1e5)) for k, row in enumerate(table)]
     temperatures, values = zip(*rows)
-    if any(b <= a for a, b in zip(temperatures, temperatures[1:])) or not all(1e-6 <= v <= 1e4 for v in values):
-        raise SceneError(f"material.conductivity_table must be {rule}; got {table!r}")
-    material["conductivity_table"] = [list(r) for r in rows]
+    if any(b <= a for a, b in zip(temperatures, temperatures[1:])) or not all(low <= v <= high for v in values):
+        raise SceneError(f"material.{key} must be {rule}; got {table!r}")
+    material[key] = [list(r) for r in rows]
 
 
 def _check_details(scene):
-    _check_conductivity_table(scene["material"])
+    _check_property_table(scene["material"], "conductivity_table", "kappa", 1e-6, 1e4)
+    _check_property_table(scene["material"], "specific_heat_table", "c", 1.0, 1e5)
     conduction = scene["conduction"]
     _check_law_params("conduction.params", conduction.get("params", {}), CONDUCTANCE_LAWS[conduction["law"]],
                       _LAW_PARAMS, "law")
