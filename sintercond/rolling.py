@@ -123,6 +123,17 @@ def _first_entry(A, B, E, phi_end):
     return entry
 
 
+def _first_entry_scalar(A, B, E, phi_end):
+    """:func:`_first_entry` of one row, in Python floats."""
+    M = math.hypot(A, B)
+    if A - E <= _TOL * max(M, abs(E)) and B < 0:
+        return 0.0
+    if M == 0.0 or abs(E / M) > 1.0:
+        return math.inf
+    entry = (math.atan2(B, A) + math.acos(E / M)) % (2.0 * math.pi)
+    return entry if entry <= phi_end and entry <= 2.0 * math.pi - _TOL else math.inf
+
+
 @dataclasses.dataclass
 class _Supports:
     """What a rolling sphere touches: sphere indices and wall numbers (0: x = r, 1: x = L - r, 2: y = r, 3: y = L - r)."""
@@ -142,6 +153,8 @@ def _leave(supports, m):
         supports.walls.pop(m - len(supports.spheres))
 
 
+_UP = np.array([0.0, 0.0, 1.0])
+
 _WALL_NORMALS = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
 
 
@@ -150,13 +163,28 @@ def _wall_offsets(reach, L):
     return np.array([reach, -(L - reach), reach, -(L - reach)])
 
 
+def _norm(v):
+    """Length of a 3-vector (math on its three numbers: NumPy's norm costs more than the arithmetic here)."""
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
 def _reactions(p, supports, centres):
-    """Reactions ``lambda`` with ``sum lambda_k n_k = z`` (least squares for fewer than three supports), and the residual."""
-    normals = [(p - centres[k]) / np.linalg.norm(p - centres[k]) for k in supports.spheres]
+    """Reactions ``lambda`` with ``sum lambda_k n_k = z``: solved for three supports, least squares (the normal
+    equations of the Gram matrix) for fewer."""
+    normals = [(p - centres[k]) / _norm(p - centres[k]) for k in supports.spheres]
     normals += [_WALL_NORMALS[w] for w in supports.walls]
+    if len(normals) == 2:  # the projection of z on the normals' plane: the Gram matrix [[1, c], [c, 1]]
+        c = float(np.dot(normals[0], normals[1]))
+        if 1.0 - c * c > _TOL:
+            z0, z1 = normals[0][2], normals[1][2]
+            return np.array([z0 - c * z1, z1 - c * z0]) / (1.0 - c * c)
     N = np.array(normals).T
-    lam, *_ = np.linalg.lstsq(N, np.array([0.0, 0.0, 1.0]), rcond=None)
-    return lam, float(np.linalg.norm(N @ lam - np.array([0.0, 0.0, 1.0])))
+    if N.shape[1] == 3:
+        try:
+            return np.linalg.solve(N, _UP)
+        except np.linalg.LinAlgError:  # coplanar supports: the least-squares reactions
+            pass
+    return np.linalg.lstsq(N, _UP, rcond=None)[0]
 
 
 PROGRESS_EVERY = 500
@@ -242,7 +270,7 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
             # the circle the sphere rolls along, and where on it the arc ends
             if len(sup.spheres) == 1 and not sup.walls:
                 c = centres[sup.spheres[0]]
-                q, s = c, float(np.linalg.norm(p - c))
+                q, s = c, _norm(p - c)
                 u = (p - q) / s
                 if u[2] <= _TOL:  # at or below the equator: it leaves the sphere
                     sup.spheres = []
@@ -255,17 +283,17 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
                     heading = u[:2] / uh
                 w = np.array([*(u[2] * heading), -uh])  # the tangent down the great circle
                 w -= np.dot(w, u) * u
-                w /= np.linalg.norm(w)
+                w /= _norm(w)
                 phi_low = math.atan2(u[2], -w[2])  # the equator: past it the sphere falls
             else:
-                lam, _ = _reactions(p, sup, centres)
+                lam = _reactions(p, sup, centres)
                 if np.min(lam) < -_TOL:  # one support would pull: roll on the other alone
                     _leave(sup, int(np.argmin(lam)))
                     continue
                 if len(sup.spheres) == 2:
                     ca, cb = centres[sup.spheres[0]], centres[sup.spheres[1]]
-                    ra, rb = np.linalg.norm(p - ca), np.linalg.norm(p - cb)
-                    d = float(np.linalg.norm(cb - ca))
+                    ra, rb = _norm(p - ca), _norm(p - cb)
+                    d = _norm(cb - ca)
                     axis = (cb - ca) / d
                     along = (d * d + ra * ra - rb * rb) / (2.0 * d)
                     q = ca + along * axis
@@ -275,12 +303,13 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
                     q = ca + (offsets[sup.walls[0]] - np.dot(axis, ca)) * axis
                 u = p - q
                 u -= np.dot(u, axis) * axis
-                s = float(np.linalg.norm(u))
+                s = _norm(u)
                 if s < _TOL * R:  # the circle is a point: nowhere to roll
                     outcome = "two"
                     break
                 u /= s
-                w = np.cross(axis, u)
+                w = np.array([axis[1] * u[2] - axis[2] * u[1], axis[2] * u[0] - axis[0] * u[2],
+                              axis[0] * u[1] - axis[1] * u[0]])
                 if w[2] > 0:
                     w = -w
                 if w[2] > -_TOL:  # at the circle's lowest point already
@@ -290,7 +319,8 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
             # events on the arc: new spheres, the floor, the walls, a support that would pull
             lo, hi = q - s - R - r_max, q + s + R + r_max
             cand = grid.within(lo, hi)
-            cand = cand[~np.isin(cand, sup.spheres)]
+            for m in sup.spheres:
+                cand = cand[cand != m]
             rho = (R + radii[cand]) * shrink
             rel = q[None, :] - centres[cand]
             A = 2.0 * s * rel @ u
@@ -308,7 +338,7 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
             if sup.count() == 2:
                 normals_u, normals_w, normals_q = [], [], []
                 for m in sup.spheres:
-                    rk = float(np.linalg.norm(p - centres[m]))
+                    rk = _norm(p - centres[m])
                     normals_u.append(s * u / rk)
                     normals_w.append(s * w / rk)
                     normals_q.append((q - centres[m]) / rk)
@@ -324,7 +354,7 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
                         zu = normals_u[a][2] - cosine * normals_u[b][2]
                         zw = normals_w[a][2] - cosine * normals_w[b][2]
                         zq = normals_q[a][2] - cosine * normals_q[b][2]
-                        lam_at[a] = _first_entry(np.array([zu]), np.array([zw]), np.array([-zq]), phi_low)[0]
+                        lam_at[a] = _first_entry_scalar(zu, zw, -zq, phi_low)
                         if lam_at[a] == 0.0:
                             lam_at[a] = _TOL  # leave it now (below), not an endless loop
             first = min(float(np.min(sphere_at, initial=np.inf)), float(np.min(plane_at, initial=np.inf)),
@@ -350,7 +380,7 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
             else:
                 sup.spheres.append(int(cand[int(np.argmin(sphere_at))]))
             if sup.count() == 3 or (len(sup.walls) == 2 and sup.spheres):
-                lam, _ = _reactions(p, sup, centres)
+                lam = _reactions(p, sup, centres)
                 if np.all(lam >= -_TOL):
                     outcome = "three"
                     break
