@@ -534,6 +534,8 @@ def run(mutants, timeout):
 
 def main():
     parser = argparse.ArgumentParser()
+    parser.add_argument("--record", action="store_true",
+                        help="only rewrite RESULTS.md's section from results/mutation.csv (runs nothing)")
     parser.add_argument("--only", default=None, help="run the mutants whose name contains this (several: A|B)")
     parser.add_argument("--check", action="store_true", help="only check that every snippet is found once")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant")
@@ -546,6 +548,9 @@ def main():
     if problems or args.check:
         print("\n".join(problems) or f"{len(mutants)} mutants, every snippet found once")
         sys.exit(1 if problems else 0)
+    if args.record:
+        write_record([])
+        return
     rows = run(mutants, args.timeout)
     killed = sum(r[2].startswith("killed") for r in rows)
     print(f"{killed} of {len(rows)} mutants killed ({100 * killed / len(rows):.1f} %)")
@@ -583,18 +588,23 @@ def write_record(rows) -> None:
     killed = sum(r[2].startswith("killed") for r in rows)
     modules = sorted({r[1] for r in rows})
     summary = f"{killed} of {len(rows)} mutants killed ({100 * killed / len(rows):.1f} %) in {len(modules)} modules"
-    per_module = []
-    for module in modules:
-        mine = [r for r in rows if r[1] == module]
-        per_module.append((module, len(mine), sum(r[2].startswith("killed") for r in mine),
-                           f"{sum(float(r[4]) for r in mine):.0f}"))
+    per_folder = []
+    for folder in sorted({m.rsplit("/", 1)[0] for m in modules}):
+        mine = [m for m in modules if m.rsplit("/", 1)[0] == folder]
+        counts = []
+        for module in mine:
+            rows_of = [r for r in rows if r[1] == module]
+            killed_of = sum(r[2].startswith("killed") for r in rows_of)
+            counts.append(f"{module.rsplit('/', 1)[1]} {killed_of}/{len(rows_of)}")
+        seconds = sum(float(r[4]) for r in rows if r[1] in mine)
+        per_folder.append((folder, "; ".join(counts), f"{seconds:.0f}"))
     survivors = [r for r in rows if not r[2].startswith("killed")]
     body = (
         "## Mutation testing\n\n"
         "Small deliberate bugs (benchmarks/mutation.py: each replaces one snippet of one module) against the "
         "tests of that module (`pytest -x`). Killed: the tests fail. "
         f"{summary}. Every mutant's result: [results/mutation.csv](results/mutation.csv).\n\n"
-        + markdown_table(("module", "mutants", "killed", "seconds"), per_module)
+        + markdown_table(("folder", "module killed/mutants", "seconds"), per_folder)
         + ("\n\nSurvivors:\n" + "\n".join(f"- {r[0]} ({r[1]}): {EXPLAINED.get(r[0], 'not explained')}"
                                          for r in survivors) if survivors else "\n\nNo survivors.")
     )

@@ -405,15 +405,13 @@ def main():
         f"temperatures written. Process start to exit, best of {args.repeats}. `sintercond run` (scene file): the "
         "command a user runs (`--no-progress --no-pictures`) on a scene whose packing file (x, y, z, r, T rows, "
         "`initial.from_file`) holds the lattice and its start field; it writes history.csv, a LAMMPS dump, a "
-        "checkpoint and the summary; 'steps' is its stepping loop. The other sintercond rows are a driver on the "
-        "public API (import includes JAX; build = packing + `contact_table`; compile = `jit(...).lower()."
-        "compile()`; cold/warm: JAX's persistent cache empty or filled). LAMMPS/LIGGGHTS 'loop' is their loop "
-        "time; 'rest' is the process less the phases. The last column compares final temperatures (K) with the "
-        "peer of the same law: LAMMPS `heat radius` (`2 kappa a_Hertz`) is `batchelor_obrien` + `neck_model="
-        "'hertz'`; LIGGGHTS `heat/gran/conduction` (`2 sqrt(pi) kappa a_lens`) is `batchelor_obrien`, slope "
-        "4/sqrt(pi), `neck_model='intersection'`. Serial peers (one MPI rank, OMP_NUM_THREADS=1), reading a data "
-        "file written beforehand, as `sintercond run` reads its table; their loops also evaluate (zero-stiffness) "
-        "contact forces and check neighbour lists.\n\n"
+        "checkpoint and the summary; 'steps': its stepping loop. The other sintercond rows: a driver on the "
+        "public API (build = packing + `contact_table`; cold/warm: JAX's persistent cache empty or filled). "
+        "'loop': the peers' loop time; 'rest': the process less the phases. Last column: final temperatures (K) "
+        "against the peer of the same law: LAMMPS `heat radius` (`2 kappa a_Hertz`) is `batchelor_obrien` + "
+        "`neck_model='hertz'`; LIGGGHTS `heat/gran/conduction` (`2 sqrt(pi) kappa a_lens`) is "
+        "`batchelor_obrien`, slope 4/sqrt(pi), `neck_model='intersection'`. Serial peers (one MPI rank, "
+        "OMP_NUM_THREADS=1) read a data file written beforehand.\n\n"
         + markdown_table(("particles", "code", "whole process (s)", "phases (s)", "max abs(dT) (K) against"), rows)
         + ("\n\n" + "; ".join(notes) if notes else "") + "\n\n" + plot(rows)
     )
