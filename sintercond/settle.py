@@ -254,7 +254,7 @@ class SettleReport:
     """How a DEM settle ended; returned with every packing it builds (all SI).
 
     Attributes:
-      steps: DEM steps taken; time: simulated time (s); dt: the step (s).
+      steps: DEM steps taken; time: simulated time (s); dt: the step (s) (a stiffened bed's: its stiff stage's).
       kinetic_ratio: kinetic energy (translation + rotation) over ``sum_i m_i g r_i``
         at the end; ``kinetic_tol`` the threshold it met.
       force_ratio: ``max_i |F_i| / (m_i g)`` at the end, ``F_i`` the net force
@@ -264,6 +264,9 @@ class SettleReport:
       step_overlap: overlap (m) the time step was sized for (:func:`sintercond.mechanics.mechanical_time_step`).
       v_rel: approach speed (m/s) the time step was sized for.
       reallocations: neighbour-list reallocations; wall_seconds: run time (s).
+      soft_modulus: the Young's modulus (Pa) of the soft stage a stiffened bed settled at first
+        (:func:`stiffen`), or None; soft_steps: that stage's steps; stiffen_residual: the relative residual of
+        the stiffened overlaps (:func:`stiffened_positions`).
     """
 
     steps: int
@@ -278,13 +281,19 @@ class SettleReport:
     v_rel: float
     reallocations: int
     wall_seconds: float
+    soft_modulus: float | None = None
+    soft_steps: int = 0
+    stiffen_residual: float = 0.0
 
     def summary(self) -> dict:
         """The figures as a flat dict with units in the keys."""
+        soft = {} if self.soft_modulus is None else {"settle_soft_modulus_Pa": self.soft_modulus,
+                                                     "settle_soft_steps": self.soft_steps,
+                                                     "settle_stiffen_residual": self.stiffen_residual}
         return {"settle_steps": self.steps, "settle_time_s": self.time, "settle_dt_s": self.dt,
                 "settle_kinetic_ratio": self.kinetic_ratio, "settle_kinetic_tol": self.kinetic_tol,
                 "settle_force_ratio": self.force_ratio, "settle_force_tol": self.force_tol,
-                "settle_max_overlap": self.max_overlap, "settle_wall_s": self.wall_seconds}
+                "settle_max_overlap": self.max_overlap, "settle_wall_s": self.wall_seconds} | soft
 
 
 class DemSettled(typing.NamedTuple):
@@ -300,6 +309,7 @@ class DemSettled(typing.NamedTuple):
     params: typing.Any
     neighbor_fns: typing.Any
     report: SettleReport
+    material: DemMaterial | None = None
 
 
 def box_walls(lateral_size):
@@ -353,7 +363,7 @@ def _overlaps(centres, radii, walls):
 
 def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0, softening=False, *,
                kinetic_tol=KINETIC_TOL, force_tol=FORCE_TOL, max_time=2.0, check_every=1000, skin_fraction=0.1,
-               v_rel=None, progress=None) -> DemSettled:
+               v_rel=None, progress=None, soft_modulus=None) -> DemSettled:
     """Let spheres fall and settle under gravity with the real contact laws; returns a :class:`DemSettled`.
 
     The coupled step of :mod:`sintercond.simulate` (``Physics(mechanics=Mechanics(...))``,
@@ -382,32 +392,47 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     force is read off one probe step, ``m dv/dt``). ``progress(phase, steps, max_steps, figure, 1.0)``, if
     given, is called at every check with the larger of the two figures over its threshold.
 
+    Soft pour, then stiffen (``soft_modulus``): a pile comes to rest in some tens of milliseconds of physical time,
+    whatever its stiffness, while the step shrinks as the stiffness grows (a 45-105 um Ti6Al4V bed at 110 GPa
+    takes some 5e-9 s steps: millions of steps). With ``soft_modulus`` (Pa, below ``material.E``) the pile settles
+    at that modulus first, and :func:`stiffen` then carries it to ``material``: Hertz-Mindlin contacts are
+    homogeneous, so the same forces and torques hold at the stiff modulus with every deformation (normal overlap,
+    tangential and rolling spring) scaled by ``(soft_modulus / E)^(2/3)``; the stiff DEM then only damps what the
+    geometric change leaves (``max_time`` is the budget of each stage).
+
     Args:
       centres: ``[n, 3]`` start positions (m), at rest, no sphere below the floor.
       radii: ``[n]`` (m).
       walls: :class:`sintercond.walls.PlaneWall` s (e.g. :func:`box_walls`).
       material: :class:`DemMaterial`.
       max_time: simulated time (s) allowed to settle.
+      soft_modulus: Young's modulus (Pa) of a soft pour first, ``0 < soft_modulus < material.E``, or None.
 
     Raises:
       PackingError: bad input (naming it), or not settled within ``max_time``
         (naming the quantity that missed its threshold and its value).
     """
-    from sintercond import mechanics, simulate
-    from sintercond.rollout import ListOverflow, advance
-    from sintercond.state import particle_state
-
     if not isinstance(material, DemMaterial):
         raise PackingError(f"material must be a DemMaterial; got {type(material).__name__}")
-    for name, value in (("kinetic_tol", kinetic_tol), ("force_tol", force_tol), ("max_time", max_time),
-                        ("skin_fraction", skin_fraction)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise PackingError(f"{name} must be a finite number > 0; got {value!r}")
-    if not (isinstance(check_every, int) and check_every >= 1):
-        raise PackingError(f"check_every must be an int >= 1; got {check_every!r}")
+    options = dict(kinetic_tol=kinetic_tol, force_tol=force_tol, max_time=max_time, check_every=check_every,
+                   progress=progress)
+    if soft_modulus is not None:
+        if isinstance(soft_modulus, bool) or not isinstance(soft_modulus, (int, float)) \
+                or not 0.0 < soft_modulus < material.E:
+            raise PackingError(f"soft_modulus must be a number in (0, E = {material.E:g}) Pa; got {soft_modulus!r}")
+        if softening:
+            raise PackingError("soft_modulus needs softening=False: the stiffening scales every contact by one "
+                               "modulus ratio, which softening would make differ from particle to particle")
+        soft = dem_settle(centres, radii, walls, dataclasses.replace(material, E=float(soft_modulus)), temperature,
+                          skin_fraction=skin_fraction, v_rel=v_rel, **options)
+        return stiffen(soft, material, **options)
+    _check_settle_options(kinetic_tol, force_tol, max_time, check_every, skin_fraction)
     start = time.perf_counter()
     centres = np.asarray(centres, np.float64)
     radii = np.broadcast_to(np.asarray(radii, np.float64), (len(centres),))
+    from sintercond import mechanics, simulate
+    from sintercond.state import particle_state
+
     with jax.enable_x64(True):
         temperature = np.broadcast_to(np.asarray(temperature, np.float64), radii.shape)
         try:
@@ -415,59 +440,203 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
         except ValueError as err:
             raise PackingError(str(err)) from None
         physics = dem_physics(walls, softening, material.mu_wall > 0, material.mu_r_wall > 0)
-        mp = material.mechanical_params()
         r_max = float(radii.max())
         contacts, fns = simulate.dynamic_contacts(centres, radii, skin_fraction * float(radii.mean()),
                                                   capacity_multiplier=1.5, margin=np.full(3, 2.0 * r_max))
-        top = float(np.max(centres[:, 2] + radii))
         if v_rel is None:
+            top = float(np.max(centres[:, 2] + radii))
             v_rel = math.sqrt(2.0 * GRAVITY * max(top - float(np.min(centres[:, 2] - radii)), 4.0 * float(radii.mean())))
-        column = material.density * GRAVITY * top * (2.0 * r_max) ** 2
-        static = _hertz_plane_overlap(column, r_max, material.E, material.nu)
-        from sintercond.forces import effective_mass, hertz_collision_overlap
-
-        m_max = 4.0 / 3.0 * math.pi * r_max**3 * material.density
-        collision = float(hertz_collision_overlap(r_max, effective_mass(m_max, jnp.inf), material.E / (1 - material.nu**2),
-                                                  v_rel))
-        step_overlap = max(static, collision)
-        step_fn = mechanics.mechanical_time_step
-        dt = float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, step_overlap))
-        dt = min(dt, float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, None)))
-        params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
-        state = simulate.init_state(particles, contacts, dt,
+        state = simulate.init_state(particles, contacts, 1.0,
                                     mechanics=mechanics.mechanical_state(physics.mechanics, centres, contacts))
-        sim = simulate.simulator(physics, fns)
-        energy_scale = float(jnp.sum(particles.mass * GRAVITY * particles.radii))
-        max_steps = check_every * int(math.ceil(max_time / dt / check_every))
-        figures = {"kinetic": math.inf, "force": math.inf}
+        return _settle(simulate.simulator(physics, fns), physics, state, fns, material, float(v_rel), start,
+                       "settling (DEM)", **options)
 
-        def settled(s, measured):
-            kinetic, force = measured
-            figures.update(kinetic=float(kinetic) / energy_scale, force=float(force))
-            if progress is not None:  # settled when both are below their thresholds: the larger ratio below 1
-                progress("settling (DEM)", int(s.step), max_steps,
-                         max(figures["kinetic"] / kinetic_tol, figures["force"] / force_tol), 1.0)
-            return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
 
-        try:
-            state, loop = advance(sim, state, params, max_steps, check_every, settled,
-                                  reallocate=simulate.reallocate_neighbors(fns), check=_finite_positions,
-                                  measure=_settle_figures)
-        except ListOverflow:
-            raise PackingError("the DEM neighbour list keeps overflowing") from None
-        final = np.asarray(state.particles.positions)
+def _check_settle_options(kinetic_tol, force_tol, max_time, check_every, skin_fraction=0.1):
+    for name, value in (("kinetic_tol", kinetic_tol), ("force_tol", force_tol), ("max_time", max_time),
+                        ("skin_fraction", skin_fraction)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise PackingError(f"{name} must be a finite number > 0; got {value!r}")
+    if not (isinstance(check_every, int) and check_every >= 1):
+        raise PackingError(f"check_every must be an int >= 1; got {check_every!r}")
+
+
+def _settle(sim, physics, state, fns, material, v_rel, start, phase, *, kinetic_tol, force_tol, max_time, check_every,
+            progress, soft=None) -> DemSettled:
+    """Step ``state`` (float64, under ``jax.enable_x64``) at ``material`` until settled (:func:`dem_settle`'s rule).
+
+    The time step is sized here, at ``v_rel`` and the static column's overlap; ``soft``: the
+    ``(modulus, steps)`` of the soft stage it was stiffened from, for the report.
+    """
+    from sintercond import mechanics, simulate
+    from sintercond.forces import effective_mass, hertz_collision_overlap
+    from sintercond.rollout import ListOverflow, advance
+
+    particles, contacts = state.particles, state.contacts
+    centres, radii = np.asarray(particles.positions), np.asarray(particles.radii)
+    mp = material.mechanical_params()
+    r_max = float(radii.max())
+    column = material.density * GRAVITY * float(np.max(centres[:, 2] + radii)) * (2.0 * r_max) ** 2
+    static = _hertz_plane_overlap(column, r_max, material.E, material.nu)
+    m_max = 4.0 / 3.0 * math.pi * r_max**3 * material.density
+    collision = float(hertz_collision_overlap(r_max, effective_mass(m_max, jnp.inf), material.E / (1 - material.nu**2),
+                                              v_rel))
+    step_overlap = max(static, collision)
+    step_fn = mechanics.mechanical_time_step
+    dt = float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, step_overlap))
+    dt = min(dt, float(step_fn(physics.mechanics, particles, contacts.neighbors, mp, v_rel, None)))
+    state = dataclasses.replace(state, dt=jnp.asarray(dt, state.time.dtype))
+    params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
+    energy_scale = float(jnp.sum(particles.mass * GRAVITY * particles.radii))
+    max_steps = check_every * int(math.ceil(max_time / dt / check_every))
+    figures = {"kinetic": math.inf, "force": math.inf}
+
+    def settled(s, measured):
+        kinetic, force = measured
+        figures.update(kinetic=float(kinetic) / energy_scale, force=float(force))
+        if progress is not None:  # settled when both are below their thresholds: the larger ratio below 1
+            progress(phase, int(s.step), max_steps, max(figures["kinetic"] / kinetic_tol, figures["force"] / force_tol),
+                     1.0)
+        return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
+
+    first, began = int(state.step), float(state.time)
+    try:
+        state, loop = advance(sim, state, params, max_steps, check_every, settled,
+                              reallocate=simulate.reallocate_neighbors(fns), check=_finite_positions,
+                              measure=_settle_figures)
+    except ListOverflow:
+        raise PackingError("the DEM neighbour list keeps overflowing") from None
+    final = np.asarray(state.particles.positions)
+    steps = int(state.step) - first
     if not (figures["kinetic"] < kinetic_tol and figures["force"] < force_tol):
         missed = []
         if not figures["kinetic"] < kinetic_tol:
             missed.append(f"kinetic energy {figures['kinetic']:.3g} of sum m g r (allowed < {kinetic_tol:g})")
         if not figures["force"] < force_tol:
             missed.append(f"largest net force {figures['force']:.3g} of a sphere's weight (allowed < {force_tol:g})")
-        raise PackingError(f"the DEM bed did not settle within {max_time:g} s ({int(state.step)} steps of "
-                           f"{dt:.3g} s): " + " and ".join(missed))
-    report = SettleReport(int(state.step), float(state.time), dt, figures["kinetic"], float(kinetic_tol),
-                          figures["force"], float(force_tol), _overlaps(final, radii, physics.mechanics.walls), step_overlap,
-                          float(v_rel), loop.reallocations, time.perf_counter() - start)
-    return DemSettled(final, state, sim, params, fns, report)
+        what = "the DEM bed did not settle" if soft is None else \
+            f"the DEM bed settled at {soft[0]:g} Pa did not settle once stiffened to {material.E:g} Pa"
+        raise PackingError(f"{what} within {max_time:g} s ({steps} steps of {dt:.3g} s): " + " and ".join(missed))
+    soft_modulus, soft_steps, residual = (None, 0, 0.0) if soft is None else soft
+    report = SettleReport(steps, float(state.time) - began, dt, figures["kinetic"], float(kinetic_tol),
+                          figures["force"], float(force_tol), _overlaps(final, radii, physics.mechanics.walls),
+                          step_overlap, float(v_rel), loop.reallocations, time.perf_counter() - start,
+                          soft_modulus, soft_steps, residual)
+    return DemSettled(final, state, sim, params, fns, report, material)
+
+
+STIFFEN_ITERATIONS = 3
+"""Gauss-Newton passes of :func:`stiffen`'s displacement: each solves the contacts' overlaps to first order in the
+displacement, so the normals that turn with it leave a remainder of second order (the overlaps are ~1e-2 of a
+radius), which the next pass removes."""
+
+
+def stiffened_positions(centres, radii, pairs, walls, ratio, iterations=STIFFEN_ITERATIONS):
+    """Positions (m) at which every touching pair and sphere-wall overlap is ``ratio`` times its value at
+    ``centres`` and no other pair or sphere-wall overlaps, and the relative residual of those overlaps.
+
+    The displacements are the least-norm solution of the linear system ``n_ij . (u_j - u_i) = h_ij - h'_ij`` of the
+    pairs (``n_ij`` from ``i`` to ``j``, ``h`` the overlap) and ``n_w . u_i = p_iw - p'_iw`` of the walls
+    (``p`` the penetration), by LSQR (:func:`scipy.sparse.linalg.lsqr`), repeated ``iterations`` times from the
+    moved positions. A pair (or sphere and wall) apart at ``centres`` that the displacements would bring into
+    contact joins the system at zero overlap (touching, no force), and the solve is repeated until none is left
+    (an active set). A packing of more contacts than its particles' degrees of freedom in some region has no exact
+    solution there: the residual says how far the least-squares one is (``|h' - h_target|`` over
+    ``|h_target|``, all contacts).
+
+    Args:
+      centres: ``[n, 3]`` (m); radii ``[n]`` (m); pairs ``[c, 2]`` candidate pairs (padding ``(n, n)`` ignored);
+      walls: :class:`sintercond.walls.PlaneWall` s; ratio: in (0, 1].
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import lsqr
+
+    x0 = np.array(centres, np.float64)
+    r = np.asarray(radii, np.float64)
+    n = len(r)
+    pairs = np.asarray(pairs)
+    pairs = pairs[(pairs[:, 0] < n) & (pairs[:, 1] < n) & (pairs[:, 0] != pairs[:, 1])]
+    wall_normals = np.array([np.asarray(w.normal, np.float64) for w in walls]).reshape(-1, 3)
+
+    def overlaps(x):  # [c] pair overlaps, [c, 3] normals i -> j, [n_walls, n] penetrations
+        d = x[pairs[:, 1]] - x[pairs[:, 0]]
+        dist = np.linalg.norm(d, axis=1)
+        wall = np.array([np.asarray(w.penetration(x, r), np.float64) for w in walls]).reshape(-1, n)
+        return r[pairs[:, 0]] + r[pairs[:, 1]] - dist, d / dist[:, None], wall
+
+    h0, _, p0 = overlaps(x0)
+    pair_target, wall_target = ratio * np.maximum(h0, 0.0), ratio * np.maximum(p0, 0.0)
+    active, active_wall = h0 > 0, p0 > 0
+    if not (active.any() or active_wall.any()):
+        return x0, 0.0
+
+    def solve(active, active_wall):
+        x = x0.copy()
+        for _ in range(iterations):
+            h, normal, p = overlaps(x)
+            k = np.flatnonzero(active)
+            i, j = pairs[k, 0], pairs[k, 1]
+            w, m = np.nonzero(active_wall)
+            rows = np.concatenate([np.repeat(np.arange(len(k)), 6), np.repeat(len(k) + np.arange(len(m)), 3)])
+            cols = np.concatenate([np.concatenate([3 * j[:, None] + np.arange(3), 3 * i[:, None] + np.arange(3)],
+                                                  axis=1).ravel(), (3 * m[:, None] + np.arange(3)).ravel()])
+            vals = np.concatenate([np.concatenate([normal[k], -normal[k]], axis=1).ravel(), wall_normals[w].ravel()])
+            matrix = coo_matrix((vals, (rows, cols)), shape=(len(k) + len(m), 3 * n)).tocsr()
+            rhs = np.concatenate([h[k] - pair_target[k], p[w, m] - wall_target[w, m]])
+            x = x + lsqr(matrix, rhs, atol=1e-14, btol=1e-14, iter_lim=60 * n)[0].reshape(n, 3)
+        return x
+
+    for _ in range(n):
+        x = solve(active, active_wall)
+        h, _, p = overlaps(x)
+        new, new_wall = (h > 0) & ~active, (p > 0) & ~active_wall
+        if not (new.any() or new_wall.any()):
+            break
+        active, active_wall = active | new, active_wall | new_wall
+    now = np.concatenate([h[active], p[active_wall]])
+    target = np.concatenate([pair_target[active], wall_target[active_wall]])
+    return x, float(np.linalg.norm(now - target) / np.linalg.norm(target))
+
+
+def stiffen(settled: DemSettled, material: DemMaterial, *, kinetic_tol=KINETIC_TOL, force_tol=FORCE_TOL, max_time=2.0,
+            check_every=1000, progress=None) -> DemSettled:
+    """A bed settled at a soft modulus (:func:`dem_settle`) carried to ``material``'s, and settled again.
+
+    Hertz normal forces go as ``E* sqrt(r*) h^(3/2)`` and the Mindlin tangential and rolling stiffnesses as
+    ``G* sqrt(r* h)`` (Eqs. 2, 7, 15; ``E*``, ``G*`` proportional to ``E`` at one Poisson ratio), each force capped
+    by Coulomb's ``mu F_n``: scaling every overlap, tangential spring and rolling spring by
+    ``lambda = (E_soft / E)^(2/3)`` leaves every force and torque as it was. The settled bed is moved to overlaps
+    ``lambda`` times its own (:func:`stiffened_positions`), its springs scaled by ``lambda``, at rest, and the DEM
+    at ``material`` settles what the moved normals and an over-constrained region's least-squares residual leave
+    (at the stiff step, sized as :func:`dem_settle` sizes it).
+
+    ``material`` must be the settled bed's own but for ``E`` (larger). The report's ``steps`` are the stiff
+    stage's, ``soft_steps`` and ``soft_modulus`` the soft stage's, ``stiffen_residual`` the moved overlaps'.
+    """
+    soft = settled.material
+    if soft is None or not isinstance(material, DemMaterial) or dataclasses.replace(soft, E=material.E) != material \
+            or not material.E > soft.E:
+        raise PackingError("stiffen takes the DemMaterial of the soft settle with a larger E only; got "
+                           f"{material!r} for a bed settled at {soft!r}")
+    _check_settle_options(kinetic_tol, force_tol, max_time, check_every)
+    start = time.perf_counter()
+    ratio = (soft.E / material.E) ** (2.0 / 3.0)
+    state = settled.state
+    with jax.enable_x64(True):
+        walls = settled.sim.physics.mechanics.walls
+        x, residual = stiffened_positions(state.particles.positions, state.particles.radii,
+                                          state.contacts.pairs.pairs, walls, ratio)
+        motion = state.mechanics
+        scaled = lambda s: None if s is None else s * ratio  # noqa: E731
+        motion = dataclasses.replace(motion, velocity=jnp.zeros_like(motion.velocity), spin=jnp.zeros_like(motion.spin),
+                                     spring=scaled(motion.spring), rolling=scaled(motion.rolling),
+                                     wall_spring=scaled(motion.wall_spring), wall_rolling=scaled(motion.wall_rolling))
+        particles = dataclasses.replace(state.particles, positions=jnp.asarray(x, state.particles.positions.dtype))
+        state = dataclasses.replace(state, particles=particles, mechanics=motion)
+        return _settle(settled.sim, settled.sim.physics, state, settled.neighbor_fns, material, settled.report.v_rel,
+                       start, "stiffening (DEM)", kinetic_tol=kinetic_tol, force_tol=force_tol, max_time=max_time,
+                       check_every=check_every, progress=progress,
+                       soft=(soft.E, settled.report.steps + settled.report.soft_steps, residual))
 
 
 def _settle_figures(sim, state, params):

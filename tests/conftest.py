@@ -41,6 +41,7 @@ LONGEST_FIRST = (
     "test_fitting.py",  # (65)
     "test_teeth_thermal.py",  # (60)
     "test_readme.py",  # (60)
+    "test_stiffen.py",  # (45)
 )
 
 

@@ -121,14 +121,16 @@ def build_packing(scene, log=None):
                                                p["truncation"], rng)
         packed = packing.pour(radii, p["lateral_size"], dem_material(scene), seed=rng, start=p["start"],
                               temperature=scene["initial"]["temperature"],
-                              progress=SettlingProgress(log, len(radii)) if log else None)
+                              progress=SettlingProgress(log, len(radii)) if log else None,
+                              soft_modulus=p.get("soft_modulus"))
     else:
         count = packing.bed_particle_count(p["lateral_size"], p["height"], p["diameter_range"]) \
             if p["kind"] == "powder_bed" else 0
         progress = SettlingProgress(log, count) if log and count else None
         if p.get("method") == "dem":
             packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],
-                                        method="dem", material=dem_material(scene), progress=progress)
+                                        method="dem", material=dem_material(scene), progress=progress,
+                                        soft_modulus=p.get("soft_modulus"))
             packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p["sinter_swelling"]))
         else:
             packed = packing.from_scene(p, progress=progress)

@@ -147,6 +147,14 @@ def _check_mechanics(scene):
         raise SceneError("a poured packing (packing.kind = \"poured\" or packing.method = \"dem\") needs a [mechanics] "
                          "section: the contact material it is poured with (at least mechanics.young_modulus and "
                          "mechanics.poisson_ratio)")
+    if "soft_modulus" in packing:
+        if not pours:
+            raise SceneError("packing.soft_modulus applies to a poured packing only (packing.kind = \"poured\" or "
+                             "packing.method = \"dem\")")
+        modulus = scene.get("mechanics", {}).get("young_modulus")
+        if isinstance(modulus, (int, float)) and not packing["soft_modulus"] < modulus:
+            raise SceneError(f"packing.soft_modulus must be below mechanics.young_modulus = {modulus:g} Pa (the "
+                             f"modulus it is stiffened to); got {packing['soft_modulus']:g} Pa")
     for section in ("mechanics", "softening"):
         if section == "mechanics" and pours:
             continue
