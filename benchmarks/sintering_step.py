@@ -8,6 +8,8 @@ Usage: python benchmarks/sintering_step.py [--sizes 10648,97336] [--steps 100] [
   and every 10 steps (the grain-boundary law; the conductance law applied to the grown necks at every step),
   and every 10 steps with many-body shrinkage (the force balance solved by conjugate gradients at each update,
   the particles moved; on the lattice, whose contacts can all approach freely, it costs its solve's iterations).
+  The same with the elastic mechanics on (dynamic contacts, the necks on the half pair list): the coupled step
+  without sintering, and with the necks grown every 10 steps, independently and many-body.
   The obvious alternative to the in-scan update, a host loop that grows the necks between jitted conduction
   chunks, pays a dispatch and a copy per update and cannot be differentiated through: not timed.
 * Error against N: the neck of each contact of a pulsed three-sphere chain (the test's history, far from
@@ -74,11 +76,46 @@ def models(n):
     return out
 
 
+def coupled_models(n):
+    """The coupled thermo-mechanical step on the same lattice (its small overlaps taken as necks, so nothing is
+    loaded and 100 steps of 10 ns move nothing): without sintering, and with necks on the half pair list grown
+    every 10 steps, independently and many-body (the bottom layer held)."""
+    from sintercond import mechanics
+
+    centres, radii, temperature = lattice(n)
+    particles = particle_state(centres, radii, temperature, 4430.0)
+    out = {}
+    for name, spec in (("coupled (mechanics)", None),
+                       ("coupled, sintering every 10 steps", neck_growth.Sintering(every=10)),
+                       ("coupled, sintering every 10 steps, many-body",
+                        neck_growth.Sintering(every=10, shrinkage="many_body"))):
+        physics = simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted",
+                                          contacts="dynamic", mechanics=True, gravity=(0.0, 0.0, 0.0),
+                                          sintering=spec)
+        contacts, fns = simulate.dynamic_contacts(centres, radii, 4e-6)
+        motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
+        necks = None
+        if spec is not None:
+            motion = neck_growth.with_pair_necks(motion, contacts, centres, radii, "overlap")
+            supports = None
+            if spec.shrinkage == "many_body":
+                supports = np.zeros((len(radii), 3), bool)
+                supports[:, 2] = centres[:, 2] == centres[:, 2].min()
+            necks = neck_growth.neck_state(contacts, particles.temperature, supports=supports, positions=centres)
+        state = simulate.init_state(particles, contacts, 1e-8, mechanics=motion, sintering=necks)
+        mp = mechanics.MechanicalParams(E0=110e9, nu=0.34, xi_con=1.0, xi_fric=1.0, xi_rol=0.0, mu=0.0, mu_r=0.0,
+                                        theta_star=1000.0, rate=1.0, E_min=0.0)
+        params = simulate.Params(conductivity=[7.0], specific_heat=[560.0], mechanics=mp,
+                                 sintering=None if spec is None else dict(KINETICS))
+        out[name] = (simulate.simulator(physics, fns), state, params)
+    return out
+
+
 def step_costs(sizes, steps):
     rows = []
     for n in sizes:
         base = None
-        for name, (sim, state, params) in models(n).items():
+        for name, (sim, state, params) in {**models(n), **coupled_models(n)}.items():
             run = jax.jit(lambda s, p, sim=sim: simulate.rollout(sim, s, p, steps, simulate.SaveAt(steps, lambda s: ()),
                                                                  checkpoint=False)[0])
             seconds = best_time(run, state, params, repeats=5, max_seconds=20.0)
@@ -167,7 +204,9 @@ def main():
         write_section("sintering_step", command_line(), "## Sintering step: cost against conduction, error against N\n\n"
                       f"{args.steps} steps of a simple cubic lattice, jitted, minimum of 5. Sintering: necks grown "
                       "per update (4 nodes, 2 Newton steps), the conductance law at every step; many-body: the "
-                      "balance solved per update by preconditioned CG (tol 1e-8), the bottom layer held.\n\n"
+                      "balance solved per update by preconditioned CG (tol 1e-8), the bottom layer held. Coupled: "
+                      "the thermo-mechanical step (dynamic contacts, Hertz, dt 10 ns), the necks on its half pair "
+                      "list.\n\n"
                       + cost + "\n\nError of a pulsed three-sphere chain's necks after 0.24 s (dt 1 ms), updated "
                       "every N steps, against N = 1 with 8 nodes and 4 Newton steps:\n\n" + error + "\n\n" + whole)
 

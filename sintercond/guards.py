@@ -73,12 +73,15 @@ def motion_figures(physics: simulate.Physics, state: simulate.SimState, params: 
     kinetic = 0.5 * float(np.sum(m * np.sum(v * v, axis=1)) + np.sum(inertia * np.sum(omega * omega, axis=1)))
     gravity = -float(np.sum(m * (x @ np.asarray(physics.mechanics.gravity, np.float64))))
     pairs = np.asarray(state.contacts.pairs.pairs)
-    pairs = pairs[pairs[:, 0] < pairs[:, 1]]
+    real = pairs[:, 0] < pairs[:, 1]
+    pairs = pairs[real]
     i, j = pairs[:, 0], pairs[:, 1]
     separation = x[j] - x[i]
     distance = np.linalg.norm(separation, axis=1)
     normal = separation / np.where(distance > 0, distance, 1.0)[:, None]
     overlap = r[i] + r[j] - distance
+    if motion.neck_overlap is not None:  # a sintered neck's approach is not elastic (simulate.sintered_geometry)
+        overlap = overlap - np.asarray(motion.neck_overlap, np.float64)[real]
     e_star = np.asarray(forces.effective_modulus(modulus[i], nu[i], modulus[j], nu[j]))
     elastic = float(np.sum(np.asarray(forces.hertz_elastic_energy(overlap, forces.effective_radius(r[i], r[j]),
                                                                     e_star))))

@@ -286,6 +286,11 @@ class MechanicalState:
         (``Mechanics.force_dtype``).
       rolling: ``[capacity, 3]`` rolling springs per pair (rad); None without rolling.
       wall_spring, wall_rolling: ``[n_walls, n, 3]`` the same against each wall.
+      neck: ``[capacity]`` the sintered neck radius of each pair (m), with
+        ``Physics.sintering`` (:mod:`sintercond.neck_growth`); None without.
+      neck_overlap: ``[capacity]`` its approach ``H(a)`` (m, Rojek et al.
+        2022, Eqs. 23-27): the part of the pair's overlap the neck accounts
+        for, which the elastic laws do not see; None without sintering.
     """
 
     velocity: Any
@@ -294,6 +299,8 @@ class MechanicalState:
     rolling: Any = None
     wall_spring: Any = None
     wall_rolling: Any = None
+    neck: Any = None
+    neck_overlap: Any = None
 
 
 def mechanical_state(spec, positions, contacts, velocity=None, spin=None) -> MechanicalState:
@@ -387,14 +394,18 @@ class PairGeometry(NamedTuple):
     overlap: Any
 
 
-def pair_geometry(positions, radii, pairs) -> PairGeometry:
-    """Overlaps ``delta = r_i + r_j - |x_j - x_i|`` (Eq. 4) and normals (Eq. 5) of every pair of a half list ``[c, 2]``."""
+def pair_geometry(positions, radii, pairs, gap=0.0) -> PairGeometry:
+    """Overlaps ``delta = r_i + r_j - |x_j - x_i|`` (Eq. 4) and normals (Eq. 5) of every pair of a half list ``[c, 2]``.
+
+    ``gap`` (static float): pairs whose surfaces are less than ``gap (r_i + r_j)`` apart count as touching, with
+    their (negative) overlap: point contacts of a touching lattice, for sintering (0: overlapping pairs only).
+    """
     valid = pairs[:, 0] < pairs[:, 1]
     i, j = jnp.where(valid, pairs[:, 0], 0), jnp.where(valid, pairs[:, 1], 0)
     delta = positions[j] - positions[i]
     distance_sq = jnp.sum(delta * delta, axis=-1)
     contact_range = (radii[i] + radii[j]) ** 2
-    touching = valid & (distance_sq < contact_range)
+    touching = valid & (distance_sq < (contact_range if not gap else contact_range * (1.0 + gap) ** 2))
     apart = valid & (distance_sq > 0)
     distance = jnp.sqrt(jnp.where(apart, distance_sq, contact_range))
     overlap = jnp.where(touching, radii[i] + radii[j] - distance, 0.0)
@@ -572,15 +583,20 @@ def in_force_dtype(spec, dtype, *values):
     return [jax.tree.map(lambda x: jnp.asarray(x).astype(fd), v) for v in values]
 
 
+PAIR_HISTORY = ("spring", "rolling", "neck", "neck_overlap")
+"""The fields of :class:`MechanicalState` that live on the half pair list (one row per pair)."""
+
+
 def remap_history(state: MechanicalState, old_pairs, new_pairs) -> MechanicalState:
-    """Carry the pair springs from the half list ``old_pairs`` to ``new_pairs`` by ``(i, j)`` identity.
+    """Carry the pair springs (and sintered necks) from the half list ``old_pairs`` to ``new_pairs`` by ``(i, j)``
+    identity.
 
     :func:`sintercond.pair_list.remap_half_pairs`: a pair new to the list
     starts at zero; the lists may differ in capacity (a reallocation). Call
     it when the list is rebuilt (under the rebuild's ``lax.cond``).
     """
     fields = {f: remap_half_pairs(old_pairs, new_pairs, getattr(state, f))
-              for f in ("spring", "rolling") if getattr(state, f) is not None}
+              for f in PAIR_HISTORY if getattr(state, f) is not None}
     return dataclasses.replace(state, **fields)
 
 

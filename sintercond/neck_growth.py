@@ -67,6 +67,26 @@ preheating scenes a particle's weight is some 1e-8 N against sintering forces of
 with ``gamma_s`` about 2 N/m), so the grain-boundary law's ``A`` need not be split into its factors.
 The shrinkage of :func:`neck_statistics` is then measured from the positions.
 
+With the mechanics
+------------------
+With :class:`sintercond.mechanics.Mechanics` on (dynamic contacts), the neck of each pair is history on the half
+pair list, :attr:`sintercond.mechanics.MechanicalState.neck` with its approach ``neck_overlap = H(a)``, carried
+across rebuilds and reallocations as the tangential springs are (a pair new to the list starts as a point
+contact). The elastic laws act on what the neck does not account for, ``delta - H(a)`` (touching only where that
+is positive; :func:`sintercond.simulate.sintered_geometry`), as a plastic overlap does in MercuryDPM's sinter
+species; the conductance laws on ``max(delta, H(a))``, the volume-conserving neck of which is ``max(a,
+neck(delta))``. Spheres whose surfaces are within :data:`POINT_CONTACT_GAP` of ``r_i + r_j`` are in contact (the
+point contacts of a touching lattice). Every ``Sintering.every`` steps the necks grow (:func:`grow_pair_necks`):
+independently, when the particles move only under their loads (the grown neck takes its approach out of the
+elastic overlap, and gravity or the walls close it), or by the many-body balance, whose displacements are added to
+the positions and leave each contact's elastic overlap as it was: the packing shrinks without being loaded, and the
+explicit dynamics never sees the dashpot. A pair the displacements bring into contact met at the sintering's pace:
+its overlap is taken as a neck. A pair whose spheres come apart loses its neck (no sintered bond carries tension
+or shear in this model; a packing that cannot stand without one, such as a frictionless simple cubic stack under
+gravity, collapses as it would without necks). Start necks: :func:`pair_necks` (point contacts, or the overlaps
+taken as necks). The sintering time scale is seconds to minutes and the mechanical step is set by the stiffness
+(Eq. 47): a soft modulus makes such runs affordable, and changes only the elastic overlaps.
+
 Stability
 ---------
 Growing necks raise the conductances, and with them lower the explicit step's limit
@@ -92,8 +112,10 @@ import numpy as np
 
 from sintercond import sintering
 from sintercond._validation import all_concrete, require_law_params
+from sintercond.mechanics import MechanicalState, pair_geometry
 from sintercond.neck import neck_radius
-from sintercond.state import LiftedContacts, pytree_dataclass
+from sintercond.pair_list import pair_sum
+from sintercond.state import DynamicContacts, LiftedContacts, pytree_dataclass
 
 
 SHRINKAGE_MODES = ("independent", "many_body")
@@ -108,6 +130,15 @@ or cold) is near-rigid, and the solve stays well conditioned."""
 MIN_BALANCE_ITERATIONS = 2000
 """The fewest conjugate-gradient iterations a many-body balance may take before it is flagged (at least ten per
 unknown)."""
+
+POINT_CONTACT_GAP = 1e-9
+"""With the mechanics, spheres whose surfaces are less than this fraction of ``r_i + r_j`` apart are in contact for
+sintering (:func:`sintercond.mechanics.pair_geometry`'s ``gap``): the point contacts of a touching lattice, at zero
+overlap to round-off, sinter as the static table's do."""
+
+NECK_STARTS = ("point", "overlap")
+"""How :func:`pair_necks` starts the necks of a sintering run with the mechanics: point contacts whose overlaps
+stay elastic, or the overlaps taken as sintered necks."""
 
 GRADIENT_DRAG = 1e-8
 """The drag, relative to each particle's dashpots, that makes the reverse-mode solve of the many-body balance
@@ -199,6 +230,18 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, pos
     (e.g. ``[False, False, True]`` for a particle resting on a plate normal to z); all
     False lets the packing shrink about its centre. None for independent contacts. ``positions``: ``[n, 3]`` the
     particles' positions (m), given with ``supports``: the reference of the many-body shrinkage."""
+    step_type = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32  # as SimState.step
+    if isinstance(contacts, DynamicContacts):  # with the mechanics: the necks live on the half pair list
+        if positions is None:
+            raise ValueError("neck_state on dynamic contacts (sintering with the mechanics) needs the positions: "
+                             "the shrinkage is measured from them")
+        n = jnp.asarray(temperature).shape[0]
+        return NeckState(start_overlap=None, interval_temperature=jnp.asarray(temperature),
+                         unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type), pairs=None,
+                         pair_slot=None, slot_pair=None,
+                         supports=None if supports is None else _supports(supports, n),
+                         unbalanced=None if supports is None else jnp.zeros((), bool),
+                         start_positions=_start_positions(positions, n))
     if (supports is None) != (positions is None):
         raise ValueError("neck_state takes supports and positions together (many-body shrinkage) or neither")
     neighbors = np.asarray(contacts.neighbors)
@@ -218,7 +261,6 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, pos
         raise ValueError("the contact table lists a contact in one of its rows only; each contact (i, j) must be in "
                          "row i and row j (simulate.lifted_contacts builds such tables)")
     slot_pair[upper] = found
-    step_type = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32  # as SimState.step
     return NeckState(start_overlap=jnp.asarray(contacts.overlap), interval_temperature=jnp.asarray(temperature),
                      unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type),
                      pairs=jnp.asarray(pairs, jnp.int32),
@@ -275,7 +317,7 @@ def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii,
         if not many_body and carried.supports is not None:
             raise ValueError(f"NeckState.supports is for Sintering(shrinkage='many_body'); the shrinkage is "
                              f"{spec.shrinkage!r}: build the state without supports")
-        if many_body and all_concrete(carried.start_positions, radii, carried.pairs):
+        if many_body and carried.pairs is not None and all_concrete(carried.start_positions, radii, carried.pairs):
             x, r = np.asarray(carried.start_positions, np.float64), np.asarray(radii, np.float64)
             pairs = np.asarray(carried.pairs)
             gap = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
@@ -286,14 +328,12 @@ def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii,
                                  f"must be within r_i + r_j; particles {int(pairs[k, 0])} and {int(pairs[k, 1])} are "
                                  f"{gap[k]:.3g} m apart beyond it (a contact across a periodic boundary?)")
     merged = law_params(spec, params)
+    if isinstance(contacts, DynamicContacts):
+        _validate_law(spec, merged)
+        return
     if not all_concrete(merged, contacts.neck, radii):
         return
-    law = sintering.kinetic_law(spec.law)
-    require_law_params("Params.sintering", law, merged,
-                       lambda name: f"Params.sintering[{name!r}] of kinetic law {law.name!r} ({law.units[name]})")
-    if "dihedral_angle" in merged and not float(np.max(merged["dihedral_angle"])) <= 180.0:
-        raise ValueError(f"Params.sintering['dihedral_angle'] must be in (0, 180] degrees; got "
-                         f"{merged['dihedral_angle']!r}")
+    _validate_law(spec, merged)
     neighbors, neck, r = np.asarray(contacts.neighbors), np.asarray(contacts.neck, np.float64), np.asarray(radii)
     n = r.shape[0]
     rows = np.arange(n)[:, None]
@@ -306,6 +346,41 @@ def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii,
                          f"{int(neighbors[i, k])} is {neck[i, k]!r} m")
 
 
+def _validate_law(spec: Sintering, merged: dict) -> None:
+    """Raise ``ValueError`` naming the key unless the kinetic law's parameters ``merged`` are in range (concrete)."""
+    if not all_concrete(merged):
+        return
+    law = sintering.kinetic_law(spec.law)
+    require_law_params("Params.sintering", law, merged,
+                       lambda name: f"Params.sintering[{name!r}] of kinetic law {law.name!r} ({law.units[name]})")
+    if "dihedral_angle" in merged and not float(np.max(merged["dihedral_angle"])) <= 180.0:
+        raise ValueError(f"Params.sintering['dihedral_angle'] must be in (0, 180] degrees; got "
+                         f"{merged['dihedral_angle']!r}")
+
+
+def validate_pair_necks(motion: MechanicalState, radii, pairs) -> None:
+    """Raise ``ValueError`` unless the necks on a half pair list ``pairs`` ``[c, 2]`` exist and lie in
+    ``[0, min(r_i, r_j)]`` with their approaches ``>= 0`` (concrete values)."""
+    if motion is None or motion.neck is None or motion.neck_overlap is None:
+        raise ValueError("sintering with the mechanics needs MechanicalState.neck and neck_overlap (the necks on the "
+                         "half pair list): neck_growth.with_pair_necks(motion, contacts, positions, radii, start)")
+    if not all_concrete(motion.neck, motion.neck_overlap, radii, pairs):
+        return
+    pairs, r = np.asarray(pairs), np.asarray(radii, np.float64)
+    neck, h = np.asarray(motion.neck, np.float64), np.asarray(motion.neck_overlap, np.float64)
+    if neck.shape != (len(pairs),) or h.shape != (len(pairs),):
+        raise ValueError(f"MechanicalState.neck and neck_overlap must be [capacity] = [{len(pairs)}] (one per pair of "
+                         f"the half list); got shapes {neck.shape} and {h.shape}")
+    n = len(r)
+    real = pairs[:, 0] < pairs[:, 1]
+    limit = np.where(real, np.minimum(r[np.minimum(pairs[:, 0], n - 1)], r[np.minimum(pairs[:, 1], n - 1)]), 0.0)
+    bad = ~((neck >= 0) & (neck <= limit * (1 + 1e-12)) & (h >= 0) & np.isfinite(h))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"MechanicalState.neck must lie in [0, min(r_i, r_j)] and neck_overlap be >= 0; pair {k} "
+                         f"{tuple(int(v) for v in pairs[k])} has neck {neck[k]!r} m, neck_overlap {h[k]!r} m")
+
+
 def _pairs(neighbors, n):
     """``(lo, hi, valid)`` of every slot of a padded table: the pair in index order, and whether it is a contact."""
     rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
@@ -314,16 +389,28 @@ def _pairs(neighbors, n):
     return jnp.minimum(rows, j), jnp.maximum(rows, j), valid
 
 
+def _interval_temperature(carried: NeckState, end_temperature, i, j):
+    """``[c]`` the pair temperature of the growth interval (K): the mean of its start and end values (module
+    docstring), of the pairs ``(i, j)``."""
+    start = carried.interval_temperature
+    return 0.5 * (sintering.pair_temperature(start[i], start[j])
+                  + sintering.pair_temperature(end_temperature[i], end_temperature[j]))
+
+
+def _grown(spec: Sintering, params: dict, start_neck, r_i, r_j, temperature, duration):
+    """``[c]`` neck of each pair after growing freely for ``duration`` (s) at ``temperature`` ``[c]`` (K) from
+    ``start_neck`` ``[c]`` (m)."""
+    dtype = start_neck.dtype
+    return sintering._grow_neck(sintering.kinetic_law(spec.law), start_neck, r_i, r_j, temperature[None],
+                                jnp.reshape(jnp.asarray(duration, dtype), (1,)), params, spec.quadrature_nodes,
+                                spec.newton_iterations)[0]
+
+
 def _free_growth(spec: Sintering, params: dict, carried: NeckState, start_neck, radii, end_temperature, duration):
     """``[c]`` neck of each pair after growing freely over the interval, from ``start_neck`` ``[c]`` (m)."""
     i, j = carried.pairs[:, 0], carried.pairs[:, 1]
-    start = carried.interval_temperature
-    temperature = 0.5 * (sintering.pair_temperature(start[i], start[j])
-                         + sintering.pair_temperature(end_temperature[i], end_temperature[j]))
-    dtype = start_neck.dtype
-    return sintering._grow_neck(sintering.kinetic_law(spec.law), start_neck, radii[i], radii[j], temperature[None],
-                                jnp.reshape(jnp.asarray(duration, dtype), (1,)), params, spec.quadrature_nodes,
-                                spec.newton_iterations)[0]
+    return _grown(spec, params, start_neck, radii[i], radii[j], _interval_temperature(carried, end_temperature, i, j),
+                  duration)
 
 
 def _on_table(carried: NeckState, per_pair):
@@ -351,7 +438,7 @@ def _pair_normals(pairs, positions):
     return separation / jnp.linalg.norm(separation, axis=1, keepdims=True)
 
 
-def balance_displacements(pairs, positions, weights, free_approach, supports, tol):
+def balance_displacements(pairs, positions, weights, free_approach, supports, tol, normal=None):
     """Displacements ``[n, 3]`` (m) of the many-body balance ``sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0``
     on the components that are not ``supports`` (module docstring), and whether its solve fell short.
 
@@ -361,12 +448,14 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
       free_approach: ``[c]`` the approach each contact would make on its own (m).
       supports: ``[n, 3]`` bool, the components held at zero.
       tol: relative residual of the conjugate-gradient solve.
+      normal: ``[c, 3]`` the unit normals, if given (a half pair list's, whose padding pairs have weight 0);
+        else from ``positions``.
 
     Returns:
       ``(u, unbalanced)``: the displacements, and a bool scalar set when the residual exceeds ``10 tol``.
     """
     i, j = pairs[:, 0], pairs[:, 1]
-    normal = _pair_normals(pairs, positions)
+    normal = _pair_normals(pairs, positions) if normal is None else normal
     movable = ~supports
 
     def on_particles(per_pair):  # [c] -> [n, 3]: + along n_ij on i, - on j
@@ -404,29 +493,103 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
     return u, ~converged
 
 
+def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_start, r_i, r_j, temperature, duration,
+                    positions, supports):
+    """The many-body update of the pairs ``[c, 2]`` (module docstring): ``(a, u, unbalanced)``, the necks ``[c]``
+    (m) after the interval, the displacements ``[n, 3]`` (m) and whether the balance fell short. Only the
+    ``active`` pairs sinter and enter the balance; the others keep ``a_start``."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    law = sintering.kinetic_law(spec.law)
+    a_free = _grown(spec, params, a_start, r_i, r_j, temperature, duration)
+    h_start = sintering.neck_overlap(a_start, r_i, r_j)
+    free = jnp.where(active, sintering.neck_overlap(a_free, r_i, r_j) - h_start, 0.0)
+    fastest = jnp.max(free, initial=0.0)
+    growing = fastest > 0
+    weights = jnp.where(growing & active, law.force(0.5 * (a_start + a_free), r_i, r_j, params)
+                        / jnp.maximum(free, jnp.where(growing, STIFF_CONTACT_RATIO * fastest, 1.0)), 0.0)
+    tol = max(spec.balance_tol, 50.0 * float(jnp.finfo(positions.dtype).eps))
+    u, unbalanced = balance_displacements(pairs, positions, weights, free, supports, tol, normal)
+    approach = jnp.sum((u[i] - u[j]) * normal, axis=1)
+    cap = jnp.minimum(law.cap(r_i, r_j, params), jnp.minimum(r_i, r_j))
+    h = jnp.clip(h_start + approach, h_start, sintering.neck_overlap(cap, r_i, r_j))
+    a = jnp.where(active, jnp.clip(neck_radius(r_i, r_j, h), a_start, cap), a_start)
+    return a, u, unbalanced
+
+
 def balance_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, positions, radii, end_temperature,
                         duration):
     """The many-body update (``shrinkage="many_body"``, module docstring): ``(neck, overlap, displacement,
     unbalanced)``, the necks and approaches ``[n, m]`` (m) after the interval, the particles' displacements
     ``[n, 3]`` (m) over it and whether the balance fell short of its tolerance."""
-    i, j = carried.pairs[:, 0], carried.pairs[:, 1]
+    pairs = carried.pairs
+    i, j = pairs[:, 0], pairs[:, 1]
     r_i, r_j = radii[i], radii[j]
-    law = sintering.kinetic_law(spec.law)
-    a_start = neck.reshape(-1)[carried.pair_slot]
-    a_free = _free_growth(spec, params, carried, a_start, radii, end_temperature, duration)
-    h_start = sintering.neck_overlap(a_start, r_i, r_j)
-    free = sintering.neck_overlap(a_free, r_i, r_j) - h_start
-    fastest = jnp.max(free, initial=0.0)
-    growing = fastest > 0
-    weights = jnp.where(growing, law.force(0.5 * (a_start + a_free), r_i, r_j, params)
-                        / jnp.maximum(free, jnp.where(growing, STIFF_CONTACT_RATIO * fastest, 1.0)), 0.0)
-    tol = max(spec.balance_tol, 50.0 * float(jnp.finfo(positions.dtype).eps))
-    u, unbalanced = balance_displacements(carried.pairs, positions, weights, free, carried.supports, tol)
-    approach = jnp.sum((u[i] - u[j]) * _pair_normals(carried.pairs, positions), axis=1)
-    cap = jnp.minimum(law.cap(r_i, r_j, params), jnp.minimum(r_i, r_j))
-    h = jnp.clip(h_start + approach, h_start, sintering.neck_overlap(cap, r_i, r_j))
-    a = jnp.clip(neck_radius(r_i, r_j, h), a_start, cap)
+    a, u, unbalanced = _balanced_necks(spec, params, pairs, _pair_normals(pairs, positions),
+                                       jnp.ones(i.shape, bool), neck.reshape(-1)[carried.pair_slot], r_i, r_j,
+                                       _interval_temperature(carried, end_temperature, i, j), duration, positions,
+                                       carried.supports)
     return _on_table(carried, a), _on_table(carried, sintering.neck_overlap(a, r_i, r_j)), u, unbalanced
+
+
+def grow_pair_necks(spec: Sintering, params: dict, carried: NeckState, neck, geometry, positions, radii,
+                    end_temperature, duration):
+    """One growth interval of the necks on a half pair list (sintering with the mechanics):
+    ``(neck, neck_overlap, displacement, unbalanced)``.
+
+    ``neck``: ``[c]`` the pairs' necks (m, :attr:`sintercond.mechanics.MechanicalState.neck`); ``geometry``: the
+    :class:`sintercond.mechanics.PairGeometry` of the list at ``positions`` ``[n, 3]`` with the gap
+    :data:`POINT_CONTACT_GAP`. The pairs whose spheres touch sinter, each on its own (``shrinkage="independent"``)
+    or in the many-body balance; a pair whose spheres have come apart has no neck (0). A pair that the balance's
+    displacements bring into contact met at the sintering's creeping pace, not by an impact: its overlap is taken
+    as a neck (``a = H^-1(delta)``), so the elastic laws do not see it. Returns the necks and their approaches
+    ``[c]`` (m), and with many-body shrinkage the displacements ``[n, 3]`` (m) and whether the balance fell short
+    (else None, None).
+    """
+    i, j, touching = geometry.i, geometry.j, geometry.touching
+    r_i, r_j = radii[i], radii[j]
+    a_start = jnp.where(touching, neck, 0.0)
+    temperature = _interval_temperature(carried, end_temperature, i, j)
+    u = unbalanced = None
+    if spec.shrinkage == "many_body":
+        a, u, unbalanced = _balanced_necks(spec, params, jnp.stack([i, j], axis=1), geometry.normal, touching,
+                                           a_start, r_i, r_j, temperature, duration, positions, carried.supports)
+    else:
+        a = _grown(spec, params, a_start, r_i, r_j, temperature, duration)
+    a = jnp.where(touching, a, 0.0)
+    h = jnp.where(touching, sintering.neck_overlap(a, r_i, r_j), 0.0)
+    if u is not None:
+        after = pair_geometry(positions + u, radii, geometry.pairs, POINT_CONTACT_GAP)
+        closed = after.touching & ~touching
+        met = jnp.maximum(after.overlap, 0.0)
+        a = jnp.where(closed, neck_radius(r_i, r_j, met), a)
+        h = jnp.where(closed, met, h)
+    return a, h, u, unbalanced
+
+
+def pair_necks(contacts: DynamicContacts, positions, radii, start: str = "point"):
+    """``(neck, neck_overlap)`` ``[capacity]`` (m) of a half pair list at the start of a sintering run with the
+    mechanics: :attr:`sintercond.mechanics.MechanicalState.neck` and ``neck_overlap``.
+
+    ``start``: ``"point"``, every contact a point contact (``a = 0``: the overlaps stay elastic, the packing keeps
+    its load); ``"overlap"``, every overlap ``delta`` taken as a sintered neck, the volume-conserving neck of it
+    (``a = H^-1(delta)``, Rojek et al. 2022, Eqs. 23-27) with ``H(a) = delta``: the contacts then carry no elastic
+    load at the start.
+    """
+    if start not in NECK_STARTS:
+        raise ValueError(f"the start of the necks must be one of {list(NECK_STARTS)}; got {start!r}")
+    geometry = pair_geometry(jnp.asarray(positions), jnp.asarray(radii), contacts.pairs.pairs)
+    zeros = jnp.zeros(geometry.overlap.shape, geometry.overlap.dtype)
+    if start == "point":
+        return zeros, zeros
+    r_i, r_j = jnp.asarray(radii)[geometry.i], jnp.asarray(radii)[geometry.j]
+    return jnp.where(geometry.touching, neck_radius(r_i, r_j, geometry.overlap), 0.0), geometry.overlap
+
+
+def with_pair_necks(motion: MechanicalState, contacts: DynamicContacts, positions, radii, start: str = "point"
+                    ) -> MechanicalState:
+    """``motion`` (:func:`sintercond.mechanics.mechanical_state`) with the necks of :func:`pair_necks`."""
+    neck, overlap = pair_necks(contacts, positions, radii, start)
+    return dataclasses.replace(motion, neck=neck, neck_overlap=overlap)
 
 
 def neck_statistics(state) -> dict:
@@ -435,8 +598,20 @@ def neck_statistics(state) -> dict:
     ``h - h_0`` the change of the approach ``H(a)`` of the neck (independent contacts), or of the distance
     ``|x_i - x_j|`` from the start positions (many-body shrinkage).
 
+    With the mechanics (necks on the half pair list) the contacts are the pairs whose spheres overlap, and the
+    shrinkage is measured from the start positions.
+
     Returns ``{"mean_neck_ratio", "max_neck_ratio", "shrinkage"}`` (scalars; 0 without contacts).
     """
+    if _on_pairs(state):
+        g, ratio = _pair_ratio(state)
+        x0, x = state.sintering.start_positions, state.particles.positions
+        distance = lambda y: jnp.linalg.norm(jnp.where(g.touching[:, None], y[g.j] - y[g.i], 1.0), axis=-1)  # noqa: E731
+        radii = state.particles.radii
+        count = jnp.sum(g.touching.astype(radii.dtype))
+        per = lambda v: jnp.sum(jnp.where(g.touching, v, 0.0)) / jnp.maximum(count, 1.0)  # noqa: E731
+        return {"mean_neck_ratio": per(ratio), "max_neck_ratio": jnp.max(jnp.where(g.touching, ratio, 0.0), initial=0.0),
+                "shrinkage": per((distance(x0) - distance(x)) / (radii[g.i] + radii[g.j]))}
     contacts, radii = state.contacts, state.particles.radii
     lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
     r_lo, r_hi = radii[lo], radii[hi]
@@ -454,11 +629,29 @@ def neck_statistics(state) -> dict:
 
 def particle_neck_ratio(state):
     """``[n]`` each particle's mean neck ratio ``a / min(r_i, r_j)`` over its contacts (0 without contacts)."""
+    if _on_pairs(state):
+        g, ratio = _pair_ratio(state)
+        n = state.particles.radii.shape[0]
+        pairs = jnp.where(g.touching[:, None], g.pairs, n)
+        count = pair_sum(*(2 * [g.touching.astype(ratio.dtype)]), pairs, n)
+        return pair_sum(ratio, ratio, pairs, n) / jnp.maximum(count, 1.0)
     contacts, radii = state.contacts, state.particles.radii
     lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
     ratio = jnp.where(valid, contacts.neck / jnp.minimum(radii[lo], radii[hi]), 0.0)
     count = jnp.sum(valid.astype(radii.dtype), axis=1)
     return jnp.sum(ratio, axis=1) / jnp.maximum(count, 1.0)
+
+
+def _on_pairs(state) -> bool:
+    """Whether the state's necks live on its half pair list (sintering with the mechanics)."""
+    return state.mechanics is not None and state.mechanics.neck is not None
+
+
+def _pair_ratio(state):
+    """``(geometry, ratio)``: the pair geometry of a state with the mechanics and each pair's ``a / min(r_i, r_j)``."""
+    p = state.particles
+    g = pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs, POINT_CONTACT_GAP)
+    return g, jnp.where(g.touching, state.mechanics.neck / jnp.minimum(p.radii[g.i], p.radii[g.j]), 0.0)
 
 
 def necks_at_cap(spec: Sintering, params, contacts: LiftedContacts, radii) -> LiftedContacts:
@@ -496,6 +689,7 @@ def update_interval(spec: Sintering, step) -> jax.Array:
     return step % spec.every == 0
 
 
-__all__ = ["NeckState", "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering", "balance_displacements",
-           "balance_table_necks", "check_stable", "grow_table_necks", "law_params", "neck_state", "neck_statistics",
-           "necks_at_cap", "particle_neck_ratio", "validate_sintering"]
+__all__ = ["NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering",
+           "balance_displacements", "balance_table_necks", "check_stable", "grow_pair_necks", "grow_table_necks",
+           "law_params", "neck_state", "neck_statistics", "necks_at_cap", "pair_necks", "particle_neck_ratio",
+           "validate_pair_necks", "validate_sintering", "with_pair_necks"]

@@ -45,6 +45,19 @@ def sintered_conductivity(model, state) -> float:
     (:func:`sintercond.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
     layers are held hot and cold; any other packing's face layers (:func:`sintercond.steady.face_layer_box`)."""
     carried, radii = state.sintering, model.radii
+    axis = model.k_star_axis
+    if state.mechanics is not None:  # the necks on the half pair list, the packing where it has moved to
+        geometry, pair_k = jax.jit(simulate.sintered_pair_conductance, static_argnums=0)(model.physics, state,
+                                                                                         model.params)
+        keep = np.asarray(geometry.touching) & (np.asarray(pair_k) > 0)
+        if not keep.any():
+            return 0.0
+        i, j = np.asarray(geometry.i, np.int64)[keep], np.asarray(geometry.j, np.int64)[keep]
+        centres = np.asarray(state.particles.positions, np.float64)
+        pairs = network.ContactPairs(i, j, np.asarray(geometry.overlap)[keep], radii[i], radii[j], len(radii))
+        box = steady.face_layer_box(centres, radii, axis)
+        return float(steady.steady_state_network_conductivity(centres, radii, pairs, np.asarray(pair_k)[keep],
+                                                              axis=axis, box=box))
     slot = np.asarray(carried.pair_slot)
     pair_k = np.asarray(simulate.neck_conductance(model.physics, state, model.params)).reshape(-1)[slot]
     if not np.any(pair_k > 0):
@@ -52,7 +65,6 @@ def sintered_conductivity(model, state) -> float:
     i, j = np.asarray(carried.pairs, np.int64).T
     pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap).reshape(-1)[slot], radii[i], radii[j],
                                  len(radii))
-    axis = model.k_star_axis
     box = None if model.lattice else steady.face_layer_box(model.centres, radii, axis)
     return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=axis, box=box))
 

@@ -225,10 +225,11 @@ class Physics:
         ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
       sintering: :class:`sintercond.neck_growth.Sintering`, necks that grow with each contact's temperature
         history (:mod:`sintercond.neck_growth`: contacts on their own on a packing that does not move, or
-        many-body shrinkage that moves the particles). Needs
-        ``contacts="static"``, ``conduction.conductance="lifted"``, the explicit integrator, the
-        ``"volume_conserving"`` neck model, no mechanics, ``Params.sintering`` and ``SimState.sintering``.
-        None: the necks stay.
+        many-body shrinkage that moves the particles). Needs ``conduction.conductance="lifted"``, the explicit
+        integrator, the ``"volume_conserving"`` neck model, ``Params.sintering`` and ``SimState.sintering``;
+        without mechanics ``contacts="static"`` (the necks on the table), with mechanics the necks live on the
+        dynamic half pair list (``MechanicalState.neck``, :func:`sintercond.neck_growth.with_pair_necks`) and
+        the elastic laws act on each overlap less its neck's approach. None: the necks stay.
     """
 
     conduction: Conduction = Conduction()
@@ -252,15 +253,15 @@ class Physics:
             if not isinstance(self.sintering, Sintering):
                 raise ValueError(f"Physics.sintering must be a sintercond.neck_growth.Sintering or None; got "
                                  f"{self.sintering!r}")
-            needs = {"contacts": ("static", self.contacts), "conduction.conductance": ("lifted", c.conductance),
+            needs = {"contacts": ("dynamic" if self.mechanics is not None else "static", self.contacts),
+                     "conduction.conductance": ("lifted", c.conductance),
                      "conduction.integrator": ("explicit", c.integrator),
                      "conduction.neck_model": ("volume_conserving", c.neck)}
             for name, (want, got) in needs.items():
                 if got != want:
-                    raise ValueError(f"Physics.sintering needs {name}={want!r} (the necks grow on a packing that "
-                                     f"does not move, by Rojek's volume-conserving geometry); got {got!r}")
-            if self.mechanics is not None:
-                raise ValueError("Physics.sintering runs on a packing that does not move; mechanics must be None")
+                    raise ValueError(f"Physics.sintering needs {name}={want!r} (the necks grow by Rojek's "
+                                     f"volume-conserving geometry, on a static table or, with the mechanics, on the "
+                                     f"dynamic pair list); got {got!r}")
         if self.mechanics is not None:
             needs = {"contacts": ("dynamic", self.contacts), "conduction.conductance": ("lifted", c.conductance),
                      "conduction.integrator": ("explicit", c.integrator)}
@@ -573,6 +574,37 @@ def _pair_neck(physics, radii, g):
     return jnp.where(g.touching, NECK_MODELS[physics.neck](radii[g.i], radii[g.j], g.overlap), 0.0)
 
 
+def sintered_geometry(geometry, neck_overlap):
+    """The :class:`sintercond.mechanics.PairGeometry` the elastic laws see on sintered pairs: each overlap less the
+    approach ``H(a)`` its neck accounts for (``neck_overlap`` ``[c]``, m), touching only where that stays positive.
+
+    Sintering moves the spheres together by the neck's approach without loading them (Rojek et al. 2022); the
+    elastic contact acts on what is left, as a plastic overlap does in MercuryDPM's sinter species."""
+    overlap = geometry.overlap - neck_overlap
+    touching = geometry.touching & (overlap > 0)
+    return geometry._replace(touching=touching, overlap=jnp.where(touching, overlap, 0.0))
+
+
+def conducting_geometry(geometry, neck_overlap):
+    """The :class:`sintercond.mechanics.PairGeometry` the conductance laws see on sintered pairs: each touching
+    pair's overlap, or its neck's approach ``H(a)`` (``neck_overlap`` ``[c]``, m) where that is larger (necks grown
+    on pairs that have not moved together: independent contacts, point contacts), so the volume-conserving neck of
+    it is ``max(a, neck(delta))``. ``geometry``: with the gap :data:`sintercond.neck_growth.POINT_CONTACT_GAP`."""
+    overlap = jnp.where(geometry.touching, jnp.maximum(geometry.overlap, neck_overlap), 0.0)
+    return geometry._replace(touching=geometry.touching & (overlap > 0), overlap=overlap)
+
+
+def sintered_pair_conductance(physics: Physics, state: SimState, params: Params):
+    """``(geometry, conductance [c])`` of a mechanical sintering state's half pair list (W/K): what its step
+    conducts through (:func:`conducting_geometry`)."""
+    p = state.particles
+    geometry = conducting_geometry(mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs,
+                                                           neck_growth.POINT_CONTACT_GAP),
+                                   state.mechanics.neck_overlap)
+    index, kappa = conductivity_lookup(physics, params, p)
+    return geometry, pair_conductance(physics, p.radii, index, geometry, kappa, merged_law_params(physics, params))
+
+
 def pair_heat_power(conductance, pairs, temperature):
     """Heat power ``[n]`` (W) into each particle through the pairs ``[c, 2]`` of a half list, ``K (T_j - T_i)`` into ``i``.
 
@@ -705,17 +737,23 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         law_params = merged_law_params(physics, params)
         temperature = particles.temperature
 
-        def on_pairs(pairs, spring, rolling):
-            geometry = mechanics.pair_geometry(positions, radii, pairs)
-            f, t_i, t_j, spring, rolling = mechanics.pair_loads(physics.mechanics, mp, geometry, radii, mass, modulus, nu,
+        gap = 0.0 if physics.sintering is None else neck_growth.POINT_CONTACT_GAP
+
+        def on_pairs(pairs, spring, rolling, sintered):
+            geometry = mechanics.pair_geometry(positions, radii, pairs, gap)
+            elastic = geometry if sintered is None else sintered_geometry(geometry, sintered)
+            f, t_i, t_j, spring, rolling = mechanics.pair_loads(physics.mechanics, mp, elastic, radii, mass, modulus, nu,
                                                                 motion.velocity, motion.spin, spring, rolling,
                                                                 state.dt, positions.dtype)
-            # heat through the contacts of this geometry (Eqs. 32-36)
+            # heat through the contacts of this geometry (Eqs. 32-36); a sintered neck conducts as its approach does
+            if sintered is not None:
+                geometry = conducting_geometry(geometry, sintered)
             conductance = pair_conductance(physics, radii, index, geometry, kappa, law_params)
             return f, t_i, t_j, spring, rolling, pair_heat_flow(conductance, geometry.i, geometry.j, temperature)
 
         pairs = contacts.pairs.pairs
-        f, t_i, t_j, spring, rolling, q = map_pair_blocks(on_pairs, pairs, motion.spring, motion.rolling)
+        f, t_i, t_j, spring, rolling, q = map_pair_blocks(on_pairs, pairs, motion.spring, motion.rolling,
+                                                          motion.neck_overlap)
         n = radii.shape[0]
         motion = dataclasses.replace(motion, spring=spring, rolling=rolling)
         loads = mechanics.body_loads(physics.mechanics, mp, positions, radii, mass, modulus, nu, motion, t, state.dt,
@@ -734,7 +772,52 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
                                                         radii, state.dt)
         particles = dataclasses.replace(particles, positions=positions, temperature=temperature)
         motion = dataclasses.replace(loads.mechanics, velocity=velocity, spin=spin)
-        return dataclasses.replace(state, particles=particles, mechanics=motion, step=state.step + 1)
+        state = dataclasses.replace(state, particles=particles, mechanics=motion, step=state.step + 1)
+        return state if physics.sintering is None else grow_pair_necks(state, prep)
+
+    def grow_pair_necks(state: SimState, prep: Prepared) -> SimState:
+        """With the mechanics: at the end of a growth interval, the necks on the half pair list grown over it (the
+        many-body balance moving the particles) and the stability of the heat step on them."""
+        spec = physics.sintering
+        law = neck_growth.law_params(spec, prep.params.sintering)
+        pairs = state.contacts.pairs.pairs
+
+        def grow(particles, motion, carried):
+            radii, n = particles.radii, particles.radii.shape[0]
+            elapsed = (state.step - carried.interval_start).astype(state.dt.dtype) * state.dt
+            geometry = mechanics.pair_geometry(particles.positions, radii, pairs, neck_growth.POINT_CONTACT_GAP)
+            neck, overlap, displacement, unbalanced = neck_growth.grow_pair_necks(
+                spec, law, carried, motion.neck, geometry, particles.positions, radii, particles.temperature, elapsed)
+            if displacement is not None:
+                particles = dataclasses.replace(particles, positions=particles.positions + displacement)
+                carried = dataclasses.replace(carried, unbalanced=carried.unbalanced | unbalanced)
+                geometry = mechanics.pair_geometry(particles.positions, radii, pairs, neck_growth.POINT_CONTACT_GAP)
+            motion = dataclasses.replace(motion, neck=neck, neck_overlap=overlap)
+            index, kappa = conductivity_lookup(physics, prep.params, particles)
+            k = pair_conductance(physics, radii, index, conducting_geometry(geometry, overlap), kappa,
+                                 merged_law_params(physics, prep.params))
+            total = pair_sum(k, k, pairs, n)
+            walls = [w for w in physics.mechanics.walls if w.mode == "conducting"]
+            if walls:
+                h = mechanics.wall_penetration(walls, particles.positions, radii, state.time)
+                for w in range(len(walls)):
+                    total = total + wall_conductance_from_neck(
+                        physics.conduction.law, wall_neck_radius(physics.neck, radii, h[w]), radii, h[w],
+                        kappa[index], kappa[index], merged_law_params(physics, prep.params))
+            if physics.conduction.held:  # held particles are reset every step: their rows do not count
+                total = jnp.where(particles.fixed, 0.0, total)
+            limit = thermal.explicit_stability_limit(capacity_now(state, prep), total)
+            carried = dataclasses.replace(carried, interval_temperature=particles.temperature,
+                                          interval_start=state.step, unstable=carried.unstable | jnp.any(state.dt > limit))
+            return particles, motion, carried
+
+        args = (state.particles, state.mechanics, state.sintering)
+        if spec.every == 1:
+            particles, motion, carried = grow(*args)
+        else:
+            particles, motion, carried = jax.lax.cond(neck_growth.update_interval(spec, state.step), grow,
+                                                      lambda *kept: kept, *args)
+        return dataclasses.replace(state, particles=particles, mechanics=motion, sintering=carried)
 
     def capacity_now(state: SimState, prep: Prepared):
         """The capacities (J/K) at this step: the rollout's, or with a specific-heat table at today's temperatures."""
@@ -1037,7 +1120,7 @@ def reallocate_neighbors(neighbor_fns):
         if motion is not None and capacity > half.capacity:  # the springs stay with their pairs, zeros after them
             pad = lambda x: None if x is None else jnp.concatenate(  # noqa: E731
                 [x, jnp.zeros((capacity - half.capacity,) + x.shape[1:], x.dtype)])
-            motion = dataclasses.replace(motion, spring=pad(motion.spring), rolling=pad(motion.rolling))
+            motion = dataclasses.replace(motion, **{f: pad(getattr(motion, f)) for f in mechanics.PAIR_HISTORY})
         return dataclasses.replace(start, contacts=contacts, mechanics=motion)
 
     return reallocate
@@ -1182,6 +1265,8 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
                              "sintering=neck_growth.neck_state(contacts, temperature)))")
         neck_growth.validate_sintering(sim.physics.sintering, params.sintering, state.contacts, p.radii,
                                        state.sintering)
+        if sim.physics.mechanics is not None:
+            neck_growth.validate_pair_necks(state.mechanics, p.radii, state.contacts.pairs.pairs)
     if sim.physics.mechanics is None:
         return
     if params.mechanics is None:

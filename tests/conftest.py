@@ -28,6 +28,7 @@ LONGEST_FIRST = (
     "test_notebooks_alone.py",  # (350) calibrate_softening
     "test_fit_softening.py",  # (470)
     "test_mechanics.py",  # (190)
+    "test_sintering_mechanics.py",  # (180)
     "test_notebooks.py",  # (220) the other six notebooks
     "test_moving.py",  # (90)
     "test_inverse.py",  # (110)

@@ -353,6 +353,11 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
             bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
                                     f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
         motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
+        if physics.sintering is not None:  # the necks on the half pair list, carried as the springs are
+            motion = neck_growth.with_pair_necks(motion, contacts, centres, radii,
+                                                 scene["sintering"].get("start_necks", "point"))
+            necks = neck_growth.neck_state(contacts, particles.temperature, supports=necks.supports,
+                                           positions=particles.positions)
     beam = scene.get("beam")
     if beam is not None and beam_step(beam) is not None:
         step = beam_step(beam)

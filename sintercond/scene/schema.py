@@ -247,6 +247,11 @@ _SCHEMA = {
                              "the particles at each neck update, those resting on a floor (a wall on axis 2, side min) held "
                              "vertically "
                              "(sintercond.neck_growth)"),
+        "start_necks": Key(str, _choice("point", "overlap"), False,
+                           doc="with physics.mechanics (point if not given): point, every contact starts as a point "
+                               "contact and its overlap stays elastic (the bed keeps its load); overlap, every "
+                               "overlap is taken as a sintered neck (the volume-conserving neck of it) that carries "
+                               "no elastic load. Without the mechanics the necks start from the packing's overlaps"),
         "k_star_axis": Key(int, _choice(0, 1, 2), False,
                            doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
                                "steady solve on the grown necks at each output (sintercond.steady, the face "

@@ -278,9 +278,9 @@ def _check_sintering(scene):
     s, conduction = scene["sintering"], scene["conduction"]
     _check_law_params("sintering.params", s.get("params", {}), KINETIC_LAWS[s["law"]], _SINTERING_PARAMS,
                       "kinetic law")
-    if scene["physics"]["mechanics"]:
-        raise SceneError("[sintering] grows necks without the elastic mechanics in this version: it needs "
-                         "physics.mechanics = false")
+    if "start_necks" in s and not scene["physics"]["mechanics"]:
+        raise SceneError("sintering.start_necks chooses how the necks of a run with physics.mechanics start; "
+                         "without the mechanics they start from the packing's overlaps: drop it")
     model = conduction.get("neck_model", CONDUCTANCE_LAWS[conduction["law"]].neck_model)
     if model != "volume_conserving":
         raise SceneError(f"[sintering] grows Rojek's volume-conserving necks: conduction.neck_model must be "
