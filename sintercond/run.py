@@ -227,6 +227,8 @@ def _write_outputs(scene, out, model, state, obs: Observation):
     if model.physics.mechanics is not None:
         fields = {"velocity": obs.velocity, "force": obs.force,
                   "coordination": coordination(len(model.radii), obs.pairs)}
+    if model.physics.sintering is not None:
+        fields["neck_ratio"] = np.asarray(neck_growth.particle_neck_ratio(state))
     if "lammps" in formats:
         append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields)
     if "vtp" in formats:
@@ -235,8 +237,6 @@ def _write_outputs(scene, out, model, state, obs: Observation):
                   np.zeros(len(model.radii), np.int64), "material": np.asarray(p.material, np.int64)}
         if obs.power is not None:
             fields["heat_power"] = np.asarray(obs.power)
-        if model.physics.sintering is not None:
-            fields["neck_ratio"] = np.asarray(neck_growth.particle_neck_ratio(state))
         (out / "vtp").mkdir(exist_ok=True)
         write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields,
                   encoding=scene["run"]["vtp_encoding"])

@@ -256,3 +256,21 @@ def test_a_bad_shrinkage_is_named():
     scene["sintering"]["shrinkage"] = "collective"
     with pytest.raises(SceneError, match=r"sintering\.shrinkage must be one of"):
         validate_scene(scene)
+
+
+def test_the_dump_carries_each_particles_neck_ratio_as_the_frames_do(tmp_path):
+    from sintercond.packing_files import read_packing
+
+    scene = copy.deepcopy(CELL)
+    scene["run"]["formats"] = ["vtp", "lammps"]
+    runner.run_scene(validate_scene(scene), tmp_path, progress=False, pictures=False)
+    text = (tmp_path / "dump.lammpstrj").read_text()
+    last = text.rsplit("ITEM: TIMESTEP\n", 1)[1].splitlines()
+    columns = last[7].split()[2:]
+    assert "neck_ratio" in columns
+    rows = np.array([line.split() for line in last[8:]], np.float64)
+    order = np.argsort(rows[:, columns.index("id")])
+    frame = io.read_vtp(sorted((tmp_path / "vtp").glob("*.vtp"))[-1])
+    assert np.all(frame["neck_ratio"] > 0)
+    np.testing.assert_allclose(rows[order, columns.index("neck_ratio")], frame["neck_ratio"], rtol=1e-6)
+    assert read_packing(tmp_path / "dump.lammpstrj")[1].shape == (16,)  # still a dump our reader takes
