@@ -170,3 +170,27 @@ def test_scene_soft_modulus_is_checked():
                                      "diameter_range": [45e-6, 105e-6], "soft_modulus": 1e7}, mechanics=False))
     with pytest.raises(SceneError, match=r"soft_modulus"):
         scene.validate_scene(_scene({**POURED, "soft_modulus": 0.0}))
+
+
+def test_a_dem_powder_bed_takes_where_its_pour_starts_and_the_build_passes_it(monkeypatch):
+    bed = {"kind": "powder_bed", "lateral_size": 1e-3, "height": 3e-4, "diameter_range": [45e-6, 105e-6],
+           "method": "dem", "start": "rolled", "soft_modulus": 1e7}
+    assert scene.validate_scene(_scene(bed))["packing"]["start"] == "rolled"
+    with pytest.raises(SceneError, match=r"packing.start is where a DEM pour starts from"):
+        scene.validate_scene(_scene({k: v for k, v in bed.items() if k not in ("method", "soft_modulus")},
+                                    mechanics=False))
+    with pytest.raises(SceneError, match=r"packing.start must be one of"):
+        scene.validate_scene(_scene({**bed, "start": "poured"}))
+    seen = {}
+
+    def fake_powder_bed(*args, **kwargs):
+        seen.update(kwargs)
+        raise RuntimeError("stop here")
+
+    from sintercond import packing
+    from sintercond.scene import build
+
+    monkeypatch.setattr(packing, "powder_bed", fake_powder_bed)
+    with pytest.raises(RuntimeError, match="stop here"):
+        build.build_model(scene.validate_scene(_scene(bed)))
+    assert seen["start"] == "rolled" and seen["soft_modulus"] == 1e7 and seen["method"] == "dem"

@@ -302,6 +302,13 @@ SOFT_MODULUS = Key(float, _within(1.0, 1e12, "Pa"), False, "Pa",
                        "absent: pour at the real modulus")
 """A poured packing's soft stage (both pouring kinds take it)."""
 
+POUR_START = Key(str, _choice("relaxed", "deposit", "rolled"), False, default="relaxed",
+                 doc="deposit: the DEM collapses the loose pile itself (a real pour); relaxed: the pile is first "
+                     "collapsed without friction, then the DEM settles it (cheaper, denser); rolled: the spheres "
+                     "are first rolled down the pile to rest on their supports (point contacts, sintercond.rolling), "
+                     "then the DEM settles them")
+"""Where the DEM of a pour starts from (sintercond.packing.pour's ``start``)."""
+
 
 _PACKING = {
     "powder_bed": {
@@ -322,6 +329,8 @@ _PACKING = {
                           "with the contact laws of the [mechanics] section, which it then needs; "
                           "sintercond.packing.pour; SI units; up to 20,000)"),
         "soft_modulus": SOFT_MODULUS,
+        "start": POUR_START._replace(default=None, doc="with method = \"dem\" (relaxed if not given): "
+                                     + POUR_START.doc),
         "sinter_swelling": Key(float, _within(0.0, 0.05), False, default=0.0,
                                doc="relative radius increase after settling that turns contacts into sintered "
                                    "necks (overlap h = 2 r s for equal spheres)"),
@@ -348,11 +357,7 @@ _PACKING = {
         "lateral_size": Key(float, _within(1e-5, 10.0, "m"), True, "m",
                             doc="side of the open square box [0, L]^2 the spheres are poured into, > 2 max radius"),
         "seed": Key(int, _within(0, 2**63 - 1), False, default=0, doc="random seed (radii and the deposit)"),
-        "start": Key(str, _choice("relaxed", "deposit", "rolled"), False, default="relaxed",
-                     doc="deposit: the DEM collapses the loose pile itself (a real pour); relaxed: the pile is "
-                         "first collapsed without friction, then the DEM settles it (cheaper, denser); rolled: "
-                         "the spheres are first rolled down the pile to rest on their supports (point contacts, "
-                         "sintercond.rolling), then the DEM settles them"),
+        "start": POUR_START,
 
         "soft_modulus": SOFT_MODULUS,
     },

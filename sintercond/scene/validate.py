@@ -147,6 +147,8 @@ def _check_mechanics(scene):
         raise SceneError("a poured packing (packing.kind = \"poured\" or packing.method = \"dem\") needs a [mechanics] "
                          "section: the contact material it is poured with (at least mechanics.young_modulus and "
                          "mechanics.poisson_ratio)")
+    if packing["kind"] == "powder_bed" and "start" in packing and packing.get("method") != "dem":
+        raise SceneError("packing.start is where a DEM pour starts from: it needs packing.method = \"dem\"")
     if "soft_modulus" in packing:
         if not pours:
             raise SceneError("packing.soft_modulus applies to a poured packing only (packing.kind = \"poured\" or "
