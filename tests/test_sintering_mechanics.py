@@ -364,3 +364,18 @@ def test_the_start_of_the_necks_is_a_key_of_runs_with_the_mechanics_only():
         validate_scene(without)
     with pytest.raises(SceneError, match=r"sintering\.start_necks must be one of"):
         validate_scene(coupled_cell(start_necks="sintered"))
+
+
+def test_a_contact_the_shrinkage_closes_in_one_update_takes_its_overlap_as_a_neck_not_an_impact():
+    # fast kinetics: the first update closes the ring's short diagonal by some 0.5 um at once, which as an elastic
+    # Hertz overlap would throw the ring apart at some 0.7 m/s
+    sim, state, params, _ = coupled(rhombus(), np.full(4, R), 1200.0, every=10, dt=1e-6, skin=0.05 * R,
+                                    kinetics={"A": 1e-10, "activation_energy": 100.0})
+    assert (1, 3) not in {p for p, a in by_pair(state, state.mechanics.neck).items() if a > 0}
+    end = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 20)[0])(state, params)
+    x = np.asarray(end.particles.positions)
+    assert np.linalg.norm(x[1] - x[3]) < 2 * R - 0.2e-6  # closed deep
+    necks, approaches = by_pair(end, end.mechanics.neck), by_pair(end, end.mechanics.neck_overlap)
+    np.testing.assert_allclose(approaches[(1, 3)], 2 * R - np.linalg.norm(x[1] - x[3]), rtol=1e-6)
+    assert necks[(1, 3)] > 0
+    assert float(np.max(np.abs(np.asarray(end.mechanics.velocity)))) < 1e-12
