@@ -3,6 +3,8 @@ caller of it needed; issue 24)."""
 
 import dataclasses
 
+import jax.numpy as jnp
+
 from sintercond import mechanics, network, thermal
 from sintercond.pair_list import pair_exchange, pair_sum
 
@@ -31,3 +33,11 @@ def contact_loads(spec, params, geometry, positions, radii, mass, modulus, nu, s
     state = dataclasses.replace(state, spring=spring, rolling=rolling)
     return mechanics.body_loads(spec, params, positions, radii, mass, modulus, nu, state, t, dt,
                                 pair_exchange(f, geometry.pairs, n), pair_sum(t_i, t_j, geometry.pairs, n))
+
+
+def forced_rebuild(state):
+    """A dynamic state with its lists marked stale: the next update rebuilds both (as after a reallocation),
+    carrying the pair history to the rebuilt list."""
+    nbrs = state.contacts.neighbor_list
+    nbrs = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
+    return dataclasses.replace(state, contacts=dataclasses.replace(state.contacts, neighbor_list=nbrs))

@@ -18,7 +18,7 @@ import pytest
 from sintercond import examples, mechanics, simulate
 from sintercond.state import particle_state
 from sintercond.walls import PlaneWall
-from _helpers import contact_loads
+from _helpers import contact_loads, forced_rebuild
 
 R, RHO, E0, NU, G = 1e-3, 3000.0, 1e6, 0.3, 9.81
 MASS = 4.0 / 3.0 * math.pi * R**3 * RHO
@@ -324,15 +324,8 @@ def _stack(mu=0.5):
                   _params(mu=mu, mu_r=0.5, xi_rol=0.3), walls=(floor,), gravity=gravity, friction=True, rolling=True)
 
 
-def _forced_rebuild(state):
-    """The state with its lists marked stale: the next update rebuilds both (as after a reallocation)."""
-    nbrs = state.contacts.neighbor_list
-    nbrs = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
-    return dataclasses.replace(state, contacts=dataclasses.replace(state.contacts, neighbor_list=nbrs))
-
-
 @pytest.mark.slow
-def test_a_sphere_held_by_friction_continues_bit_for_bit_through_a_forced_rebuild():
+def test_a_sphere_held_by_friction_continues_bit_for_bit_through_aforced_rebuild():
     sim, state, params = _stack()
     run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 2500, simulate.SaveAt(2500, lambda s: ()),
                                                 checkpoint=False)[0])
@@ -340,7 +333,7 @@ def test_a_sphere_held_by_friction_continues_bit_for_bit_through_a_forced_rebuil
     spring = np.asarray(settled.mechanics.spring[0])
     assert np.asarray(settled.contacts.pairs.pairs)[0].tolist() == [0, 1]
     assert np.linalg.norm(spring) > 1e-9  # ~ m g sin(a) / k_t
-    through = run(_forced_rebuild(settled), params)
+    through = run(forced_rebuild(settled), params)
     assert np.all(np.isfinite(np.asarray(through.contacts.neighbor_list.reference_position)))  # it did rebuild
     kept = run(settled, params)
     for a, b in zip(jax.tree.leaves(through.mechanics), jax.tree.leaves(kept.mechanics)):
@@ -349,7 +342,7 @@ def test_a_sphere_held_by_friction_continues_bit_for_bit_through_a_forced_rebuil
     drift = np.asarray(kept.particles.positions - settled.particles.positions)
     assert np.max(np.abs(drift)) < 1e-9  # held: it does not move
     # control: a rebuild that forgets the springs lets the top sphere lurch down the slope
-    forgot = _forced_rebuild(dataclasses.replace(settled, mechanics=dataclasses.replace(
+    forgot = forced_rebuild(dataclasses.replace(settled, mechanics=dataclasses.replace(
         settled.mechanics, spring=jnp.zeros_like(settled.mechanics.spring))))
     lurch = np.asarray(run(forgot, params).particles.positions - settled.particles.positions)
     assert np.abs(lurch[0, 0]) > 100 * np.max(np.abs(drift))

@@ -17,6 +17,7 @@ import pytest
 from sintercond import mechanics, neck_growth, rollout, simulate, sintering
 from sintercond.state import particle_state
 from sintercond.walls import PlaneWall
+from _helpers import forced_rebuild
 
 DENSITY, HEAT, KAPPA = 4430.0, 560.0, 7.0  # Ti6Al4V
 KINETICS = {"A": 1e-13, "activation_energy": 100.0}  # necks of some um in a few ms at 1000-1200 K
@@ -181,13 +182,6 @@ def test_a_hot_contact_grows_to_the_law_s_cap_and_stays_there():
     assert float(first.mechanics.neck[0]) == pytest.approx(cap, rel=1e-12)
     assert float(second.mechanics.neck[0]) == float(first.mechanics.neck[0])
     assert np.isfinite(float(second.mechanics.neck_overlap[0])) and not bool(second.sintering.unstable)
-
-
-def forced_rebuild(state):
-    """The state with its lists marked stale: the next update rebuilds both, carrying the pair history."""
-    nbrs = state.contacts.neighbor_list
-    nbrs = dataclasses.replace(nbrs, reference_position=jnp.full_like(nbrs.reference_position, jnp.inf))
-    return dataclasses.replace(state, contacts=dataclasses.replace(state.contacts, neighbor_list=nbrs))
 
 
 @pytest.mark.slow
