@@ -120,6 +120,8 @@ ELSEWHERE = {
     **{f"sintering.{key}": "test_sintering_scene.py: test_the_sintering_keys_reach_the_model (no mechanics)"
        for key in ("law", "every", "params")},
     "sintering.shrinkage": "test_sintering_scene.py: test_many_body_shrinkage_holds_the_bottom_layer_on_its_floor...",
+    "sintering.start_necks": "test_sintering_mechanics.py: test_the_start_of_the_necks_is_a_key_of_runs_with_the_"
+                             "mechanics_only, and the coupled scene starts from point contacts",
     "run.contact_network": "test_contact_network.py: network frames written when asked, none otherwise",
     "material.conductivity_table": "test_conductivity_table.py: test_a_scenes_table_reaches_the_run",
     "material.specific_heat_table": "test_specific_heat_table.py: test_a_scenes_table_reaches_the_run...",

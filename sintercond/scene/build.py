@@ -130,7 +130,7 @@ def build_packing(scene, log=None):
         if p.get("method") == "dem":
             packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],
                                         method="dem", material=dem_material(scene), progress=progress,
-                                        soft_modulus=p.get("soft_modulus"), start=p.get("start", "relaxed"))
+                                        soft_modulus=p.get("soft_modulus"), start=p["start"])
             packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p["sinter_swelling"]))
         else:
             packed = packing.from_scene(p, progress=progress)

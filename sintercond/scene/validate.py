@@ -16,7 +16,7 @@ from sintercond.mechanics import validate_mechanical_params
 from sintercond.sintering import KINETIC_LAWS
 from sintercond.scene.estimate import estimate_run
 from sintercond.scene.schema import (
-    Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, SceneError, _LAW_PARAMS, _PACKING,
+    Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, POUR_START, SceneError, _LAW_PARAMS, _PACKING,
     TEMPERATURE, _REQUIRED_SECTIONS, _SCHEMA, _SECTIONS, _SINTERING_PARAMS, _WALL, _check_keys, _check_section,
     _describe, _numbers, _suggest, _value, _within, file_packing, file_temperatures,
 )
@@ -147,7 +147,9 @@ def _check_mechanics(scene):
         raise SceneError("a poured packing (packing.kind = \"poured\" or packing.method = \"dem\") needs a [mechanics] "
                          "section: the contact material it is poured with (at least mechanics.young_modulus and "
                          "mechanics.poisson_ratio)")
-    if packing["kind"] == "powder_bed" and "start" in packing and packing.get("method") != "dem":
+    if packing["kind"] == "powder_bed" and packing.get("method") == "dem":
+        packing.setdefault("start", POUR_START.default)
+    elif packing["kind"] == "powder_bed" and "start" in packing:
         raise SceneError("packing.start is where a DEM pour starts from: it needs packing.method = \"dem\"")
     if "soft_modulus" in packing:
         if not pours:
