@@ -574,6 +574,14 @@ def _pair_neck(physics, radii, g):
     return jnp.where(g.touching, NECK_MODELS[physics.neck](radii[g.i], radii[g.j], g.overlap), 0.0)
 
 
+def mechanical_wall_conductance(physics: Physics, radii, penetration, conductivity, law_params):
+    """``[n]`` conductances (W/K) of the particles to a conducting mechanical wall at their ``penetration`` (m):
+    the law on the wall's neck (:mod:`sintercond.walls`, ``r_j -> inf``), both halves at the particle's
+    ``conductivity``."""
+    return wall_conductance_from_neck(physics.conduction.law, wall_neck_radius(physics.neck, radii, penetration),
+                                      radii, penetration, conductivity, conductivity, law_params)
+
+
 def sintered_geometry(geometry, neck_overlap):
     """The :class:`sintercond.mechanics.PairGeometry` the elastic laws see on sintered pairs: each overlap less the
     approach ``H(a)`` its neck accounts for (``neck_overlap`` ``[c]``, m), touching only where that stays positive.
@@ -761,10 +769,7 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
         power = pair_exchange(q, pairs, n)
         for w, wall in enumerate(physics.mechanics.walls):
             if wall.mode == "conducting":
-                h = loads.wall_penetration[w]
-                k = kappa[index]
-                k_w = wall_conductance_from_neck(physics.conduction.law, wall_neck_radius(physics.neck, radii, h), radii, h, k, k,
-                                                 law_params)
+                k_w = mechanical_wall_conductance(physics, radii, loads.wall_penetration[w], kappa[index], law_params)
                 power = power + k_w * (jnp.asarray(wall.temperature, power.dtype) - particles.temperature)
         power = power + thermal.source_power(physics.sources, state, params)
         temperature = explicit_heat(state, prep, power)
@@ -791,19 +796,17 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
             if displacement is not None:
                 particles = dataclasses.replace(particles, positions=particles.positions + displacement)
                 carried = dataclasses.replace(carried, unbalanced=carried.unbalanced | unbalanced)
-                geometry = mechanics.pair_geometry(particles.positions, radii, pairs, neck_growth.POINT_CONTACT_GAP)
             motion = dataclasses.replace(motion, neck=neck, neck_overlap=overlap)
-            index, kappa = conductivity_lookup(physics, prep.params, particles)
-            k = pair_conductance(physics, radii, index, conducting_geometry(geometry, overlap), kappa,
-                                 merged_law_params(physics, prep.params))
+            grown = dataclasses.replace(state, particles=particles, mechanics=motion)
+            _, k = sintered_pair_conductance(physics, grown, prep.params)
             total = pair_sum(k, k, pairs, n)
             walls = [w for w in physics.mechanics.walls if w.mode == "conducting"]
             if walls:
+                index, kappa = conductivity_lookup(physics, prep.params, particles)
                 h = mechanics.wall_penetration(walls, particles.positions, radii, state.time)
                 for w in range(len(walls)):
-                    total = total + wall_conductance_from_neck(
-                        physics.conduction.law, wall_neck_radius(physics.neck, radii, h[w]), radii, h[w],
-                        kappa[index], kappa[index], merged_law_params(physics, prep.params))
+                    total = total + mechanical_wall_conductance(physics, radii, h[w], kappa[index],
+                                                                merged_law_params(physics, prep.params))
             if physics.conduction.held:  # held particles are reset every step: their rows do not count
                 total = jnp.where(particles.fixed, 0.0, total)
             limit = thermal.explicit_stability_limit(capacity_now(state, prep), total)
