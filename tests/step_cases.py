@@ -132,14 +132,18 @@ def _api_case(conductance, integrator="explicit", pulse=True, motion=False, mate
     power = np.where(centres[:, 1] < 0.5e-4, 2e-3, 0.0)
     params = simulate.Params(conductivity=jnp.full(materials, 7.0), specific_heat=jnp.full(materials, 560.0),
                              pulse=simulate.PulseParams(jnp.asarray(power), jnp.asarray(2e-3)) if pulse else None)
-    if motion:
+    if motion:  # the top layer moves down by 2 % of a radius over the steps taken, at half the static stable step
+        static = simulate.Physics.create(conductance="lifted", held=True, pulse=pulse)
+        contacts = simulate.lifted_contacts(static, centres, radii)
+        dt = 0.5 * float(simulate.thermal_time_step(simulate.simulator(static), simulate.init_state(
+            particles, contacts, 1.0), params))
         velocity = np.zeros_like(centres)
-        velocity[:, 2] = np.where(centres[:, 2] > 1e-4, -2.0, 0.0)
+        velocity[:, 2] = np.where(centres[:, 2] > 1.5e-4, -0.02 * radii.max() / (STEPS * dt), 0.0)
         move = _Squeeze(jnp.asarray(centres), jnp.asarray(velocity))
         physics = simulate.Physics.create(conductance="lifted", contacts="dynamic", held=True, pulse=pulse, motion=move)
         contacts, fns = simulate.dynamic_contacts(centres, radii, 0.2 * radii.max())
         sim = simulate.simulator(physics, fns)
-        return sim, simulate.init_state(particles, contacts, 5e-6), params
+        return sim, simulate.init_state(particles, contacts, dt), params
     physics = simulate.Physics.create(conductance=conductance, held=True, pulse=pulse, integrator=integrator,
                                       conducting_walls=1)
     if conductance == "table":
