@@ -54,7 +54,7 @@ __version__ = "0.1.0"
 _SUBMODULES = frozenset({
     "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "guards", "heat_sources",
     "io", "materials", "mechanics", "neck", "neck_growth", "neighbors", "network", "observe", "packing",
-    "packing_files", "pair_list", "plots", "rolling", "rollout", "run", "scene", "settle", "simulate", "sintering",
+    "packing_files", "pair_list", "plots", "rolling", "rollout", "run", "scene", "settle", "sim", "simulate", "sintering",
     "state", "steady", "sweep", "thermal", "tortuosity", "walls",
 })
 

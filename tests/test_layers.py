@@ -22,7 +22,9 @@ LAYERS = {
              "dryden_zok", "tortuosity", "geometry"],
     "space": ["neighbors", "pair_list"],
     "lifts": ["network", "mechanics", "thermal", "neck_growth"],
-    "drive": ["simulate", "steady", "rollout", "guards"],
+    "drive": ["sim", "sim.physics", "sim.state", "sim.contacts", "sim.terms", "sim.terms.sources", "sim.terms.walls",
+              "sim.terms.conduction", "sim.terms.mechanics", "sim.terms.sintering", "sim.step", "sim.stability",
+              "sim.validation", "sim.rollout", "simulate", "steady", "rollout", "guards"],
     "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.build", "observe",
             "settle", "rolling", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
 }

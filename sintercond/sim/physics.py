@@ -1,0 +1,249 @@
+"""What is simulated: :class:`Physics`, a static, hashable spec in sub-specs (:class:`Conduction`,
+:class:`Sources`, :class:`sintercond.mechanics.Mechanics`, :class:`sintercond.neck_growth.Sintering`) that mirror
+:class:`sintercond.sim.state.Params`.
+
+The step (:func:`sintercond.sim.step.simulator`) branches on it in Python: a sub-spec that is ``None`` is off and
+nothing of it is traced, and each distinct spec compiles one step. The combinations the step supports are checked
+here, when the spec is made.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from sintercond.conductance import CONDUCTANCE_LAWS
+from sintercond.mechanics import Mechanics
+from sintercond.neck import NECK_MODELS
+from sintercond.neck_growth import Sintering
+
+_INTEGRATORS = ("explicit", "implicit")
+_CONDUCTANCE_MODES = ("table", "lifted")
+_CONTACT_MODES = ("static", "dynamic")
+_BEAMS = (None, "laser", "nozzle")
+
+
+@dataclasses.dataclass(frozen=True)
+class Conduction:
+    """How heat moves through the contacts: the conduction sub-spec of :class:`Physics` (static, hashable).
+
+    Its differentiable counterparts are ``Params.conductivity``, ``Params.specific_heat`` and ``Params.law``.
+
+    Attributes:
+      law: conductance law, a key of :data:`sintercond.CONDUCTANCE_LAWS`.
+      neck_model: neck model key, or None for the law's default.
+      conductance: ``"table"`` (precomputed at unit conductivity; one
+        material, no contact resistance) or ``"lifted"`` (necks stored, law
+        applied to ``params`` at each rollout; any materials and law
+        parameters).
+      integrator: ``"explicit"`` (Euler; check the stable step) or
+        ``"implicit"`` (backward Euler by conjugate gradients; conduction
+        and held particles only).
+      implicit_tol: relative residual of the implicit CG solve.
+      held: some particles are held at fixed temperatures.
+      conductivity_table: ``Params.conductivity`` is a :class:`sintercond.materials.Table`, the
+        conductivity against temperature (one material): each particle conducts at its own temperature,
+        and the conductances are evaluated at every step. Needs ``conductance="lifted"``.
+      specific_heat_table: ``Params.specific_heat`` is a :class:`sintercond.materials.Table`, the specific heat
+        against temperature (one material): each particle's capacity ``C_i = m_i c(T_i)`` at its temperature at
+        the start of every step (explicit Euler: ``sum_i C_i(T^n) (T_i^(n+1) - T_i^n)`` equals the heat in, so
+        the enthalpy ``sum_i m_i int c dT`` is kept to first order in the step). Needs the explicit integrator.
+      held_ramp: the held particles follow a stepped ramp (``Params.held_ramp``,
+        :class:`HeldRampParams`: Rizza & Galati 2024's Eq. 6 preheating) from their
+        ``fixed_temperature``; needs ``held``.
+      conducting_walls: number of conducting plane walls of a thermal step
+        (0: none traced); a mechanical step takes its walls as ``Mechanics.walls``.
+    """
+
+    law: str = "rojek"
+    neck_model: str | None = None
+    conductance: str = "table"
+    integrator: str = "explicit"
+    implicit_tol: float = 1e-13
+    held: bool = False
+    conducting_walls: int = 0
+    held_ramp: bool = False
+    conductivity_table: bool = False
+    specific_heat_table: bool = False
+
+    def __post_init__(self):
+        checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
+                  ("integrator", self.integrator, _INTEGRATORS))
+        for name, value, allowed in checks:
+            if value not in allowed:
+                raise ValueError(f"Conduction.{name} must be one of {list(allowed)}; got {value!r}")
+        if self.neck_model is not None and self.neck_model not in NECK_MODELS:
+            raise ValueError(f"Conduction.neck_model must be one of {sorted(NECK_MODELS)} or None; "
+                             f"got {self.neck_model!r}")
+        if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
+            raise ValueError(f"Conduction.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
+        if self.conductivity_table and (self.conductance != "lifted" or self.integrator != "explicit"):
+            raise ValueError("Conduction.conductivity_table evaluates the law at every step: it needs "
+                             "conductance='lifted' and the explicit integrator")
+        if self.specific_heat_table and self.integrator != "explicit":
+            raise ValueError("Conduction.specific_heat_table updates each capacity at every step: it needs the "
+                             "explicit integrator")
+        if self.held_ramp and not self.held:
+            raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
+
+    @property
+    def neck(self) -> str:
+        """The neck model in use."""
+        return CONDUCTANCE_LAWS[self.law].neck_model if self.neck_model is None else self.neck_model
+
+
+@dataclasses.dataclass(frozen=True)
+class Sources:
+    """The heat sources of :class:`Physics` (static, hashable); their parameters are ``Params.beam``,
+    ``Params.convection``, ``Params.radiation`` and ``Params.pulse``.
+
+    Attributes:
+      beam: ``None``, ``"laser"`` (Lambert-Beer) or ``"nozzle"`` (linear attenuation).
+      convection, radiation: convective / radiative exchange with the environment.
+      pulse: a prescribed power per particle while ``t < params.pulse.duration``.
+      source: extra heat power ``fn(state, t, params) -> [n]`` W (hashable
+        callable), or None.
+    """
+
+    beam: str | None = None
+    convection: bool = False
+    radiation: bool = False
+    pulse: bool = False
+    source: Callable | None = None
+
+    def __post_init__(self):
+        if self.beam not in _BEAMS:
+            raise ValueError(f"Sources.beam must be one of {list(_BEAMS)}; got {self.beam!r}")
+
+    @property
+    def any(self) -> bool:
+        """Whether any source is on."""
+        return bool(self.beam or self.convection or self.radiation or self.pulse or self.source is not None)
+
+
+@dataclasses.dataclass(frozen=True)
+class Physics:
+    """What is simulated: a static, hashable spec (nothing here is an array), in sub-specs that mirror :class:`Params`.
+
+    :func:`sintercond.sim.step.simulator` branches on it in Python: a sub-spec that is ``None`` is
+    off and nothing of it is traced, and each distinct spec compiles one step.
+    Write it nested, or from flat keywords with the normalising constructor
+    :meth:`create`::
+
+        Physics(conduction=Conduction(law="rojek", conductance="lifted"), contacts="dynamic",
+                mechanics=Mechanics.create(walls=[floor], friction=True))
+        Physics.create(law="rojek", conductance="lifted", contacts="dynamic", mechanics=True,
+                       walls=[floor], friction=True)   # the same spec
+
+    Attributes:
+      conduction: :class:`Conduction`: law, neck model, table or lifted
+        conductances, integrator, held particles, conducting walls.
+      contacts: ``"static"`` (the packing does not move) or ``"dynamic"``.
+      motion: prescribed positions ``fn(t) -> [n, 3]`` (m) for dynamic
+        contacts, or None (positions stay).
+      sources: :class:`Sources`: beam, convection, radiation, pulse, a custom source.
+      mechanics: :class:`sintercond.mechanics.Mechanics`, the coupled
+        thermo-mechanical step (Quintana-Ruiz & Campello 2020, Eqs. 43-46;
+        :mod:`sintercond.mechanics`): particles move under contact forces,
+        gravity and walls, and heat flows through the contacts the motion
+        opens, closes and grows. Needs ``contacts="dynamic"``,
+        ``conduction.conductance="lifted"``, the explicit integrator, no
+        prescribed ``motion``, ``conduction.conducting_walls=0`` (walls are
+        ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
+      sintering: :class:`sintercond.neck_growth.Sintering`, necks that grow with each contact's temperature
+        history (:mod:`sintercond.neck_growth`: contacts on their own on a packing that does not move, or
+        many-body shrinkage that moves the particles). Needs ``conduction.conductance="lifted"``, the explicit
+        integrator, the ``"volume_conserving"`` neck model, ``Params.sintering`` and ``SimState.sintering``;
+        without mechanics ``contacts="static"`` (the necks on the table), with mechanics the necks live on the
+        dynamic half pair list (``MechanicalState.neck``, :func:`sintercond.neck_growth.with_pair_necks`) and
+        the elastic laws act on each overlap less its neck's approach. None: the necks stay.
+    """
+
+    conduction: Conduction = Conduction()
+    contacts: str = "static"
+    motion: Callable | None = None
+    sources: Sources = Sources()
+    mechanics: Mechanics | None = None
+    sintering: Sintering | None = None
+
+    def __post_init__(self):
+        for name, kind in (("conduction", Conduction), ("sources", Sources)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"Physics.{name} must be a {kind.__name__}; got {getattr(self, name)!r}")
+        if self.contacts not in _CONTACT_MODES:
+            raise ValueError(f"Physics.contacts must be one of {list(_CONTACT_MODES)}; got {self.contacts!r}")
+        if self.mechanics is not None and not isinstance(self.mechanics, Mechanics):
+            raise ValueError(f"Physics.mechanics must be a sintercond.mechanics.Mechanics or None; got "
+                             f"{self.mechanics!r}")
+        c = self.conduction
+        if self.sintering is not None:
+            if not isinstance(self.sintering, Sintering):
+                raise ValueError(f"Physics.sintering must be a sintercond.neck_growth.Sintering or None; got "
+                                 f"{self.sintering!r}")
+            needs = {"contacts": ("dynamic" if self.mechanics is not None else "static", self.contacts),
+                     "conduction.conductance": ("lifted", c.conductance),
+                     "conduction.integrator": ("explicit", c.integrator),
+                     "conduction.neck_model": ("volume_conserving", c.neck)}
+            for name, (want, got) in needs.items():
+                if got != want:
+                    raise ValueError(f"Physics.sintering needs {name}={want!r} (the necks grow by Rojek's "
+                                     f"volume-conserving geometry, on a static table or, with the mechanics, on the "
+                                     f"dynamic pair list); got {got!r}")
+        if self.mechanics is not None:
+            needs = {"contacts": ("dynamic", self.contacts), "conduction.conductance": ("lifted", c.conductance),
+                     "conduction.integrator": ("explicit", c.integrator)}
+            for name, (want, got) in needs.items():
+                if got != want:
+                    raise ValueError(f"Physics.mechanics needs {name}={want!r}; got {got!r}")
+            if self.motion is not None:
+                raise ValueError("Physics.mechanics moves the particles itself; motion must be None")
+            if c.conducting_walls:
+                raise ValueError("Physics.mechanics takes its walls as Mechanics.walls (PlaneWall, mode 'conducting' "
+                                 "for heat); conduction.conducting_walls must be 0")
+        if self.contacts == "dynamic" and c.conductance != "lifted":
+            raise ValueError("Physics.contacts='dynamic' needs conduction.conductance='lifted' (conductances follow "
+                             "the motion)")
+        if c.integrator == "implicit" and (self.sources.any or self.contacts == "dynamic"):
+            raise ValueError("Conduction.integrator='implicit' supports conduction on static contacts and held "
+                             "particles only; use 'explicit' with sources or motion")
+
+    @classmethod
+    def create(cls, law="rojek", neck_model=None, conductance="table", contacts="static", integrator="explicit",
+               held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
+               motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None, held_ramp=False,
+               conductivity_table=False, specific_heat_table=False, **mechanical) -> Physics:
+        """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
+
+        ``mechanics=True`` turns the coupled step on, with ``walls`` and the
+        other :class:`sintercond.mechanics.Mechanics` fields in ``mechanical``
+        (``gravity``, ``friction``, ``rolling``, ``wall_friction``, ...),
+        normalised by :meth:`sintercond.mechanics.Mechanics.create`; without it
+        those keywords are refused (nothing would move). ``sintering``: a
+        :class:`sintercond.neck_growth.Sintering` or None.
+        """
+        if not isinstance(mechanics, (bool, np.bool_)):
+            raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
+        if mechanics:
+            spec = Mechanics.create(walls, **mechanical)
+        elif walls or mechanical:
+            given = ["walls"] * bool(walls) + sorted(mechanical)
+            raise ValueError(f"Physics.create: {', '.join(given)} belong to the mechanical step (mechanics=True; "
+                             "walls there are mechanical walls); for heat alone use conducting_walls")
+        else:
+            spec = None
+        return cls(conduction=Conduction(law=law, neck_model=neck_model, conductance=conductance,
+                                         integrator=integrator, implicit_tol=implicit_tol, held=bool(held),
+                                         conducting_walls=conducting_walls, held_ramp=bool(held_ramp),
+                                         conductivity_table=bool(conductivity_table),
+                                         specific_heat_table=bool(specific_heat_table)),
+                   contacts=contacts, motion=motion,
+                   sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
+                                   pulse=bool(pulse), source=source),
+                   mechanics=spec, sintering=sintering)
+
+    @property
+    def neck(self) -> str:
+        """The neck model in use (``conduction.neck``)."""
+        return self.conduction.neck

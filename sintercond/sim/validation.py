@@ -1,0 +1,152 @@
+"""The checks of a simulation's input, on concrete values before anything compiles: each names the field and the
+allowed range (diffrax's ``_integrate.py`` habit), with the float32 precision warning of a mechanical state."""
+
+from __future__ import annotations
+
+import warnings
+
+import jax.numpy as jnp
+import numpy as np
+
+from sintercond import materials, mechanics, neck_growth
+from sintercond._validation import all_concrete, fail_where, require_positive
+from sintercond.sim.state import Params, SimState, Simulator
+from sintercond.sim.terms import sources
+
+
+MAX_INITIAL_OVERLAP = 0.5
+"""Deepest sphere-sphere overlap a mechanical run may start from, as a fraction of the smaller radius: Hertz's law
+(a small-strain law) would blow such spheres apart."""
+
+
+def _checked_property(name, value, tabulated, symbol, unit, bound, needs):
+    """``[n_materials]`` values of ``Params.<name>``, a :class:`sintercond.materials.Table` where the spec's
+    ``<name>_table`` says so (one material: its first node's value); raises ``ValueError`` naming the field."""
+    field = f"Params.{name}"
+    if tabulated:
+        if not isinstance(value, materials.Table):
+            raise ValueError(f"Conduction.{name}_table needs {field} as a sintercond.materials.Table "
+                             f"(materials.tabulated(T, {symbol})); got {value!r}")
+        if value.extrapolate:
+            raise ValueError(f"{field} (a table) must clamp at its ends (extrapolate=False): the stable step is "
+                             f"bounded by the table's {bound}")
+        nodes, values = np.asarray(value.temperatures, np.float64), np.asarray(value.values, np.float64)
+        require_positive(f"{field} table's temperatures (K)", nodes)
+        if nodes.ndim != 1 or nodes.shape != values.shape or len(nodes) < 2 or not np.all(np.diff(nodes) > 0):
+            raise ValueError(f"{field} (a table) needs >= 2 strictly increasing temperatures (K) and as many "
+                             f"values; got {nodes.tolist()} and {values.tolist()}")
+        require_positive(f"{field} table's values ({unit})", values)
+        return values[:1]  # one material
+    if isinstance(value, materials.Table):
+        raise ValueError(f"{field} is a table: set Conduction.{name}_table=True{needs}")
+    return np.atleast_1d(np.asarray(value, np.float64))
+
+
+def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
+    """Raise ``ValueError`` naming the field and the allowed range unless ``(state, params)`` can run on ``sim``.
+
+    Checked on concrete input, before anything compiles (:func:`rollout` calls it
+    when nothing is traced, :func:`sintercond.rollout.advance` always): the
+    time step finite and > 0; conductivities and specific heats finite and > 0,
+    one per material, every particle's material among them; finite positions
+    and temperatures > 0 K; with mechanics the contact parameters
+    (:func:`sintercond.mechanics.validate_mechanical_params`, the scene's rules),
+    finite velocities and spins, and no two listed spheres at the same centre
+    or overlapping by more than :data:`MAX_INITIAL_OVERLAP` of the smaller
+    radius. Traced leaves are skipped (under ``jit`` they are the caller's).
+    """
+    sources.validate(sim.physics, params)
+    if not all_concrete(state, params):
+        return
+    dt = np.asarray(state.dt, np.float64)
+    if not (dt.shape == () and np.isfinite(dt) and dt > 0):
+        raise ValueError(f"SimState.dt (the time step) must be finite and > 0 s; got {state.dt!r}")
+    conduction = sim.physics.conduction
+    kappa = _checked_property("conductivity", params.conductivity, conduction.conductivity_table, "kappa",
+                              "W/(m K)", "largest conductivity", " (with conductance='lifted')")
+    heat = _checked_property("specific_heat", params.specific_heat, conduction.specific_heat_table, "c",
+                             "J/(kg K)", "smallest specific heat", "")
+    if kappa.ndim != 1 or heat.shape != kappa.shape:
+        raise ValueError(f"Params.conductivity and Params.specific_heat must be [n_materials] each; got shapes "
+                         f"{kappa.shape} and {heat.shape}")
+    require_positive("Params.conductivity (W/(m K))", kappa)
+    require_positive("Params.specific_heat (J/(kg K))", heat)
+    p = state.particles
+    material = np.asarray(p.material)
+    if material.size and not (0 <= material.min() and material.max() < len(kappa)):
+        raise ValueError(f"particle materials must index Params.conductivity ({len(kappa)} materials); got "
+                         f"materials {material.min()}..{material.max()}")
+    fail_where(~np.isfinite(np.asarray(p.positions)).all(axis=1),
+               lambda i: f"particle positions must be finite; particle {i[0]} is not")
+    require_positive("particle temperatures (K)", np.asarray(p.temperature, np.float64))
+    if sim.physics.conduction.held_ramp:
+        ramp = params.held_ramp
+        if ramp is None:
+            raise ValueError("Conduction.held_ramp needs Params.held_ramp (simulate.HeldRampParams)")
+        if all_concrete(ramp):
+            require_positive("Params.held_ramp.end_temperature (K)", np.asarray(ramp.end_temperature, np.float64))
+            require_positive("Params.held_ramp.duration (s)", np.asarray(ramp.duration, np.float64))
+            steps = np.asarray(ramp.steps, np.float64)
+            if not (steps.shape == () and steps >= 1 and steps == np.round(steps)):
+                raise ValueError(f"Params.held_ramp.steps must be a whole number >= 1; got {ramp.steps!r}")
+    if sim.physics.sintering is not None:
+        if state.sintering is None:
+            raise ValueError("Physics.sintering needs SimState.sintering (simulate.init_state(..., "
+                             "sintering=neck_growth.neck_state(contacts, temperature)))")
+        neck_growth.validate_sintering(sim.physics.sintering, params.sintering, state.contacts, p.radii,
+                                       state.sintering)
+        if sim.physics.mechanics is not None:
+            neck_growth.validate_pair_necks(state.mechanics, p.radii, state.contacts.pairs.pairs)
+    if sim.physics.mechanics is None:
+        return
+    if params.mechanics is None:
+        raise ValueError("Physics.mechanics needs Params.mechanics (sintercond.mechanics.MechanicalParams)")
+    mechanics.validate_mechanical_params(params.mechanics, len(kappa))
+    m = state.mechanics
+    for name in ("velocity", "spin"):
+        value = np.asarray(getattr(m, name), np.float64)
+        fail_where(~np.isfinite(value).all(axis=-1), lambda i, name=name: f"MechanicalState.{name} must be finite; "
+                                                                          f"particle {i[0]} is not")
+    pairs = np.asarray(state.contacts.pairs.pairs)
+    n = p.radii.shape[0]
+    pairs = pairs[(pairs[:, 0] < n) & (pairs[:, 1] < n)]
+    if len(pairs):
+        x, r = np.asarray(p.positions, np.float64), np.asarray(p.radii, np.float64)
+        i, j = pairs[:, 0], pairs[:, 1]
+        distance = np.linalg.norm(x[i] - x[j], axis=1)
+        depth = (r[i] + r[j] - distance) / np.minimum(r[i], r[j])
+        _warn_float32_positions(p.positions, r[i] + r[j] - distance)
+        deep = depth > MAX_INITIAL_OVERLAP
+        if deep.any():
+            k = int(np.argmax(depth))
+            where = "at the same centre" if distance[k] <= 1e-12 * (r[i[k]] + r[j[k]]) else (
+                f"overlapping by {depth[k]:.3g} of the smaller radius ({r[i[k]] + r[j[k]] - distance[k]:.3g} m)")
+            raise ValueError(f"particles {int(i[k])} and {int(j[k])} are {where}; a mechanical run may start from "
+                             f"overlaps of at most {MAX_INITIAL_OVERLAP:g} of the smaller radius (Hertz's law would "
+                             "blow them apart): move them apart")
+
+
+class PrecisionWarning(UserWarning):
+    """The state's dtype cannot resolve what the run must resolve (float32 positions and nanometre overlaps)."""
+
+
+FLOAT32_OVERLAP_STEPS = 64
+"""Fewest float32 steps of the positions a touching pair's overlap should span before :class:`PrecisionWarning`."""
+
+
+def _warn_float32_positions(positions, overlaps):
+    """Warn when float32 positions resolve the contacts' overlaps in a few float32 steps only: contacts then open
+    and close on round-off (a stiff settled bed loses a third of its touching pairs), where float64 positions with
+    float32 laws (``Mechanics(force_dtype="float32")``) keep them."""
+    if positions.dtype != jnp.float32:
+        return
+    touching = overlaps[overlaps > 0]
+    if not touching.size:
+        return
+    ulp = float(np.spacing(np.float32(np.max(np.abs(np.asarray(positions))))))
+    smallest = float(np.median(touching))
+    if smallest < FLOAT32_OVERLAP_STEPS * ulp:
+        warnings.warn(f"float32 positions resolve the contacts' overlaps (median {smallest:.3g} m) in "
+                      f"{smallest / ulp:.0f} float32 steps of {ulp:.3g} m only: contacts will open and close on "
+                      "round-off. Run with float64 positions (SINTERCOND_ENABLE_X64=1, the default) and "
+                      "Mechanics(force_dtype='float32') for float32 contact laws", PrecisionWarning, stacklevel=3)
