@@ -36,10 +36,9 @@ def _linear_call_batch(args, dims, *, callee, transpose_thunk, num_callee_consts
     size = next(a.shape[d] for a, d in zip(args, dims) if d is not batching.not_mapped)
     args = [a if d is batching.not_mapped else batching.moveaxis(a, d, 0) for a, d in zip(args, dims)]
     axes = [None if d is batching.not_mapped else 0 for d in dims]
-    consts, res, lin = args[:num_callee_consts], args[num_callee_consts:num_callee_consts + num_res], \
-        args[num_callee_consts + num_res:]
-    c_axes, r_axes, l_axes = axes[:num_callee_consts], axes[num_callee_consts:num_callee_consts + num_res], \
-        axes[num_callee_consts + num_res:]
+    split = (num_callee_consts, num_callee_consts + num_res)
+    consts, res, lin = args[:split[0]], args[split[0]:split[1]], args[split[1]:]
+    c_axes, r_axes, l_axes = axes[:split[0]], axes[split[0]:split[1]], axes[split[1]:]
     # linear inputs not batched are broadcast, so that the call stays linear in all of them
     lin = [x if ax == 0 else jax.numpy.broadcast_to(x, (size,) + x.shape) for x, ax in zip(lin, l_axes)]
 

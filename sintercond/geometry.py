@@ -202,7 +202,7 @@ def _neck_points(c_i, c_j, r_i, r_j, x):
     return points.reshape(-1, 3), np.broadcast_to(weight, (n_rho, n_theta, n_axial)).reshape(-1)
 
 
-def _neck_section_on_plane(c_i, c_j, r_i, r_j, x, axis, plane, box_lo, box_hi):
+def _neck_section_on_plane(c_i, c_j, r_i, r_j, x, axis, plane, *, box):
     """Area of the neck's section by the plane ``p[axis] = plane``, inside the box face.
 
     A plane containing the neck's axis (the lattice case: contacts on faces
@@ -210,8 +210,9 @@ def _neck_section_on_plane(c_i, c_j, r_i, r_j, x, axis, plane, box_lo, box_hi):
     distance ``s`` from the axis and in ``t`` along it over the gap between
     the spheres, with the face rectangle as an indicator (exact when the
     rectangle's edge is the axis, as in lattices). Other planes that cut the
-    neck use a fine midpoint grid around the contact point.
+    neck use a fine midpoint grid around the contact point. ``box``: its ``(lo, hi)`` corners ``[3]`` (m).
     """
+    box_lo, box_hi = box
     u, v = [k for k in range(3) if k != axis]
     axis_vec = c_j - c_i
     d = np.linalg.norm(axis_vec)
@@ -351,7 +352,8 @@ def rev_measures(centres, radii, box, necks: float | Callable | None = None, tol
         neck_volume_in_box += float(np.sum(weights[inside]))
         for axis in range(3):
             for plane in (lo[axis], hi[axis]):
-                neck_area += _neck_section_on_plane(centres[i], centres[j], radii[i], radii[j], xx, axis, plane, lo, hi)
+                neck_area += _neck_section_on_plane(centres[i], centres[j], radii[i], radii[j], xx, axis, plane,
+                                                    box=(lo, hi))
 
     diameters = 2 * radii
     d_max = np.maximum(diameters[pairs[:, 0]], diameters[pairs[:, 1]]) if len(pairs) else np.zeros(0)

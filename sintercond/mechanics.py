@@ -349,8 +349,8 @@ def check_wall_coefficients(spec, params: MechanicalParams):
     mu_w, mu_r_w = wall_coefficients(params)
     for flag, on, name, value in (("wall_friction", spec.friction, "mu_wall", mu_w),
                                   ("wall_rolling", spec.rolling, "mu_r_wall", mu_r_w)):
-        if on and not getattr(spec, flag) and not isinstance(value, jax.core.Tracer) and \
-                bool(np.any(np.asarray(value) != 0)):
+        if (on and not getattr(spec, flag) and not isinstance(value, jax.core.Tracer)
+                and bool(np.any(np.asarray(value) != 0))):
             raise ValueError(f"Mechanics.{flag}=False makes the walls frictionless, but MechanicalParams.{name} "
                              f"(or its fallback) is {value!r}; it must be 0 there (or set {flag}=True)")
 

@@ -402,8 +402,8 @@ def _grown(spec: Sintering, params: dict, start_neck, r_i, r_j, temperature, dur
     ``start_neck`` ``[c]`` (m)."""
     dtype = start_neck.dtype
     return sintering._grow_neck(sintering.kinetic_law(spec.law), start_neck, r_i, r_j, temperature[None],
-                                jnp.reshape(jnp.asarray(duration, dtype), (1,)), params, spec.quadrature_nodes,
-                                spec.newton_iterations)[0]
+                                jnp.reshape(jnp.asarray(duration, dtype), (1,)), params,
+                                quadrature_nodes=spec.quadrature_nodes, newton_iterations=spec.newton_iterations)[0]
 
 
 def _free_growth(spec: Sintering, params: dict, carried: NeckState, start_neck, radii, end_temperature, duration):

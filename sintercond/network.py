@@ -288,7 +288,7 @@ def total_conductance(table: ContactTable):
     return total if table.wall_conductance is None else total + table.wall_conductance
 
 
-def wall_conductance(centres, radii, kappa, axis, position, law="rojek", params=None, neck_model=None,
+def wall_conductance(centres, radii, kappa, axis, position, law="rojek", *, params=None, neck_model=None,
                      wall_kappa=None):
     """Conductance (W/K) of each particle to a plane wall ``p[axis] = position`` (0 if not touching).
 

@@ -180,8 +180,8 @@ def check_bed(lateral_size, height, diameter_range, max_particles=MAX_PARTICLES,
     """
     names = {"lateral_size": "lateral_size", "height": "height", "diameter_range": "diameter_range", **(names or {})}
     for key, value in (("lateral_size", lateral_size), ("height", height)):
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-                or not math.isfinite(value) or value <= 0:
+        if (isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer))
+                or not math.isfinite(value) or value <= 0):
             raise PackingError(f"{names[key]} must be a finite number > 0 (length); got {value!r}")
     try:
         low, high = (float(v) for v in diameter_range)
@@ -344,7 +344,7 @@ def _bed(centres, radii, lateral_size) -> Packing:
                    float(2 * np.sum(touching) / n), isolated)
 
 
-def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), seed=0, max_particles=None,
+def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), *, seed=0, max_particles=None,
                height_tolerance=0.25, method="roll", material=None, progress=None, overlap=ROLL_OVERLAP, **settle):
     """A settled random bed of polydisperse spheres filling a square container to about ``height``.
 

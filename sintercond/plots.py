@@ -59,7 +59,7 @@ RASTER_ABOVE = 5_000
 """Particles beyond which a view is drawn as an image of pixels (:func:`_raster_discs`) rather than a patch per disc."""
 
 
-def _raster_discs(ax, centres, disc_radii, depth, temperature, norm, cmap, limits, scale, pixels=500):
+def _raster_discs(ax, centres, disc_radii, depth, temperature, norm, cmap, *, limits, scale, pixels=500):
     """Discs drawn as one image: each pixel shows the disc nearest the viewer (largest ``depth``) covering it.
 
     Vectorised over the discs, one pass per pixel offset within the largest disc (a disc smaller than a pixel
@@ -137,7 +137,7 @@ def state_picture(path, positions, radii, temperature, time=None, section_y=None
     # top view: every sphere projected along z, the highest in front
     if len(radii) > RASTER_ABOVE:
         mappable = _raster_discs(top, positions[:, :2], radii, positions[:, 2], temperature, norm, "inferno",
-                                 np.stack([lo[:2], hi[:2]], axis=1), scale)
+                                 limits=np.stack([lo[:2], hi[:2]], axis=1), scale=scale)
     else:
         order = np.argsort(positions[:, 2], kind="stable")
         mappable = _discs(top, positions[order][:, :2], radii[order], temperature[order], norm, "inferno",
@@ -148,7 +148,7 @@ def state_picture(path, positions, radii, temperature, time=None, section_y=None
     section = positions[cut][:, [0, 2]], np.sqrt(radii[cut] ** 2 - (positions[cut, 1] - y_cut) ** 2)
     if np.count_nonzero(cut) > RASTER_ABOVE:
         _raster_discs(side, *section, np.zeros(np.count_nonzero(cut)), temperature[cut], norm, "inferno",
-                      np.stack([lo[[0, 2]], hi[[0, 2]]], axis=1), scale)
+                      limits=np.stack([lo[[0, 2]], hi[[0, 2]]], axis=1), scale=scale)
     else:
         _discs(side, *section, temperature[cut], norm, "inferno", np.stack([lo[[0, 2]], hi[[0, 2]]], axis=1), scale)
     top.set(xlabel=f"x [{unit}]", ylabel=f"y [{unit}]", title="top view (projection along z)")

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -200,6 +201,165 @@ SURFACE_POINTS = 64
 grid of :func:`sintercond.packing.Packing`'s ``height``."""
 
 
+class _Pile(NamedTuple):
+    """What a rolling sphere meets: the spheres down so far (``centres`` ``[n + 1, 3]``, the last the grid's padding
+    at infinity; ``radii`` ``[n]``) in their ``grid``, the largest radius and the contact distance factor
+    ``shrink = 1 - overlap``."""
+
+    centres: np.ndarray
+    radii: np.ndarray
+    grid: _Grid
+    r_max: float
+    shrink: float
+
+
+class _Arc(NamedTuple):
+    """The circle a sphere rolls along, ``q + s (cos(phi) u + sin(phi) w)`` (``u``, ``w`` orthonormal, ``w`` the
+    downhill tangent at ``phi = 0``), up to ``phi_low``, its lowest point or the equator of its one support."""
+
+    q: np.ndarray
+    s: float
+    u: np.ndarray
+    w: np.ndarray
+    phi_low: float
+
+
+def _fall(p, R, pile: _Pile):
+    """``(height, sphere)`` where a sphere of radius ``R`` falling straight down from ``p`` first rests on a sphere
+    of the pile, or None when it reaches the floor first."""
+    centres, radii, shrink = pile.centres, pile.radii, pile.shrink
+    reach = R + pile.r_max
+    cand = pile.grid.within(np.array([p[0] - reach, p[1] - reach, -np.inf]), np.array([p[0] + reach, p[1] + reach, p[2]]))
+    rho = (R + radii[cand]) * shrink
+    lateral2 = (centres[cand, 0] - p[0]) ** 2 + (centres[cand, 1] - p[1]) ** 2
+    above = np.sqrt(np.maximum(rho**2 - lateral2, 0.0))  # contact height above the centre below
+    hit = (lateral2 < rho**2) & (above > _TOL * rho)  # a sphere left at its equator is not hit again
+    z_rest = np.where(hit, centres[cand, 2] + above, -np.inf)
+    z_rest = np.where(z_rest <= p[2] + _TOL * R, z_rest, -np.inf)  # below where it is
+    best = int(np.argmax(z_rest)) if len(cand) else -1
+    if best < 0 or z_rest[best] <= R * shrink:
+        return None
+    return z_rest[best], int(cand[best])
+
+
+def _rolling_arc(p, R, sup: _Supports, offsets, centres, rng):
+    """The :class:`_Arc` a sphere at ``p`` rolls along on its supports ``sup``; ``"two"`` where it rests on two
+    (the circle is a point, or ``p`` its lowest point); None where the supports changed first (the sphere is at or
+    below its one support's equator and leaves it, or one of two supports would pull and is left)."""
+    if len(sup.spheres) == 1 and not sup.walls:
+        c = centres[sup.spheres[0]]
+        q, s = c, _norm(p - c)
+        u = (p - q) / s
+        if u[2] <= _TOL:  # at or below the equator: it leaves the sphere
+            sup.spheres = []
+            return None
+        uh = float(np.hypot(u[0], u[1]))
+        if uh < _TOL:  # on top: any way down
+            angle = rng.uniform(0.0, 2.0 * np.pi)
+            heading = np.array([math.cos(angle), math.sin(angle)])
+        else:
+            heading = u[:2] / uh
+        w = np.array([*(u[2] * heading), -uh])  # the tangent down the great circle
+        w -= np.dot(w, u) * u
+        w /= _norm(w)
+        return _Arc(q, s, u, w, math.atan2(u[2], -w[2]))  # the equator: past it the sphere falls
+    lam = _reactions(p, sup, centres)
+    if np.min(lam) < -_TOL:  # one support would pull: roll on the other alone
+        _leave(sup, int(np.argmin(lam)))
+        return None
+    if len(sup.spheres) == 2:
+        ca, cb = centres[sup.spheres[0]], centres[sup.spheres[1]]
+        ra, rb = _norm(p - ca), _norm(p - cb)
+        d = _norm(cb - ca)
+        axis = (cb - ca) / d
+        along = (d * d + ra * ra - rb * rb) / (2.0 * d)
+        q = ca + along * axis
+    else:  # one sphere and one wall
+        ca = centres[sup.spheres[0]]
+        axis = _WALL_NORMALS[sup.walls[0]]
+        q = ca + (offsets[sup.walls[0]] - np.dot(axis, ca)) * axis
+    u = p - q
+    u -= np.dot(u, axis) * axis
+    s = _norm(u)
+    if s < _TOL * R:  # the circle is a point: nowhere to roll
+        return "two"
+    u /= s
+    w = np.array([axis[1] * u[2] - axis[2] * u[1], axis[2] * u[0] - axis[0] * u[2], axis[0] * u[1] - axis[1] * u[0]])
+    if w[2] > 0:
+        w = -w
+    if w[2] > -_TOL:  # at the circle's lowest point already
+        return "two"
+    return _Arc(q, s, u, w, math.atan2(-w[2], -u[2]) % (2.0 * np.pi))
+
+
+def _contact_events(arc: _Arc, R, offsets, sup: _Supports, pile: _Pile):
+    """Where on the arc the rolling sphere first touches another sphere or a plane: ``(cand, sphere_at,
+    free_walls, plane_at)``, the angles of the candidate spheres ``cand`` and of the planes ``free_walls`` (the
+    side walls 0-3 and the floor 4 it does not lean on; inf: not on the arc)."""
+    q, s, u, w, phi_low = arc
+    centres = pile.centres
+    cand = pile.grid.within(q - s - R - pile.r_max, q + s + R + pile.r_max)
+    for m in sup.spheres:
+        cand = cand[cand != m]
+    rho = (R + pile.radii[cand]) * pile.shrink
+    rel = q[None, :] - centres[cand]
+    A = 2.0 * s * rel @ u
+    B = 2.0 * s * rel @ w
+    E = rho**2 - np.sum(rel**2, axis=1) - s * s
+    sphere_at = _first_entry(A, B, E, phi_low)
+    # floor (z >= R) and side walls (n . p >= d): h = n.q - d + s (n.u cos + n.w sin)
+    planes = np.vstack([_WALL_NORMALS, [[0.0, 0.0, 1.0]]])
+    plane_d = np.append(offsets, R * pile.shrink)
+    free_walls = [m for m in range(5) if m not in sup.walls]
+    plane_at = _first_entry(s * planes[free_walls] @ u, s * planes[free_walls] @ w,
+                            plane_d[free_walls] - planes[free_walls] @ q, phi_low)
+    return cand, sphere_at, free_walls, plane_at
+
+
+def _pull_events(p, arc: _Arc, sup: _Supports, centres):
+    """``[supports]``: the angle on the arc at which each of two supports' reaction turns to a pull (inf: never):
+    ``lambda_k(phi)`` is linear in ``(cos, sin, 1)``."""
+    q, s, u, w, phi_low = arc
+    lam_at = np.full(sup.count(), np.inf)
+    if sup.count() != 2:
+        return lam_at
+    normals_u, normals_w, normals_q = [], [], []
+    for m in sup.spheres:
+        rk = _norm(p - centres[m])
+        normals_u.append(s * u / rk)
+        normals_w.append(s * w / rk)
+        normals_q.append((q - centres[m]) / rk)
+    for m in sup.walls:
+        normals_u.append(np.zeros(3))
+        normals_w.append(np.zeros(3))
+        normals_q.append(_WALL_NORMALS[m])
+    n0 = normals_q[0] + normals_u[0]  # the normals at phi = 0, for their (constant) cosine
+    n1 = normals_q[1] + normals_u[1]
+    cosine = float(np.dot(n0, n1))
+    if 1.0 - cosine**2 > _TOL:
+        for a, b in ((0, 1), (1, 0)):  # lambda_a (1 - c^2) = n_a.z - c n_b.z
+            zu = normals_u[a][2] - cosine * normals_u[b][2]
+            zw = normals_w[a][2] - cosine * normals_w[b][2]
+            zq = normals_q[a][2] - cosine * normals_q[b][2]
+            lam_at[a] = _first_entry_scalar(zu, zw, -zq, phi_low)
+            if lam_at[a] == 0.0:
+                lam_at[a] = _TOL  # leave it now (below), not an endless loop
+    return lam_at
+
+
+def _raise_surface(surface, p, R, spacing):
+    """The pile's surface heights on the grid points (spacing ``spacing``) below a sphere at ``p`` raised to its
+    cap, in place."""
+    lo = np.maximum(np.floor((p[:2] - R) / spacing - 0.5).astype(int), 0)
+    hi = np.minimum(np.ceil((p[:2] + R) / spacing - 0.5).astype(int), SURFACE_POINTS - 1)
+    gx = (np.arange(lo[0], hi[0] + 1) + 0.5) * spacing
+    gy = (np.arange(lo[1], hi[1] + 1) + 0.5) * spacing
+    rho2 = (gx[:, None] - p[0]) ** 2 + (gy[None, :] - p[1]) ** 2
+    cap = np.where(rho2 < R * R, p[2] + np.sqrt(np.maximum(R * R - rho2, 0.0)), 0.0)
+    block = surface[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1]
+    np.maximum(block, cap, out=block)
+
+
 def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_height=None):
     """Drop ``radii`` one by one into the open box ``[0, L]^2 x [0, inf)`` and let each roll to rest.
 
@@ -241,6 +401,7 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
     spacing = L / SURFACE_POINTS
     surface = np.zeros((SURFACE_POINTS, SURFACE_POINTS))
     placed = n
+    pile = _Pile(centres, radii, grid, r_max, shrink)
     for k, R in enumerate(radii):
         p = np.array([*rng.uniform(R, L - R, 2), np.inf])
         sup = _Supports([], [])
@@ -250,118 +411,28 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
             arcs += 1
             if not sup.spheres:  # nothing to roll on (walls are vertical): fall
                 sup.walls = []
-                reach = R + r_max
-                cand = grid.within(np.array([p[0] - reach, p[1] - reach, -np.inf]),
-                                   np.array([p[0] + reach, p[1] + reach, p[2]]))
-                rho = (R + radii[cand]) * shrink
-                lateral2 = (centres[cand, 0] - p[0]) ** 2 + (centres[cand, 1] - p[1]) ** 2
-                above = np.sqrt(np.maximum(rho**2 - lateral2, 0.0))  # contact height above the centre below
-                hit = (lateral2 < rho**2) & (above > _TOL * rho)  # a sphere left at its equator is not hit again
-                z_rest = np.where(hit, centres[cand, 2] + above, -np.inf)
-                z_rest = np.where(z_rest <= p[2] + _TOL * R, z_rest, -np.inf)  # below where it is
-                best = int(np.argmax(z_rest)) if len(cand) else -1
-                if best < 0 or z_rest[best] <= R * shrink:
+                below = _fall(p, R, pile)
+                if below is None:
                     p[2] = R * shrink
                     outcome = "floor"
                     break
-                p[2] = z_rest[best]
-                sup.spheres = [int(cand[best])]
+                p[2], support = below
+                sup.spheres = [support]
                 continue
-            # the circle the sphere rolls along, and where on it the arc ends
-            if len(sup.spheres) == 1 and not sup.walls:
-                c = centres[sup.spheres[0]]
-                q, s = c, _norm(p - c)
-                u = (p - q) / s
-                if u[2] <= _TOL:  # at or below the equator: it leaves the sphere
-                    sup.spheres = []
-                    continue
-                uh = float(np.hypot(u[0], u[1]))
-                if uh < _TOL:  # on top: any way down
-                    angle = rng.uniform(0.0, 2.0 * np.pi)
-                    heading = np.array([math.cos(angle), math.sin(angle)])
-                else:
-                    heading = u[:2] / uh
-                w = np.array([*(u[2] * heading), -uh])  # the tangent down the great circle
-                w -= np.dot(w, u) * u
-                w /= _norm(w)
-                phi_low = math.atan2(u[2], -w[2])  # the equator: past it the sphere falls
-            else:
-                lam = _reactions(p, sup, centres)
-                if np.min(lam) < -_TOL:  # one support would pull: roll on the other alone
-                    _leave(sup, int(np.argmin(lam)))
-                    continue
-                if len(sup.spheres) == 2:
-                    ca, cb = centres[sup.spheres[0]], centres[sup.spheres[1]]
-                    ra, rb = _norm(p - ca), _norm(p - cb)
-                    d = _norm(cb - ca)
-                    axis = (cb - ca) / d
-                    along = (d * d + ra * ra - rb * rb) / (2.0 * d)
-                    q = ca + along * axis
-                else:  # one sphere and one wall
-                    ca = centres[sup.spheres[0]]
-                    axis = _WALL_NORMALS[sup.walls[0]]
-                    q = ca + (offsets[sup.walls[0]] - np.dot(axis, ca)) * axis
-                u = p - q
-                u -= np.dot(u, axis) * axis
-                s = _norm(u)
-                if s < _TOL * R:  # the circle is a point: nowhere to roll
-                    outcome = "two"
-                    break
-                u /= s
-                w = np.array([axis[1] * u[2] - axis[2] * u[1], axis[2] * u[0] - axis[0] * u[2],
-                              axis[0] * u[1] - axis[1] * u[0]])
-                if w[2] > 0:
-                    w = -w
-                if w[2] > -_TOL:  # at the circle's lowest point already
-                    outcome = "two"
-                    break
-                phi_low = math.atan2(-w[2], -u[2]) % (2.0 * np.pi)
+            arc = _rolling_arc(p, R, sup, offsets, centres, rng)
+            if arc is None:
+                continue
+            if arc == "two":
+                outcome = "two"
+                break
             # events on the arc: new spheres, the floor, the walls, a support that would pull
-            lo, hi = q - s - R - r_max, q + s + R + r_max
-            cand = grid.within(lo, hi)
-            for m in sup.spheres:
-                cand = cand[cand != m]
-            rho = (R + radii[cand]) * shrink
-            rel = q[None, :] - centres[cand]
-            A = 2.0 * s * rel @ u
-            B = 2.0 * s * rel @ w
-            E = rho**2 - np.sum(rel**2, axis=1) - s * s
-            sphere_at = _first_entry(A, B, E, phi_low)
-            # floor (z >= R) and side walls (n . p >= d): h = n.q - d + s (n.u cos + n.w sin)
-            planes = np.vstack([_WALL_NORMALS, [[0.0, 0.0, 1.0]]])
-            plane_d = np.append(offsets, R * shrink)
-            free_walls = [m for m in range(5) if m not in sup.walls]
-            plane_at = _first_entry(s * planes[free_walls] @ u, s * planes[free_walls] @ w,
-                                    plane_d[free_walls] - planes[free_walls] @ q, phi_low)
-            # supports whose reaction turns to a pull: lambda_k(phi) is linear in (cos, sin, 1)
-            lam_at = np.full(sup.count(), np.inf)
-            if sup.count() == 2:
-                normals_u, normals_w, normals_q = [], [], []
-                for m in sup.spheres:
-                    rk = _norm(p - centres[m])
-                    normals_u.append(s * u / rk)
-                    normals_w.append(s * w / rk)
-                    normals_q.append((q - centres[m]) / rk)
-                for m in sup.walls:
-                    normals_u.append(np.zeros(3))
-                    normals_w.append(np.zeros(3))
-                    normals_q.append(_WALL_NORMALS[m])
-                n0 = normals_q[0] + normals_u[0]  # the normals at phi = 0, for their (constant) cosine
-                n1 = normals_q[1] + normals_u[1]
-                cosine = float(np.dot(n0, n1))
-                if 1.0 - cosine**2 > _TOL:
-                    for a, b in ((0, 1), (1, 0)):  # lambda_a (1 - c^2) = n_a.z - c n_b.z
-                        zu = normals_u[a][2] - cosine * normals_u[b][2]
-                        zw = normals_w[a][2] - cosine * normals_w[b][2]
-                        zq = normals_q[a][2] - cosine * normals_q[b][2]
-                        lam_at[a] = _first_entry_scalar(zu, zw, -zq, phi_low)
-                        if lam_at[a] == 0.0:
-                            lam_at[a] = _TOL  # leave it now (below), not an endless loop
+            cand, sphere_at, free_walls, plane_at = _contact_events(arc, R, offsets, sup, pile)
+            lam_at = _pull_events(p, arc, sup, centres)
             first = min(float(np.min(sphere_at, initial=np.inf)), float(np.min(plane_at, initial=np.inf)),
                         float(np.min(lam_at, initial=np.inf)))
-            phi = min(first, phi_low)
-            p = q + s * (math.cos(phi) * u + math.sin(phi) * w)
-            if phi == phi_low and first > phi_low:  # the arc's end: the equator (1 support) or a stable wedge
+            phi = min(first, arc.phi_low)
+            p = arc.q + arc.s * (math.cos(phi) * arc.u + math.sin(phi) * arc.w)
+            if phi == arc.phi_low and first > arc.phi_low:  # the arc's end: the equator (1 support) or a stable wedge
                 if sup.count() == 1:
                     sup.spheres = []
                     continue
@@ -392,14 +463,7 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
         centres[k] = p
         grid.add(k, p)
         if fill_height is not None:  # the sphere's cap over the grid points below it
-            lo = np.maximum(np.floor((p[:2] - R) / spacing - 0.5).astype(int), 0)
-            hi = np.minimum(np.ceil((p[:2] + R) / spacing - 0.5).astype(int), SURFACE_POINTS - 1)
-            gx = (np.arange(lo[0], hi[0] + 1) + 0.5) * spacing
-            gy = (np.arange(lo[1], hi[1] + 1) + 0.5) * spacing
-            rho2 = (gx[:, None] - p[0]) ** 2 + (gy[None, :] - p[1]) ** 2
-            cap = np.where(rho2 < R * R, p[2] + np.sqrt(np.maximum(R * R - rho2, 0.0)), 0.0)
-            block = surface[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1]
-            np.maximum(block, cap, out=block)
+            _raise_surface(surface, p, R, spacing)
         done = fill_height is not None and float(surface.mean()) >= fill_height
         if progress is not None and ((k + 1) % PROGRESS_EVERY == 0 or k + 1 == n or done):
             progress("rolling", k + 1, n, k + 1, n)

@@ -75,7 +75,21 @@ def _pair_list(x, r, skin, capacity=0):
     return np.concatenate([i, np.zeros(pad, int)]), np.concatenate([j, np.zeros(pad, int)]), mask
 
 
-def _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_damping):
+class _Pile(typing.NamedTuple):
+    """A pile the harmonic relaxation settles (g = 1, lengths in the caller's unit): radii, masses (here the
+    inertias ``max(r^3, 1)``) and weights ``r^3`` ``[n]``, the candidate pairs ``i``, ``j`` ``[c]`` with ``mask``
+    (real pairs), and the container's side ``size`` (the walls x, y in [0, size], the floor z = 0, no lid)."""
+
+    radii: jax.Array
+    mass: jax.Array
+    weight: jax.Array
+    i: jax.Array
+    j: jax.Array
+    mask: jax.Array
+    size: jax.Array
+
+
+def _net_force(x, v, pile: _Pile, stiffness, contact_damping):
     """Gravity (g = 1) plus damped harmonic repulsion of overlapping pairs, floor and side walls, ``[n, 3]``.
 
     Each contact is a spring ``stiffness * overlap`` and a normal dashpot
@@ -83,6 +97,7 @@ def _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_dampi
     mass; the walls take the sphere's mass): impacts lose energy, as they must
     for a pile to come to rest with a finite time step.
     """
+    r, mass, weight, i, j, mask, size = pile
     d = x[i] - x[j]
     dist2 = jnp.sum(d**2, axis=1)
     safe = jnp.where(dist2 > 0, dist2, 1.0)
@@ -102,21 +117,21 @@ def _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_dampi
 
 
 @jax.jit
-def _damped_chunk(x, v, r, mass, weight, i, j, mask, size, stiffness, damping, contact_damping, dt, steps):
+def _damped_chunk(x, v, pile: _Pile, stiffness, damping, contact_damping, dt, steps):
     def step(_, carry):
         x, v = carry
-        force = _net_force(x, v, r, mass, weight, i, j, mask, size, stiffness, contact_damping)
-        v = v + dt * (force / mass[:, None] - damping * v)
+        force = _net_force(x, v, pile, stiffness, contact_damping)
+        v = v + dt * (force / pile.mass[:, None] - damping * v)
         return x + dt * v, v
 
     x_new, v_new = jax.lax.fori_loop(0, steps, step, (x, v))  # steps traced: one compilation per capacity
-    static = _net_force(x_new, jnp.zeros_like(v_new), r, mass, weight, i, j, mask, size, stiffness, contact_damping)
-    residual = jnp.max(jnp.linalg.norm(static, axis=1) / weight)
+    static = _net_force(x_new, jnp.zeros_like(v_new), pile, stiffness, contact_damping)
+    residual = jnp.max(jnp.linalg.norm(static, axis=1) / pile.weight)
     moved = jnp.max(jnp.linalg.norm(x_new - x, axis=1))
     return x_new, v_new, residual, moved
 
 
-def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=None, damping=0.3, contact_damping=0.3,
+def relax_under_gravity(centres, radii, lateral_size, *, max_steps=None, stiffness=None, damping=0.3, contact_damping=0.3,
                         force_tol=2e-3, skin=1.0, progress=None):
     """Let spheres settle under gravity; returns ``(settled centres, residual force over weight)``.
 
@@ -156,14 +171,15 @@ def relax_under_gravity(centres, radii, lateral_size, max_steps=None, stiffness=
     with jax.enable_x64(True):
         r, mass, weight = jnp.asarray(r_np), jnp.asarray(inertia), jnp.asarray(r_np**3)
         x, v = jnp.asarray(x_np), jnp.zeros((len(r_np), 3), jnp.float64)
-        args = tuple(jnp.float64(a) for a in (size, stiffness, damping, contact_damping, dt))
+        size = jnp.float64(size)
+        args = tuple(jnp.float64(a) for a in (stiffness, damping, contact_damping, dt))
         done, capacity, residual = 0, 0, math.inf
         chunk = 64
         while done < max_steps:
             i, j, mask = _pair_list(np.asarray(x), r_np, skin, capacity)
             capacity = len(i)
-            x_new, v_new, residual, moved = _damped_chunk(x, v, r, mass, weight, jnp.asarray(i), jnp.asarray(j),
-                                                          jnp.asarray(mask), *args, jnp.int32(chunk))
+            pile = _Pile(r, mass, weight, jnp.asarray(i), jnp.asarray(j), jnp.asarray(mask), size)
+            x_new, v_new, residual, moved = _damped_chunk(x, v, pile, *args, jnp.int32(chunk))
             if float(moved) > 0.5 * skin and chunk > 1:  # a pair may have been missed: redo it shorter
                 chunk //= 2
                 continue
@@ -223,8 +239,8 @@ class DemMaterial:
         ranges = {"density": (0.0, False), "E": (0.0, False), "theta_star": (0.0, False)}
         for field in dataclasses.fields(self):
             value = getattr(self, field.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
-                    or not math.isfinite(value):
+            if (isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer))
+                    or not math.isfinite(value)):
                 raise PackingError(f"DemMaterial.{field.name} must be a finite number; got {value!r}")
             low, closed = ranges.get(field.name, (0.0, True))
             if value < low or (value == low and not closed):
@@ -417,8 +433,8 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     options = dict(kinetic_tol=kinetic_tol, force_tol=force_tol, max_time=max_time, check_every=check_every,
                    progress=progress)
     if soft_modulus is not None:
-        if isinstance(soft_modulus, bool) or not isinstance(soft_modulus, (int, float)) \
-                or not 0.0 < soft_modulus < material.E:
+        if (isinstance(soft_modulus, bool) or not isinstance(soft_modulus, (int, float))
+                or not 0.0 < soft_modulus < material.E):
             raise PackingError(f"soft_modulus must be a number in (0, E = {material.E:g}) Pa; got {soft_modulus!r}")
         if softening:
             raise PackingError("soft_modulus needs softening=False: the stiffening scales every contact by one "
@@ -514,8 +530,8 @@ def _settle(sim, physics, state, fns, material, v_rel, start, phase, *, kinetic_
             missed.append(f"kinetic energy {figures['kinetic']:.3g} of sum m g r (allowed < {kinetic_tol:g})")
         if not figures["force"] < force_tol:
             missed.append(f"largest net force {figures['force']:.3g} of a sphere's weight (allowed < {force_tol:g})")
-        what = "the DEM bed did not settle" if soft is None else \
-            f"the DEM bed settled at {soft[0]:g} Pa did not settle once stiffened to {material.E:g} Pa"
+        what = ("the DEM bed did not settle" if soft is None else
+                f"the DEM bed settled at {soft[0]:g} Pa did not settle once stiffened to {material.E:g} Pa")
         raise PackingError(f"{what} within {max_time:g} s ({steps} steps of {dt:.3g} s): " + " and ".join(missed))
     soft_modulus, soft_steps, residual = (None, 0, 0.0) if soft is None else soft
     report = SettleReport(steps, float(state.time) - began, dt, figures["kinetic"], float(kinetic_tol),
@@ -614,8 +630,8 @@ def stiffen(settled: DemSettled, material: DemMaterial, *, kinetic_tol=KINETIC_T
     stage's, ``soft_steps`` and ``soft_modulus`` the soft stage's, ``stiffen_residual`` the moved overlaps'.
     """
     soft = settled.material
-    if soft is None or not isinstance(material, DemMaterial) or dataclasses.replace(soft, E=material.E) != material \
-            or not material.E > soft.E:
+    if (soft is None or not isinstance(material, DemMaterial) or dataclasses.replace(soft, E=material.E) != material
+            or not material.E > soft.E):
         raise PackingError("stiffen takes the DemMaterial of the soft settle with a larger E only; got "
                            f"{material!r} for a bed settled at {soft!r}")
     _check_settle_options(kinetic_tol, force_tol, max_time, check_every)

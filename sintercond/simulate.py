@@ -112,7 +112,7 @@ class _TemperatureSource:
 
 
 def simulate_table(temperature, table: ContactTable, capacity, dt, n_steps, save_every=1, fixed_mask=None,
-             fixed_temperature=None, method="explicit", source=None, start_step=0, probes=None):
+                   fixed_temperature=None, *, method="explicit", source=None, start_step=0, probes=None):
     """Advance a table network ``n_steps`` steps; returns ``(final, saved [n_steps // save_every, n])``.
 
     A convenience over :func:`rollout` for a network
@@ -134,11 +134,11 @@ def simulate_table(temperature, table: ContactTable, capacity, dt, n_steps, save
         if all_concrete(value):
             require_positive(name, np.atleast_1d(np.asarray(value, np.float64)))
     return _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature,
-                           method, source, start_step, probes)
+                           method=method, source=source, start_step=start_step, probes=probes)
 
 
 @functools.partial(jax.jit, static_argnames=("n_steps", "save_every", "method", "source"))
-def _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature, method,
+def _simulate_table(temperature, table, capacity, dt, n_steps, save_every, fixed_mask, fixed_temperature, *, method,
                     source, start_step, probes):
     if method == "implicit" and source is not None:
         raise ValueError("source terms need method='explicit'")

@@ -483,7 +483,7 @@ def grow_neck(law, a0, r_i, r_j, temperatures, durations, params=None, *, quadra
     if all_concrete(a0, r_i, r_j, temperatures, durations, *params.values()):
         validate_growth_inputs(law, a0, r_i, r_j, temperatures, durations, params)
     return _grow_neck_compiled(_ByIdentity(law), a0, r_i, r_j, temperatures, durations, params,
-                               quadrature_nodes, newton_iterations)
+                               quadrature_nodes=quadrature_nodes, newton_iterations=newton_iterations)
 
 
 class _ByIdentity:
@@ -499,12 +499,13 @@ class _ByIdentity:
         return isinstance(other, _ByIdentity) and other.value is self.value
 
 
-@partial(jax.jit, static_argnums=(0, 7, 8))
-def _grow_neck_compiled(law, a0, r_i, r_j, temperatures, durations, params, quadrature_nodes, newton_iterations):
-    return _grow_neck(law.value, a0, r_i, r_j, temperatures, durations, params, quadrature_nodes, newton_iterations)
+@partial(jax.jit, static_argnums=0, static_argnames=("quadrature_nodes", "newton_iterations"))
+def _grow_neck_compiled(law, a0, r_i, r_j, temperatures, durations, params, *, quadrature_nodes, newton_iterations):
+    return _grow_neck(law.value, a0, r_i, r_j, temperatures, durations, params, quadrature_nodes=quadrature_nodes,
+                      newton_iterations=newton_iterations)
 
 
-def _grow_neck(law, a0, r_i, r_j, temperatures, durations, params, quadrature_nodes=8, newton_iterations=4):
+def _grow_neck(law, a0, r_i, r_j, temperatures, durations, params, *, quadrature_nodes=8, newton_iterations=4):
     temperatures = jnp.asarray(temperatures)
     durations = jnp.asarray(durations)
     dtype = jnp.result_type(a0, r_i, r_j, temperatures, durations, float)

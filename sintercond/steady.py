@@ -45,7 +45,7 @@ def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
     return jnp.where(fixed_mask, held, solution)
 
 
-def steady_state_conductivity(centres, radii, kappa, axis=0, law="rojek", params=None, neck_model=None,
+def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", params=None, neck_model=None,
                               box=None, tol=1e-13, field=False):
     """Effective conductivity ``k*`` (W/(m K)) of a packing along ``axis``, from one steady solve.
 

@@ -67,7 +67,7 @@ def check_table_time_step(dt, capacity, table: ContactTable) -> float:
     return limit
 
 
-def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_temperature=None, network=None,
+def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_temperature=None, *, network=None,
                     pulse=None, rates=None):
     """The explicit Euler update ``T + dt P / C``, held particles reset to their values.
 

@@ -109,7 +109,7 @@ def test_large_views_are_drawn_as_an_image_nearest_disc_in_front():
     depth = np.array([0.0, 1.0, 0.0])  # the second lies in front of the first
     temperature = np.array([300.0, 900.0, 600.0])
     image = plots._raster_discs(ax, centres, radii, depth, temperature, Normalize(300, 900), "inferno",
-                                np.array([[-1.0, 3.0], [-1.0, 3.0]]), 1.0, pixels=400).get_array()
+                                limits=np.array([[-1.0, 3.0], [-1.0, 3.0]]), scale=1.0, pixels=400).get_array()
     pixel = lambda x, y: image[int((y + 1.0) / 0.01), int((x + 1.0) / 0.01)]  # noqa: E731
     assert pixel(0.25, 0.0) == 900.0  # where both cover it: the one in front
     assert pixel(-0.75, 0.0) == 300.0  # only the first reaches here

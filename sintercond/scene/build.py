@@ -76,8 +76,8 @@ class SettlingProgress:
             return
         self.last = now
         if phase == "rolling":  # spheres placed at a steady rate: the time left in proportion
-            left = f", about {(now - self.start) * (max_steps - steps) / max(steps, 1):.0f} s left" \
-                if steps < max_steps else ""
+            left = (f", about {(now - self.start) * (max_steps - steps) / max(steps, 1):.0f} s left"
+                    if steps < max_steps else "")
             self.log(f"packing: rolling {max_steps:,} spheres down the pile: {steps:,} down, "
                      f"{now - self.start:.0f} s{left}")
             return
@@ -124,8 +124,8 @@ def build_packing(scene, log=None):
                               progress=SettlingProgress(log, len(radii)) if log else None,
                               soft_modulus=p.get("soft_modulus"))
     else:
-        count = packing.bed_particle_count(p["lateral_size"], p["height"], p["diameter_range"]) \
-            if p["kind"] == "powder_bed" else 0
+        count = (packing.bed_particle_count(p["lateral_size"], p["height"], p["diameter_range"])
+                 if p["kind"] == "powder_bed" else 0)
         progress = SettlingProgress(log, count) if log and count else None
         if p.get("method") == "dem":
             packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],

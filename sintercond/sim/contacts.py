@@ -52,12 +52,14 @@ def conductance_lift(physics: Physics, radii, material, neighbors, neck, overlap
     rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
     valid = (neighbors != rows) & (neighbors < n)
     j = jnp.where(valid, neighbors, rows)
-    return _law_on_pairs(physics, radii, material, jnp.minimum(rows, j), jnp.maximum(rows, j), valid, neck, overlap,
+    return _law_on_pairs(physics, radii, material, (jnp.minimum(rows, j), jnp.maximum(rows, j), valid), neck, overlap,
                          conductivity, law_params)
 
 
-def _law_on_pairs(physics, radii, material, lo, hi, valid, neck, overlap, conductivity, law_params):
-    """The conductance law on pairs ``(lo, hi)`` (any shape) from their necks (W/K); 0 where not ``valid``."""
+def _law_on_pairs(physics, radii, material, pairs, neck, overlap, conductivity, law_params):
+    """The conductance law on ``pairs = (lo, hi, valid)`` (index arrays of any shape, and a mask) from their necks
+    (W/K); 0 where not ``valid``."""
+    lo, hi, valid = pairs
     kappa = jnp.asarray(conductivity)
     k = conductance_from_neck(physics.conduction.law, neck, radii[lo], radii[hi], overlap, kappa[material[lo]],
                               kappa[material[hi]], law_params)
@@ -88,7 +90,7 @@ def pair_conductance(physics: Physics, radii, material, geometry, conductivity, 
 
     ``geometry``: :func:`sintercond.mechanics.pair_geometry` of the list.
     """
-    return _law_on_pairs(physics, radii, material, geometry.i, geometry.j, geometry.valid,
+    return _law_on_pairs(physics, radii, material, (geometry.i, geometry.j, geometry.valid),
                          _pair_neck(physics, radii, geometry), geometry.overlap, conductivity, law_params)
 
 

@@ -210,7 +210,7 @@ class Physics:
                              "particles only; use 'explicit' with sources or motion")
 
     @classmethod
-    def create(cls, law="rojek", neck_model=None, conductance="table", contacts="static", integrator="explicit",
+    def create(cls, law="rojek", *, neck_model=None, conductance="table", contacts="static", integrator="explicit",
                held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
                motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None, held_ramp=False,
                conductivity_table=False, specific_heat_table=False, **mechanical) -> Physics:

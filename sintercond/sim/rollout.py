@@ -227,7 +227,7 @@ class Report(NamedTuple):
 
 
 def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk: int,
-            on_chunk: Callable | None = None, reallocate: Callable | None = None, progress: Callable | None = None,
+            on_chunk: Callable | None = None, *, reallocate: Callable | None = None, progress: Callable | None = None,
             check: Callable | None = None, measure: Callable | None = None) -> tuple[SimState, Report]:
     """Advance ``n_steps`` steps in compiled chunks of ``chunk`` steps (the last one may be shorter).
 

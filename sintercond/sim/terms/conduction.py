@@ -158,7 +158,8 @@ def advance(physics: Physics, neighbor_fn, state: SimState, prep: Prepared) -> S
         power = functools.reduce(jnp.add, terms) if terms else jnp.zeros((), particles.temperature.dtype)
         temperature = thermal.explicit_update(particles.temperature, power, prep.capacity, state.dt, fixed,
                                               held_temperature(physics, state, prep),
-                                              (prep.scale, conductance, neighbors), pulse, prep.rates)
+                                              network=(prep.scale, conductance, neighbors), pulse=pulse,
+                                              rates=prep.rates)
     elif c.integrator == "explicit":
         power = heat_power(physics, neighbor_fn, state, prep, conductance, neighbors)
         temperature = explicit_heat(physics, state, prep, power)
