@@ -149,7 +149,8 @@ class Mechanics:
         mean the same step compare equal and compile once. ``flags``: the other fields."""
         from sintercond.walls import PlaneWall
 
-        for name, value in (("wall_friction", wall_friction), ("wall_rolling", wall_rolling)):
+        for name, value in (("friction", friction), ("rolling", rolling), ("wall_friction", wall_friction),
+                            ("wall_rolling", wall_rolling)):
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"Mechanics.{name} must be True or False; got {value!r}")
         try:
@@ -344,15 +345,23 @@ def wall_coefficients(params: MechanicalParams):
 
 
 def check_wall_coefficients(spec, params: MechanicalParams):
-    """Raise ``ValueError`` if frictionless walls (``wall_friction``/``wall_rolling`` False) get concrete nonzero
-    :func:`wall_coefficients`; traced values are not checked."""
+    """Raise ``ValueError`` if a law that is off gets a concrete nonzero coefficient: friction (rolling) off between
+    the particles with ``mu`` (``mu_r``) given, or frictionless walls (``wall_friction``/``wall_rolling`` False)
+    with nonzero :func:`wall_coefficients`; traced values are not checked. A coefficient the step would ignore is
+    a mistake in the call, not a choice."""
+    for flag, name, value in (("friction", "mu", params.mu), ("rolling", "mu_r", params.mu_r)):
+        if (not getattr(spec, flag) and not isinstance(value, jax.core.Tracer)
+                and bool(np.any(np.asarray(value) != 0))):
+            raise ValueError(f"Mechanics.{flag}=False leaves the law out of the step, but MechanicalParams.{name} is "
+                             f"{value!r}; give {name} = 0 or turn the law on ({flag}=True)")
     mu_w, mu_r_w = wall_coefficients(params)
     for flag, on, name, value in (("wall_friction", spec.friction, "mu_wall", mu_w),
                                   ("wall_rolling", spec.rolling, "mu_r_wall", mu_r_w)):
-        if (on and not getattr(spec, flag) and not isinstance(value, jax.core.Tracer)
+        if (not (on and getattr(spec, flag)) and not isinstance(value, jax.core.Tracer)
                 and bool(np.any(np.asarray(value) != 0))):
-            raise ValueError(f"Mechanics.{flag}=False makes the walls frictionless, but MechanicalParams.{name} "
-                             f"(or its fallback) is {value!r}; it must be 0 there (or set {flag}=True)")
+            law = flag if on else flag.removeprefix("wall_")
+            raise ValueError(f"Mechanics.{law}=False makes the walls frictionless, but MechanicalParams.{name} "
+                             f"(or its fallback) is {value!r}; it must be 0 there (or set {law}=True)")
 
 
 COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False, "xla_cpu_prefer_vector_width": 512}

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 
 from sintercond import mechanics, neck_growth
 from sintercond.sim.state import Params, SimState, Simulator
-from sintercond.sim.validation import validate_inputs
+from sintercond.sim.validation import check_mechanical_step, validate_inputs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,6 +115,7 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     validate_inputs(sim, state, params)
     if sim.physics.mechanics is not None and params.mechanics is not None:
         mechanics.check_wall_coefficients(sim.physics.mechanics, params.mechanics)
+        check_mechanical_step(sim, state, params)
     prep = sim.prepare_fn(state, params)
     seg = segment_length(n_steps) if checkpoint else n_steps
 

@@ -150,3 +150,46 @@ def _warn_float32_positions(positions, overlaps):
                       f"{smallest / ulp:.0f} float32 steps of {ulp:.3g} m only: contacts will open and close on "
                       "round-off. Run with float64 positions (SINTERCOND_ENABLE_X64=1, the default) and "
                       "Mechanics(force_dtype='float32') for float32 contact laws", PrecisionWarning, stacklevel=3)
+
+
+SLOWEST_APPROACH = 1e-9
+"""Approach speed (m/s) :func:`check_mechanical_step` assumes of a state at rest: its contacts' own overlaps set the
+limit then."""
+
+
+def check_mechanical_step(sim: Simulator, state: SimState, params: Params) -> None:
+    """Raise ``ValueError`` when a mechanical state's time step exceeds the stability limit of its stiffest contact
+    as it stands (Quintana-Ruiz & Campello 2020, Eq. 47, and the symplectic-Euler bounds of MECHANICS.md's
+    erratum 8, :func:`sintercond.mechanics.mechanical_time_step` with ``fraction = safety = 1``): at the deepest
+    overlap of its listed pairs and walls and the fastest relative speed of its listed pairs (or of a particle
+    against a wall). Beyond it the step adds energy at every contact and the packing flies apart.
+
+    A bound on the state, not on the run: contacts that a fall or an impact will press deeper are the caller's to
+    size for (``mechanical_time_step`` with the approach speed expected) or the run's guards'
+    (:func:`sintercond.guards.motion_guard`). Traced states are not checked.
+    """
+    spec = sim.physics.mechanics
+    if spec is None or not all_concrete(state, params):
+        return
+    p = state.particles
+    x, r = np.asarray(p.positions, np.float64), np.asarray(p.radii, np.float64)
+    v = np.asarray(state.mechanics.velocity, np.float64)
+    n = len(r)
+    pairs = np.asarray(state.contacts.pairs.pairs)
+    pairs = pairs[(pairs[:, 0] < n) & (pairs[:, 1] < n)]
+    i, j = pairs[:, 0], pairs[:, 1]
+    depth = [r[i] + r[j] - np.linalg.norm(x[i] - x[j], axis=1)]
+    speed = [np.linalg.norm(v[i] - v[j], axis=1)]
+    if spec.walls:
+        depth.append(np.ravel(mechanics.wall_penetration(spec.walls, x, r, float(np.asarray(state.time)))))
+        speed += [np.linalg.norm(v, axis=1) + np.linalg.norm(np.asarray(w.velocity)) for w in spec.walls]
+    delta = max(float(np.max(np.concatenate(depth), initial=0.0)), 0.0)
+    v_rel = max(float(np.max(np.concatenate(speed), initial=0.0)), SLOWEST_APPROACH)
+    limit = float(mechanics.mechanical_time_step(spec, p, state.contacts.neighbor_list.idx, params.mechanics, v_rel,
+                                                 delta=delta, fraction=1.0, safety=1.0))
+    dt = float(np.asarray(state.dt))
+    if dt > limit:
+        raise ValueError(f"SimState.dt = {dt:.6g} s exceeds the stability limit {limit:.6g} s of the state's stiffest "
+                         f"contact (overlap {delta:.3g} m, relative speed {v_rel:.3g} m/s; Eq. 47 and the "
+                         f"symplectic-Euler bounds at E0): the packing would fly apart. Use dt <= {limit:.6g} s, or "
+                         "size it with sintercond.mechanics.mechanical_time_step at the approach speed you expect")
