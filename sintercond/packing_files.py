@@ -233,6 +233,9 @@ def _read_lammps_data(text, path):
                                    "diameter density x y z")
         rows.append([float(v) for v in fields[:7]])
     data = np.asarray(rows).reshape(-1, 7)
+    declared = next((line.split()[0] for line in lines[:start] if line.split("#", 1)[0].split()[1:] == ["atoms"]),
+                    None)
+    _check_count(path, declared, len(data), "the header's 'N atoms'", "rows in its Atoms section")
     data = data[np.argsort(data[:, 0], kind="stable")]
     return data[:, 4:7].copy(), data[:, 2] / 2, None
 
@@ -254,6 +257,9 @@ def _read_lammps_dump(text, path):
         raise PackingFileError(f"{path}: the last frame's atoms cannot be read ({err}); a dump cut short?") from None
     if data.shape[1] != len(names):
         raise PackingFileError(f"{path}: {data.shape[1]} columns for the {len(names)} names {names}")
+    count_at = frame.find("ITEM: NUMBER OF ATOMS")
+    declared = frame[count_at:].splitlines()[1].strip() if count_at >= 0 and frame[count_at:].count("\n") else None
+    _check_count(path, declared, len(data), "the last frame's 'ITEM: NUMBER OF ATOMS'", "rows under its ITEM: ATOMS")
     column = {name: data[:, k] for k, name in enumerate(names)}
     heat = next((data[:, k] for k, name in enumerate(names) if name.lower() in TEMPERATURE_COLUMNS), None)
     if "radius" in column:
@@ -276,6 +282,20 @@ def _read_lammps_dump(text, path):
         raise PackingFileError(f"{path}: the dump has no x y z (or xu yu zu, xs ys zs) columns (columns: {names})")
     order = np.argsort(column["id"], kind="stable") if "id" in column else np.arange(len(radii))
     return centres[order].copy(), radii[order].copy(), None if heat is None else heat[order].copy()
+
+
+def _check_count(path, declared, found, where, what):
+    """Raise :class:`PackingFileError` unless the particle count a file declares (``declared``, its text, None
+    if it declares none) is the ``found`` rows read: a file cut short at a line boundary reads cleanly otherwise."""
+    if declared is None:
+        return
+    try:
+        count = int(declared)
+    except ValueError:
+        raise PackingFileError(f"{path}: {where} is {declared!r}, not a whole number") from None
+    if count != found:
+        cut = "; the file is cut short?" if found < count else ""
+        raise PackingFileError(f"{path}: {where} says {count} particles, but {found} {what} were read{cut}")
 
 
 def write_table(path, centres, radii, length_unit="m"):
