@@ -53,14 +53,14 @@ def read_packing(path, format="auto", length_unit="m") -> tuple[np.ndarray, np.n
     path, format = _checked(path, format)
     if length_unit not in LENGTH_UNITS:
         raise PackingFileError(f"length_unit must be one of {list(LENGTH_UNITS)}; got {length_unit!r}")
-    centres, radii, _ = _read(path, format)
+    centres, radii, _, lines = _read(path, format)
     scale = LENGTH_UNITS[length_unit]
     centres, radii = centres * scale, radii * scale
     bad = ~(np.all(np.isfinite(centres), axis=1) & np.isfinite(radii) & (radii > 0))
     if bad.any():
         k = int(np.argmax(bad))
-        raise PackingFileError(f"{path}: particle {k} (row {k + 1}) has centre {centres[k].tolist()} and radius "
-                               f"{radii[k]!r}: centres must be finite and radii > 0")
+        raise PackingFileError(f"{path}, line {lines[k]}: particle {k} has centre {centres[k].tolist()} and radius "
+                               f"{float(radii[k])!r}: centres must be finite and radii > 0")
     return centres, radii
 
 
@@ -82,6 +82,13 @@ def read_temperatures(path, format="auto") -> np.ndarray:
     return temperature
 
 
+def particle_lines(path, format="auto") -> np.ndarray:
+    """``[n]`` line numbers (1-based) of each particle's row in ``path``, in :func:`read_packing`'s order: where a
+    message about particle k sends the user."""
+    path, format = _checked(path, format)
+    return _read(path, format)[3]
+
+
 def _checked(path, format):
     path = Path(path)
     if format == "auto":
@@ -101,26 +108,26 @@ def _read(path, format):
 @functools.lru_cache(maxsize=8)
 def _read_cached(path, mtime, size, format):
     """The file read once per version (validation and the build both ask), in the file's units:
-    ``(centres, radii, temperatures or None)``."""
+    ``(centres, radii, temperatures or None, line of each particle's row)``."""
     text = Path(path).read_text(errors="replace")
     reader = {"table": _read_table, "lammps_data": _read_lammps_data, "lammps_dump": _read_lammps_dump}[format]
-    centres, radii, temperature = reader(text, path)
+    centres, radii, temperature, lines = reader(text, path)
     if len(radii) == 0:
         raise PackingFileError(f"{path}: no particles found (read as {format!r})")
-    for array in (centres, radii, temperature):
+    for array in (centres, radii, temperature, lines):
         if array is not None:
             array.setflags(write=False)
-    return centres, radii, temperature
+    return centres, radii, temperature, lines
 
 
 def _read_table(text, path):
-    fast = _read_uniform_table(text)
-    if fast is not None:
-        return fast
     lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
     rows = [(k + 1, line.replace(",", " ").replace(";", " ").split()) for k, line in enumerate(lines) if line]
+    fast = _read_uniform_table(text)
+    if fast is not None:
+        return (*fast, np.array([line for line, _ in rows[len(rows) - len(fast[1]):]]))
     if not rows:
-        return np.zeros((0, 3)), np.zeros(0), None
+        return np.zeros((0, 3)), np.zeros(0), None, np.zeros(0, int)
     columns = {"x": 0, "y": 1, "z": 2, "r": 3}
     diameter = False
     first = rows[0][1]
@@ -163,7 +170,8 @@ def _read_table(text, path):
             except ValueError:
                 raise PackingFileError(f"{path}, line {line}: {fields} are not all numbers") from None
     radii = values[:, 3] / 2 if diameter else values[:, 3]
-    return values[:, :3].copy(), radii.copy(), values[:, 4].copy() if "t" in columns else None
+    return (values[:, :3].copy(), radii.copy(), values[:, 4].copy() if "t" in columns else None,
+            np.array([line for line, _ in rows]))
 
 
 def _read_uniform_table(text):
@@ -218,7 +226,7 @@ def _read_lammps_data(text, path):
     if style != "sphere":
         raise PackingFileError(f"{path}: the Atoms section is atom_style {style!r}; sphere (id type diameter "
                                "density x y z) is read")
-    rows = []
+    rows, at = [], []
     for k in range(start + 1, len(lines)):
         line = lines[k].split("#", 1)[0].strip()
         if not line:
@@ -232,12 +240,14 @@ def _read_lammps_data(text, path):
             raise PackingFileError(f"{path}, line {k + 1}: {len(fields)} columns in Atoms, expected id type "
                                    "diameter density x y z")
         rows.append([float(v) for v in fields[:7]])
+        at.append(k + 1)
     data = np.asarray(rows).reshape(-1, 7)
     declared = next((line.split()[0] for line in lines[:start] if line.split("#", 1)[0].split()[1:] == ["atoms"]),
                     None)
     _check_count(path, declared, len(data), "the header's 'N atoms'", "rows in its Atoms section")
-    data = data[np.argsort(data[:, 0], kind="stable")]
-    return data[:, 4:7].copy(), data[:, 2] / 2, None
+    order = np.argsort(data[:, 0], kind="stable")
+    data = data[order]
+    return data[:, 4:7].copy(), data[:, 2] / 2, None, np.asarray(at, int)[order]
 
 
 def _read_lammps_dump(text, path):
@@ -281,7 +291,10 @@ def _read_lammps_dump(text, path):
     else:
         raise PackingFileError(f"{path}: the dump has no x y z (or xu yu zu, xs ys zs) columns (columns: {names})")
     order = np.argsort(column["id"], kind="stable") if "id" in column else np.arange(len(radii))
-    return centres[order].copy(), radii[order].copy(), None if heat is None else heat[order].copy()
+    first = text.count("\n", 0, len(text) - len(frame) + atoms_at) + 2  # the line after the ITEM: ATOMS header
+    body_lines = [first + k for k, line in enumerate(body.splitlines()) if line.strip()]
+    return (centres[order].copy(), radii[order].copy(), None if heat is None else heat[order].copy(),
+            np.asarray(body_lines, int)[order])
 
 
 def _check_count(path, declared, found, where, what):

@@ -7,6 +7,7 @@ read as metres, coincident centres that crashed after the build, and the like.
 import pytest
 
 from sintercond import packing_files
+from sintercond.scene import SceneError, load_scene
 
 DUMP_ROWS = [f"{i} 1 {2.0 * i!r} 0.0 0.0 1.0" for i in range(1, 9)]  # 8 touching unit spheres along x (file units)
 
@@ -36,3 +37,38 @@ def test_a_file_cut_at_a_line_boundary_is_refused(tmp_path):
     data.write_text(_data(DATA_ROWS[:6]))
     with pytest.raises(packing_files.PackingFileError, match=r"'N atoms' says 8 particles, but 6 .*cut short"):
         packing_files.read_packing(data)
+
+
+def _file_scene(tmp_path, packing_path, length_unit="m", extra=""):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(f"""[packing]
+kind = "file"
+path = "{packing_path.name}"
+length_unit = "{length_unit}"
+[material]
+density = 4430.0
+specific_heat = 560.0
+conductivity = 12.6
+[conduction]
+law = "rojek"
+[initial]
+temperature = 300.0
+[boundary]
+floor_temperature = 500.0
+[run]
+duration = 1e-4
+output_every = 5
+checkpoint_every = 10
+{extra}""")
+    return scene
+
+
+def test_a_packing_in_micrometres_read_as_metres_is_refused(tmp_path):
+    """Before: a table in micrometres with length_unit left at "m" ran spheres of 520 m (exit 0, nothing warmed).
+    File radii take the range of every other packing kind, [1e-8, 1] m, and the message points at length_unit."""
+    table = tmp_path / "bed.csv"
+    table.write_text("# a CT scan, in um\nx,y,z,r\n0,0,520,520\n1040,0,520,520\n")
+    with pytest.raises(SceneError, match=r"particle 0 \(line 3 of the file\) has radius 520 m.*\[1e-08, 1\] m.*"
+                                         r"packing\.length_unit to one of \['mm', 'um', 'nm'\]"):
+        load_scene(_file_scene(tmp_path, table))
+    assert load_scene(_file_scene(tmp_path, table, "um"))["packing"]["length_unit"] == "um"

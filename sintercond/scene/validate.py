@@ -195,13 +195,28 @@ def _check_mechanics(scene):
         raise SceneError(str(err)) from None
 
 
+RADIUS_RANGE = (1e-8, 1.0)
+RADIUS = _within(*RADIUS_RANGE, "m")
+"""The radius range of a sphere of any packing kind (listed, lattice, bed, file)."""
+
+
 def _check_packing(packing, conduction, sintering=False):
     from sintercond import neck
     from sintercond.packing import MAX_PARTICLES, MAX_ROLLED_PARTICLES, PackingError, check_bed
+    from sintercond.packing_files import LENGTH_UNITS, particle_lines
 
     if packing["kind"] == "file":
         packing["path"] = str(Path(packing["path"]).resolve())  # scene.json then finds it from anywhere
-        file_packing(packing)  # read (once) and checked now: a bad file is named before anything is built
+        radii = file_packing(packing)[1]  # read (once) and checked now: a bad file is named before anything is built
+        low, high = RADIUS_RANGE
+        outside = np.flatnonzero(~((radii >= low) & (radii <= high)))
+        if outside.size:
+            k, unit = int(outside[0]), packing["length_unit"]
+            others = [u for u in LENGTH_UNITS if u != unit]
+            line = int(particle_lines(packing["path"], packing["format"])[k])
+            raise SceneError(f"packing.path: particle {k} (line {line} of the file) has radius {float(radii[k]):g} m, "
+                             f"its file value read in packing.length_unit = {unit!r}; radii must be {RADIUS[0]}: is "
+                             f"the file in other units? set packing.length_unit to one of {others}")
         return
     if packing["kind"] == "spheres":
         centres, radii = packing["centres"], packing["radii"]
@@ -210,7 +225,7 @@ def _check_packing(packing, conduction, sintering=False):
             raise SceneError(f"packing.centres must be {_describe(_PACKING['spheres']['centres'])}; got "
                              f"{len(centres)} points")
         packing["centres"] = [_numbers(f"packing.centres[{k}]", c, 3, rule) for k, c in enumerate(centres)]
-        radius_rule = _within(1e-8, 1.0, "m")
+        radius_rule = RADIUS
         if not isinstance(radii, list):
             radii = [radii] * len(centres)
         packing["radii"] = _numbers("packing.radii", radii, len(centres), radius_rule)
