@@ -4,10 +4,12 @@ Each test fails on the code before its fix: a file cut short read with fewer par
 read as metres, coincident centres that crashed after the build, and the like.
 """
 
+import numpy as np
 import pytest
 
-from sintercond import packing_files
-from sintercond.scene import SceneError, load_scene
+from sintercond import cli, packing_files
+from sintercond.scene import SceneError, load_scene, validate_scene
+from sintercond.scene.build import build_model
 
 DUMP_ROWS = [f"{i} 1 {2.0 * i!r} 0.0 0.0 1.0" for i in range(1, 9)]  # 8 touching unit spheres along x (file units)
 
@@ -72,3 +74,24 @@ def test_a_packing_in_micrometres_read_as_metres_is_refused(tmp_path):
                                          r"packing\.length_unit to one of \['mm', 'um', 'nm'\]"):
         load_scene(_file_scene(tmp_path, table))
     assert load_scene(_file_scene(tmp_path, table, "um"))["packing"]["length_unit"] == "um"
+
+
+def test_coincident_centres_are_refused_naming_the_particles_and_the_lines(tmp_path, capsys):
+    """Before: a duplicated row of a packing file (or two listed spheres at one centre) passed validation, wrote
+    scene.json and crashed after the build (ZeroDivisionError with mechanics) or ran with a step of 0 s."""
+    table = tmp_path / "bed.csv"
+    table.write_text("x y z r\n0 0 1 1.02\n2 0 1 1.02\n# a duplicated row:\n2 0 1 1.02\n")
+    scene = _file_scene(tmp_path, table, "mm")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["run", str(scene), "--out", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "Traceback" not in err and not (tmp_path / "out").exists()
+    assert "packing.path: particles 1 and 2 (lines 3 and 5 of the file) have the same centre [0.002, 0.0, 0.001] m" \
+        in err, err
+    table.write_text("x y z r\n0 0 1 1.02\n2 0 1 1.02\n")
+    listed = {"kind": "spheres", "centres": [[0.0, 0.0, 1e-3], [2e-3, 0.0, 1e-3], [2e-3, 0.0, 1e-3]], "radii": 1e-3}
+    raw = load_scene(scene)
+    with pytest.raises(SceneError, match=r"packing\.centres\[1\] and packing\.centres\[2\] have the same centre"):
+        validate_scene({**raw, "packing": listed})
+    with pytest.raises(SceneError, match=r"particles 0 and 2 of the packing have the same centre"):  # a packing.npz
+        build_model(raw, np.array([[0.0, 0.0, 1e-3], [2e-3, 0.0, 1e-3], [0.0, 0.0, 1e-3]]), np.full(3, 1.02e-3))

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
+from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, file_temperatures, restitution_damping_ratio)
 from sintercond.state import particle_state
@@ -271,6 +272,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         start = time.perf_counter()
         centres, radii, bed = build_packing(scene, log)
         log(f"packing: {len(radii):,} particles in {time.perf_counter() - start:.1f} s")
+    check_distinct_centres(None, centres)  # a pour, a bed, or a run folder's packing.npz as well
     m, c = scene["material"], scene["conduction"]
     physics = scene_physics(scene)
     log(f"network: contacts and conductances of {len(radii):,} particles")

@@ -195,6 +195,32 @@ def _check_mechanics(scene):
         raise SceneError(str(err)) from None
 
 
+def check_distinct_centres(packing, centres):
+    """Raise :class:`SceneError` if two particles have the same centre ``centres`` [n, 3] (m), naming both: for
+    ``packing`` a validated ``[packing]`` table whose particles they are, a file's lines or the listed spheres' keys,
+    for None (a packing built or read back from a run folder) their indices. The
+    contact laws divide by the centre distance, so such a run crashed after the build or took a step of 0 s."""
+    centres = np.asarray(centres, np.float64)
+    _, first, inverse = np.unique(centres, axis=0, return_index=True, return_inverse=True)
+    duplicates = np.flatnonzero(first[inverse.reshape(-1)] != np.arange(len(centres)))  # each after its first
+    if duplicates.size == 0:
+        return
+    j = int(duplicates[0])
+    i = int(first[inverse.reshape(-1)[j]])
+    where, fix = f"particles {i} and {j} of the packing", ""
+    kind = None if packing is None else packing["kind"]
+    if kind == "file":
+        from sintercond.packing_files import particle_lines
+
+        lines = particle_lines(packing["path"], packing["format"])
+        where = f"packing.path: particles {i} and {j} (lines {int(lines[i])} and {int(lines[j])} of the file)"
+        fix = "; remove the duplicated rows"
+    elif kind == "spheres":
+        where, fix = f"packing.centres[{i}] and packing.centres[{j}]", "; remove the duplicated centres"
+    raise SceneError(f"{where} have the same centre {centres[i].tolist()} m ({duplicates.size} such "
+                     f"duplicate(s) in all): two particles cannot sit in one place{fix}")
+
+
 RADIUS_RANGE = (1e-8, 1.0)
 RADIUS = _within(*RADIUS_RANGE, "m")
 """The radius range of a sphere of any packing kind (listed, lattice, bed, file)."""
@@ -207,7 +233,8 @@ def _check_packing(packing, conduction, sintering=False):
 
     if packing["kind"] == "file":
         packing["path"] = str(Path(packing["path"]).resolve())  # scene.json then finds it from anywhere
-        radii = file_packing(packing)[1]  # read (once) and checked now: a bad file is named before anything is built
+        centres, radii = file_packing(packing)  # read (once) and checked now: a bad file is named before anything is built
+        check_distinct_centres(packing, centres)
         low, high = RADIUS_RANGE
         outside = np.flatnonzero(~((radii >= low) & (radii <= high)))
         if outside.size:
@@ -229,6 +256,7 @@ def _check_packing(packing, conduction, sintering=False):
         if not isinstance(radii, list):
             radii = [radii] * len(centres)
         packing["radii"] = _numbers("packing.radii", radii, len(centres), radius_rule)
+        check_distinct_centres(packing, packing["centres"])
         return
     if packing["kind"] == "poured":
         from sintercond.packing import check_radius_distribution
