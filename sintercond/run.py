@@ -29,6 +29,7 @@ from sintercond.rollout import advance
 from sintercond.io import (append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_network_vtp, write_pvd,
                            write_vtp)
 from sintercond.scene import SceneError, validate_scene
+from sintercond.scene.validate import held_temperatures
 
 from sintercond.scene.build import build_model
 from sintercond.observe import (Observation, _history_row, _probe_fn, contact_network, coordination, history_columns, observe,
@@ -53,6 +54,7 @@ def physical_range_check(scene):
 
     melting = scene["material"].get("melting_point")
     warned = []
+    inputs = heat_inputs(scene)
 
     def check(state):
         neck_growth.check_stable(state)
@@ -70,12 +72,25 @@ def physical_range_check(scene):
                            f"material.melting_point = {melting:g} K: the model has no melting (no latent heat, no "
                            "liquid), so what follows is not physical")
                 if scene["material"]["on_melting"] == "stop":
-                    raise MeltingPointCrossed(message + "; lower the heat input (beam.intensity or beam.power), or "
+                    raise MeltingPointCrossed(message + f"; lower the heat input ({', '.join(inputs)}), or "
                                               'set material.on_melting = "warn" to go on')
                 warned.append(int(state.step))
                 warnings.warn(message, MeltingPointWarning, stacklevel=2)
                 _log(f"warning: {message} (said once)")
     return check
+
+
+def heat_inputs(scene) -> list[str]:
+    """The keys of a scene that put heat in (a beam's power, held or conducting walls' and the surroundings'
+    temperatures above the start, a preheating ramp's end): what a run that grows too hot can lower."""
+    start = scene["initial"]["temperature"]
+    keys = ["beam.intensity or beam.power"] if "beam" in scene else []
+    hotter = {**held_temperatures(scene), **{f"walls[{k}].temperature": w["temperature"]
+                                            for k, w in enumerate(scene["walls"]) if w["mode"] == "conducting"}}
+    hotter.update({f"{section}.environment_temperature": scene[section]["environment_temperature"]
+                   for section in ("convection", "radiation") if section in scene})
+    keys += [key for key, value in hotter.items() if value > start]
+    return keys or ["none is named in the scene: initial.temperature"]
 
 
 class MeltingPointCrossed(FloatingPointError):

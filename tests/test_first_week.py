@@ -4,10 +4,14 @@ Each test fails on the code before its fix: a file cut short read with fewer par
 read as metres, coincident centres that crashed after the build, and the like.
 """
 
+import copy
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from sintercond import cli, packing_files
+from sintercond import run as runner
 from sintercond.scene import SceneError, load_scene, validate_scene
 from sintercond.scene.build import build_model
 
@@ -95,3 +99,60 @@ def test_coincident_centres_are_refused_naming_the_particles_and_the_lines(tmp_p
         validate_scene({**raw, "packing": listed})
     with pytest.raises(SceneError, match=r"particles 0 and 2 of the packing have the same centre"):  # a packing.npz
         build_model(raw, np.array([[0.0, 0.0, 1e-3], [2e-3, 0.0, 1e-3], [0.0, 0.0, 1e-3]]), np.full(3, 1.02e-3))
+
+
+def _lattice_scene(**sections):
+    scene = {"packing": {"kind": "simple_cubic", "counts": [3, 1, 1], "spacing": 1e-4, "radius": 0.52e-4},
+             "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 12.6},
+             "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
+             "run": {"duration": 1e-3, "output_every": 5, "checkpoint_every": 10}}
+    for name, table in sections.items():
+        scene[name] = {**scene.get(name, {}), **table} if isinstance(table, dict) else table
+    return scene
+
+
+@pytest.mark.parametrize("sections, key", [
+    ({"material": {"melting_point": 280.0}}, r"initial\.temperature = 300 K"),
+    ({"material": {"melting_point": 800.0}, "boundary": {"floor_temperature": 900.0}},
+     r"boundary\.floor_temperature = 900 K"),
+    ({"material": {"melting_point": 800.0}, "walls": [{"axis": 0, "side": "min", "mode": "held",
+                                                       "temperature": 1200.0}]}, r"walls\[0\]\.temperature = 1200 K"),
+])
+def test_a_melting_point_below_the_start_is_refused_at_validation(sections, key):
+    """Before: a melting point below the initial (or a held) temperature was found after the first output chunk."""
+    with pytest.raises(SceneError, match=r"material\.melting_point = \d+ K is below " + key):
+        validate_scene(_lattice_scene(**sections))
+    warn = copy.deepcopy(sections)
+    warn["material"]["on_melting"] = "warn"  # a held wall above it then only warns when the run crosses it
+    if "initial" not in key:
+        validate_scene(_lattice_scene(**warn))
+
+
+def test_the_melting_advice_names_the_heat_inputs_the_scene_has():
+    """Before: a run without a beam that crossed the melting point was told to lower beam.power."""
+    hot = {"material": {"melting_point": 800.0},
+           "walls": [{"axis": 0, "side": "min", "mode": "conducting", "temperature": 1200.0}],
+           "convection": {"environment_temperature": 290.0, "environment_conductivity": 0.026}}
+    scene = validate_scene(_lattice_scene(**hot))
+    state = SimpleNamespace(step=np.int64(40), dt=np.float64(1e-6), sintering=None,  # the fields the check reads
+                            particles=SimpleNamespace(temperature=np.array([900.0, 600.0, 400.0])))
+    with pytest.raises(runner.MeltingPointCrossed, match=r"lower the heat input \(walls\[0\]\.temperature\), or") as e:
+        runner.physical_range_check(scene)(state)
+    assert "beam" not in str(e.value) and "convection" not in str(e.value)
+
+
+SINTERING = {"sintering": {"every": 1000}, "packing": {"radius": 0.5e-4},
+             "conduction": {"law": "rojek", "neck_model": "volume_conserving"}}
+
+
+def test_sintering_every_above_the_step_count_is_refused():
+    """Before: sintering.every = 1000 in a run of 100 steps was accepted and no neck grew."""
+    with pytest.raises(SceneError, match=r"sintering\.every = 1000 steps is more than the run's 100 steps"):
+        validate_scene(_lattice_scene(run={"dt": 1e-5}, **SINTERING))  # an explicit step: 1e-3 s in 100 steps
+
+
+@pytest.mark.slow
+def test_sintering_every_above_the_automatic_step_count_is_refused_at_the_build():
+    scene = validate_scene(_lattice_scene(**SINTERING))  # the automatic step: the build counts the steps
+    with pytest.raises(SceneError, match=r"sintering\.every = 1000 steps is more than the run's \d+ steps"):
+        build_model(scene)

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
+from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
 from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, file_temperatures, restitution_damping_ratio)
@@ -324,9 +325,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                          f"{thermal_limit:.6g} s{at_cap} (G_i: linearised convection and "
                                          "radiation)")}
     if "preheating" in scene:
-        ramp = scene["preheating"]
         every = scene["sintering"]["every"] if "sintering" in scene else 1  # a growth interval spans every steps
-        step = RAMP_STEP_FRACTION * ramp["duration"] / ramp["steps"] / every
+        step = ramp_step(scene)
         bounds["preheating"] = (step, f"{step:.6g} s, in which {every} step(s) (sintering.every) span "
                                       f"{RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
                                       "(preheating.duration / preheating.steps)")
@@ -376,6 +376,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                  + (" or the implicit integrator" if kind == "thermal" and motion is None else ""))
     n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
     dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
+    check_sintering_every(scene, n_steps)
     state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
     return Model(sim, params, state, n_steps, contact_count, limit, bed, reallocate,
@@ -540,10 +541,3 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
                           t_wall)
         k_wall = k_wall + k_w
     return k_wall, t_wall
-
-
-RAMP_STEP_FRACTION = 0.1
-"""A growth interval (``sintering.every`` time steps; one without ``[sintering]``) spans at most this fraction of a
-step of a ``[preheating]`` ramp: each level is resolved in ten intervals (necks grow over an interval at the mean of
-its start and end temperatures, so the interval that straddles a level's edge takes the mean of two levels)."""
-

@@ -409,6 +409,7 @@ def _check_details(scene):
                                or any(not isinstance(v, bool) for v in on)):
             raise SceneError(f"beam.segments_on must be a list of {len(path) - 1} booleans (true or false), one per "
                              f"segment of beam.path; got {on!r}")
+    _check_melting_point(scene)
     convection = scene.get("convection", {})
     if ("reynolds" in convection) != ("prandtl" in convection):
         raise SceneError("convection.reynolds and convection.prandtl go together (Whitaker's correlation)")
@@ -426,6 +427,34 @@ def _check_details(scene):
         raise SceneError(f"run.formats must be a non-empty list of distinct names from {list(allowed)}; "
                          f"got {formats!r}")
     run["formats"] = list(formats)
+
+
+def held_temperatures(scene) -> dict:
+    """``{key: temperature (K)}`` of what a scene holds particles at: held walls, the floor, a preheating ramp's end."""
+    held = {f"walls[{k}].temperature": w["temperature"] for k, w in enumerate(scene["walls"]) if w["mode"] == "held"}
+    if "floor_temperature" in scene.get("boundary", {}):
+        held["boundary.floor_temperature"] = scene["boundary"]["floor_temperature"]
+    if "preheating" in scene:
+        held["preheating.end_temperature"] = scene["preheating"]["end_temperature"]
+    return held
+
+
+def _check_melting_point(scene):
+    """``material.melting_point`` above the start: the initial temperatures (a run starting molten stopped after
+    its first output chunk), and with ``on_melting = "stop"`` the temperatures particles are held at."""
+    melting = scene["material"].get("melting_point")
+    if melting is None:
+        return
+    start = {"initial.temperature": scene["initial"]["temperature"]}
+    if scene["initial"]["from_file"]:
+        start = {"initial.from_file (the file's hottest particle)": float(np.max(file_temperatures(scene["packing"])))}
+    if scene["material"]["on_melting"] == "stop":
+        start.update(held_temperatures(scene))
+    for key, value in start.items():
+        if value > melting:
+            raise SceneError(f"material.melting_point = {melting:g} K is below {key} = {value:g} K: the run would "
+                             f"stop at its first output (the model has no melting); {key} must be below the melting "
+                             "point (check both: a solidus in K, not in degrees Celsius?)")
 
 
 def _builtin_dir():
