@@ -143,6 +143,10 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         _clear_outputs(out)
         (out / "scene.json").write_text(json.dumps(scene, indent=1))
         model = build_model(scene, log=_log)
+        if "output_every" not in scene["run"]:  # the intervals the build chose: a resume keeps them
+            scene = {**scene, "run": {**scene["run"], "output_every": model.output_every,
+                                      "checkpoint_every": model.checkpoint_every}}
+            (out / "scene.json").write_text(json.dumps(scene, indent=1))
         np.savez(out / "packing.npz", centres=model.centres, radii=model.radii)
         (out / "bed.json").write_text(json.dumps(model.bed))
         probe = _probe_fn(model)
@@ -154,8 +158,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     else:
         model, state = _start
         probe = _probe_fn(model)
-    run = scene["run"]
-    chunk = run["output_every"]
+    chunk, checkpoint_every = model.output_every, model.checkpoint_every
     chunks_done = 0
     _log(f"{len(model.radii)} particles, {model.contacts} contacts; stable step {model.stable_step:.4g} s, "
          f"dt {model.dt:.4g} s, {model.n_steps} steps to {model.n_steps * model.dt:.6g} s; compiling the step")
@@ -167,7 +170,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         step = int(s.step)
         if chunks_done == 0:  # the first chunk carries the compile
             _log(f"compiled the step and ran steps {last[0]:,} to {step:,} in {time.perf_counter() - wall:.1f} s")
-        crossed = step // run["checkpoint_every"] > last[0] // run["checkpoint_every"]  # an extension's steps
+        crossed = step // checkpoint_every > last[0] // checkpoint_every  # an extension's steps
         last[0] = step  # are off the output grid: checkpoint once a multiple of checkpoint_every is passed
         start = time.perf_counter()
         obs = observe(scene, model, s, probe)
@@ -179,7 +182,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         writing = time.perf_counter() - start
         if writing > SLOW_OUTPUT_S:
             _log(f"outputs of step {step:,} written in {writing:.1f} s ({', '.join(scene['run']['formats'])}"
-                 f"{', checkpoint' if crossed or step >= model.n_steps else ''}); {scene['run']['output_every']:,} "
+                 f"{', checkpoint' if crossed or step >= model.n_steps else ''}); {chunk:,} "
                  "steps between outputs (run.output_every)")
         chunks_done += 1
         return stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps

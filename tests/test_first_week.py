@@ -5,6 +5,7 @@ read as metres, coincident centres that crashed after the build, and the like.
 """
 
 import copy
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -156,3 +157,19 @@ def test_sintering_every_above_the_automatic_step_count_is_refused_at_the_build(
     scene = validate_scene(_lattice_scene(**SINTERING))  # the automatic step: the build counts the steps
     with pytest.raises(SceneError, match=r"sintering\.every = 1000 steps is more than the run's \d+ steps"):
         build_model(scene)
+
+
+def test_without_output_every_the_outputs_follow_the_duration(tmp_path):
+    """Before: run.output_every was required, and the preheating scene's 20,000 steps gave 3 history rows with the
+    docs' --duration 1. Not given, the run writes about 100 outputs whatever its duration, and a resume keeps them."""
+    assert "output_every" not in load_scene("ti6al4v_preheating_bed", duration=1.0)["run"]
+    scene = _lattice_scene(walls=[{"axis": 0, "side": "min", "mode": "held", "temperature": 500.0}],
+                           run={"duration": 2e-3, "dt": 1e-5})  # 200 steps
+    del scene["run"]["output_every"], scene["run"]["checkpoint_every"]
+    _, summary = runner.run_scene(validate_scene(scene), tmp_path, progress=False, pictures=False)
+    steps = [int(row.split(",")[0]) for row in (tmp_path / "history.csv").read_text().splitlines()[1:]]
+    assert summary["steps"] == 200 and steps == list(range(0, 201, 2))  # 100 outputs after the start
+    saved = json.loads((tmp_path / "scene.json").read_text())["run"]
+    assert (saved["output_every"], saved["checkpoint_every"]) == (2, 20)
+    with pytest.raises(SceneError, match=r"run\.checkpoint_every \(20\) needs run\.output_every"):
+        validate_scene({**scene, "run": {**scene["run"], "checkpoint_every": 20}})

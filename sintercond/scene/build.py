@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
+from sintercond.scene.schema import output_interval
 from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
 from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
@@ -39,6 +40,8 @@ class Model:
     sized_speed: float | None = None  # with mechanics: the approach speed (m/s) the mechanical step is sized for
     k_star_axis: int | None = None  # with [sintering] k_star_axis: the axis of k* at each output
     lattice: bool = False  # a simple cubic packing (k* between its end layers)
+    output_every: int = 1  # steps between outputs: run.output_every, or about DEFAULT_OUTPUTS over the run
+    checkpoint_every: int = 1  # steps between checkpoints (run.checkpoint_every or DEFAULT_CHECKPOINT_OUTPUTS outputs)
 
     @property
     def physics(self) -> simulate.Physics:
@@ -383,7 +386,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                  _wall_heat_specs(scene, centres, radii),
                  {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None,
                  scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
-                 scene["packing"]["kind"] == "simple_cubic")
+                 scene["packing"]["kind"] == "simple_cubic", *output_interval(run, n_steps))
 
 
 def _fastest_wall(scene) -> tuple[float, int | None]:

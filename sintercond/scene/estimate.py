@@ -11,7 +11,7 @@ import numpy as np
 
 from sintercond.scene.schema import (
     MAX_FRAMES, MAX_MEMORY_BYTES, MAX_OUTPUT_BYTES, MAX_STEPS, SceneError, file_packing, file_temperatures,
-    restitution_damping_ratio,
+    output_interval, restitution_damping_ratio,
 )
 
 
@@ -94,7 +94,7 @@ def estimate_run(scene) -> RunEstimate:
         dt = min(dt, 0.9 * ramp_step(scene))
     dt = dt if run["dt"] == "auto" else run["dt"]
     steps = max(1, math.ceil(run["duration"] / dt))
-    frames = steps // run["output_every"] + 1
+    frames = steps // output_interval(run, steps)[0] + 1
     per_frame = n * (("vtp" in run["formats"]) * 230 + ("lammps" in run["formats"]) * 140)
     estimate = RunEstimate(n, dt, steps, frames, frames * per_frame, 4e3 * n)
     if run["dt"] != "auto":  # the step count is exact; with the automatic step the build checks it

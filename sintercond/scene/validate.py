@@ -16,7 +16,8 @@ from sintercond.mechanics import validate_mechanical_params
 from sintercond.sintering import KINETIC_LAWS
 from sintercond.scene.estimate import estimate_run
 from sintercond.scene.schema import (
-    Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, POUR_START, SceneError, _LAW_PARAMS, _PACKING,
+    DEFAULT_CHECKPOINT_OUTPUTS, Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, POUR_START,
+    SceneError, _LAW_PARAMS, _PACKING,
     TEMPERATURE, _REQUIRED_SECTIONS, _SCHEMA, _SECTIONS, _SINTERING_PARAMS, _WALL, _check_keys, _check_section,
     _describe, _numbers, _suggest, _value, _within, file_packing, file_temperatures,
 )
@@ -417,7 +418,10 @@ def _check_details(scene):
         raise SceneError("give convection.nusselt or convection.reynolds and prandtl, not both")
     run = scene["run"]
     run["dt"] = run["dt"] if run["dt"] == "auto" else float(run["dt"])
-    if run["checkpoint_every"] % run["output_every"]:
+    if "checkpoint_every" in run and "output_every" not in run:
+        raise SceneError(f"run.checkpoint_every ({run['checkpoint_every']}) needs run.output_every (it is a multiple "
+                         f"of it); without both, the run checkpoints every {DEFAULT_CHECKPOINT_OUTPUTS} outputs")
+    if "output_every" in run and run.get("checkpoint_every", run["output_every"]) % run["output_every"]:
         raise SceneError(f"run.checkpoint_every ({run['checkpoint_every']}) must be a multiple of "
                          f"run.output_every ({run['output_every']})")
     formats = run["formats"]
