@@ -311,8 +311,11 @@ def _check_count(path, declared, found, where, what):
         raise PackingFileError(f"{path}: {where} says {count} particles, but {found} {what} were read{cut}")
 
 
-def write_table(path, centres, radii, length_unit="m"):
-    """Write ``centres``, ``radii`` (m) as a CSV table with a header, in ``length_unit``."""
+def write_table(path, centres, radii, length_unit="m", temperature=None):
+    """Write ``centres``, ``radii`` (m) as a CSV table with a header, in ``length_unit``, and with ``temperature``
+    (K, [n]) a column ``T`` (read back by :func:`read_temperatures`)."""
     scale = LENGTH_UNITS[length_unit]
-    data = np.column_stack([np.asarray(centres) / scale, np.asarray(radii) / scale])
-    np.savetxt(path, data, delimiter=",", header="x,y,z,r", comments="", fmt="%.17g")
+    columns = [np.asarray(centres) / scale, np.asarray(radii) / scale]
+    columns += [] if temperature is None else [np.asarray(temperature)]
+    header = "x,y,z,r" + ("" if temperature is None else ",T")
+    np.savetxt(path, np.column_stack(columns), delimiter=",", header=header, comments="", fmt="%.17g")

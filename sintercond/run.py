@@ -28,6 +28,7 @@ from sintercond._deprecation import old_names
 from sintercond.rollout import advance
 from sintercond.io import (append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_network_vtp, write_pvd,
                            write_vtp)
+from sintercond.packing_files import write_table
 from sintercond.scene import SceneError, validate_scene
 from sintercond.scene.validate import held_temperatures
 
@@ -305,8 +306,9 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
         if summary.get("steps") == step:
             _log(f"the run in {out} is finished (step {step}); nothing to resume (--duration S extends it)")
             return jnp.asarray(saved["temperature"]), summary
-    scene = validate_scene(raw)
     packed = np.load(out / "packing.npz")
+    _packing_from_run_folder(raw, out, packed, saved)
+    scene = validate_scene(raw)
     model = build_model(scene, packed["centres"], packed["radii"], log=_log)
     if (out / "bed.json").exists():
         model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
@@ -333,6 +335,20 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
         lines = (out / "history.csv").read_text().splitlines(keepends=True)
         (out / "history.csv").write_text("".join([lines[0]] + [r for r in lines[1:] if int(r.split(",")[0]) <= step]))
     return run_scene(scene, out, progress, stop_after_chunks, _start=(model, state), pictures=pictures)
+
+
+def _packing_from_run_folder(raw, out, packed, saved):
+    """A file packing whose file has moved since the run started is read from the run folder: ``raw``'s packing
+    then points at ``out/packing.csv``, the table of ``packing.npz`` (m; with ``initial.from_file``, the
+    checkpoint's temperatures as its column, which the checkpoint then replaces anyway)."""
+    packing = raw["packing"]
+    if packing["kind"] != "file" or Path(packing["path"]).is_file():
+        return
+    table = out / "packing.csv"
+    write_table(table, packed["centres"], packed["radii"],
+                temperature=saved["temperature"] if raw["initial"].get("from_file") else None)
+    _log(f"the packing file {packing['path']} is gone; resuming from the run folder's packing ({table})")
+    raw["packing"] = {**packing, "path": str(table), "format": "table", "length_unit": "m"}
 
 
 def summary_table(summary) -> str:

@@ -173,3 +173,21 @@ def test_without_output_every_the_outputs_follow_the_duration(tmp_path):
     assert (saved["output_every"], saved["checkpoint_every"]) == (2, 20)
     with pytest.raises(SceneError, match=r"run\.checkpoint_every \(20\) needs run\.output_every"):
         validate_scene({**scene, "run": {**scene["run"], "checkpoint_every": 20}})
+
+
+def test_a_file_packing_run_resumes_after_the_file_moved(tmp_path):
+    """Before: --resume re-read packing.path and failed once the file had moved, though the run folder holds the
+    packing. The reference: the same run uninterrupted (a resume gives identical results)."""
+    table = tmp_path / "bed.csv"
+    table.write_text("x y z r T\n0 0 1 1.02 300\n2 0 1 1.02 310\n4 0 1 1.02 320\n")
+    scene_path = _file_scene(tmp_path, table, "mm", extra='dt = 1e-5\n[[walls]]\naxis = 0\nside = "min"\nmode = '
+                                                           '"held"\ntemperature = 500.0\n')
+    scene_path.write_text(scene_path.read_text().replace("[boundary]\nfloor_temperature = 500.0\n", "")
+                          .replace("checkpoint_every = 10", "checkpoint_every = 5")
+                          .replace("temperature = 300.0\n", "temperature = 300.0\nfrom_file = true\n", 1))
+    whole, _ = runner.run_scene(load_scene(scene_path), tmp_path / "whole", progress=False, pictures=False)
+    runner.run_scene(load_scene(scene_path), tmp_path / "cut", progress=False, pictures=False, stop_after_chunks=1)
+    table.rename(tmp_path / "moved.csv")
+    resumed, summary = runner.resume(tmp_path / "cut", progress=False, pictures=False)
+    assert summary["steps"] == 10 and (tmp_path / "cut" / "packing.csv").exists()  # checkpointed at step 5 of 10
+    np.testing.assert_array_equal(np.asarray(resumed), np.asarray(whole))
