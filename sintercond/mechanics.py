@@ -52,6 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sintercond._validation import shown
 from sintercond import forces
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
@@ -151,7 +152,7 @@ class Mechanics:
 
         for name, value in (("wall_friction", wall_friction), ("wall_rolling", wall_rolling)):
             if not isinstance(value, (bool, np.bool_)):
-                raise ValueError(f"Mechanics.{name} must be True or False; got {value!r}")
+                raise ValueError(f"Mechanics.{name} must be True or False; got {shown(value)}")
         try:
             gravity = tuple(float(g) for g in gravity)
         except (TypeError, ValueError):
@@ -252,7 +253,7 @@ def validate_mechanical_params(params, n_materials=None, names=None) -> None:
         try:
             v = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
-            raise ValueError(f"{what}; got {value!r}") from None
+            raise ValueError(f"{what}; got {shown(value)}") from None
         allowed_shapes = [()] + ([(n_materials,)] if field in PER_MATERIAL and n_materials else [])
         if field in PER_MATERIAL and n_materials is None and v.ndim <= 1:
             allowed_shapes.append(v.shape)
@@ -261,7 +262,7 @@ def validate_mechanical_params(params, n_materials=None, names=None) -> None:
             raise ValueError(f"{label(field)} must be a scalar{per}; got shape {v.shape}")
         bad = ~(np.isfinite(v) & (v >= low) & (v <= high))
         if bad.any():
-            raise ValueError(f"{what}; got {v[bad].ravel()[0]!r}" + ("" if v.ndim == 0 else
+            raise ValueError(f"{what}; got {shown(v[bad].ravel()[0])}" + ("" if v.ndim == 0 else
                                                                      f" at material {int(np.argwhere(bad)[0][0])}"))
         arrays[field] = v
     if "E0" in arrays and "E_min" in arrays:
@@ -661,7 +662,7 @@ def check_mechanical_time_step(dt, spec, particles, neighbors, params: Mechanica
         raise ValueError(f"the mechanical time step is undefined for v_rel = {float(v_rel)!r} m/s (the largest "
                          f"normal approach speed must be finite and > 0) and delta = {delta!r}")
     if not (math.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be finite and > 0 s; got {dt!r}")
+        raise ValueError(f"dt must be finite and > 0 s; got {shown(dt)}")
     if dt > limit:
         raise ValueError(f"dt = {dt:.6g} s exceeds the mechanical time step {limit:.6g} s (Eq. 47 and the "
                          f"symplectic-Euler bounds of the stiffest contact at v_rel = {float(v_rel):.3g} m/s); "

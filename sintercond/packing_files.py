@@ -261,10 +261,16 @@ def _read_lammps_dump(text, path):
         raise PackingFileError(f"{path}: the last frame has no 'ITEM: ATOMS' section")
     header, _, body = frame[atoms_at:].partition("\n")
     names = header.split()[2:]
+    first = text.count("\n", 0, len(text) - len(frame) + atoms_at) + 2  # the line after the ITEM: ATOMS header
     try:
         data = np.loadtxt(_io.StringIO(body), ndmin=2) if body.strip() else np.zeros((0, len(names)))
-    except ValueError as err:
-        raise PackingFileError(f"{path}: the last frame's atoms cannot be read ({err}); a dump cut short?") from None
+    except ValueError:  # name the row at fault (NumPy's message advises its own arguments)
+        for k, line in enumerate(body.splitlines()):
+            fields = line.split()
+            if fields and (len(fields) != len(names) or not all(_is_number(v) for v in fields)):
+                raise PackingFileError(f"{path}, line {first + k}: {len(fields)} fields {fields}, expected "
+                                       f"{len(names)} numbers ({' '.join(names)}); a dump cut short?") from None
+        raise
     if data.shape[1] != len(names):
         raise PackingFileError(f"{path}: {data.shape[1]} columns for the {len(names)} names {names}")
     count_at = frame.find("ITEM: NUMBER OF ATOMS")
@@ -291,7 +297,6 @@ def _read_lammps_dump(text, path):
     else:
         raise PackingFileError(f"{path}: the dump has no x y z (or xu yu zu, xs ys zs) columns (columns: {names})")
     order = np.argsort(column["id"], kind="stable") if "id" in column else np.arange(len(radii))
-    first = text.count("\n", 0, len(text) - len(frame) + atoms_at) + 2  # the line after the ITEM: ATOMS header
     body_lines = [first + k for k, line in enumerate(body.splitlines()) if line.strip()]
     return (centres[order].copy(), radii[order].copy(), None if heat is None else heat[order].copy(),
             np.asarray(body_lines, int)[order])

@@ -49,6 +49,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sintercond._validation import shown
+
 
 class PackingError(ValueError):
     """A bed that cannot be built or did not settle; the message says which quantity and its range.
@@ -225,12 +227,12 @@ class DemMaterial:
             value = getattr(self, field.name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
                     or not math.isfinite(value):
-                raise PackingError(f"DemMaterial.{field.name} must be a finite number; got {value!r}")
+                raise PackingError(f"DemMaterial.{field.name} must be a finite number; got {shown(value)}")
             low, closed = ranges.get(field.name, (0.0, True))
             if value < low or (value == low and not closed):
-                raise PackingError(f"DemMaterial.{field.name} must be {'>=' if closed else '>'} {low:g}; got {value!r}")
+                raise PackingError(f"DemMaterial.{field.name} must be {'>=' if closed else '>'} {low:g}; got {shown(value)}")
         if not self.nu < 0.5:
-            raise PackingError(f"DemMaterial.nu must be in [0, 0.5); got {self.nu!r}")
+            raise PackingError(f"DemMaterial.nu must be in [0, 0.5); got {shown(self.nu)}")
 
     def mechanical_params(self):
         """The :class:`sintercond.mechanics.MechanicalParams` of this material (float64 scalars)."""
@@ -419,7 +421,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     if soft_modulus is not None:
         if isinstance(soft_modulus, bool) or not isinstance(soft_modulus, (int, float)) \
                 or not 0.0 < soft_modulus < material.E:
-            raise PackingError(f"soft_modulus must be a number in (0, E = {material.E:g}) Pa; got {soft_modulus!r}")
+            raise PackingError(f"soft_modulus must be a number in (0, E = {material.E:g}) Pa; got {shown(soft_modulus)}")
         if softening:
             raise PackingError("soft_modulus needs softening=False: the stiffening scales every contact by one "
                                "modulus ratio, which softening would make differ from particle to particle")
@@ -456,7 +458,7 @@ def _check_settle_options(kinetic_tol, force_tol, max_time, check_every, skin_fr
     for name, value in (("kinetic_tol", kinetic_tol), ("force_tol", force_tol), ("max_time", max_time),
                         ("skin_fraction", skin_fraction)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise PackingError(f"{name} must be a finite number > 0; got {value!r}")
+            raise PackingError(f"{name} must be a finite number > 0; got {shown(value)}")
     if not (isinstance(check_every, int) and check_every >= 1):
         raise PackingError(f"check_every must be an int >= 1; got {check_every!r}")
 

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sintercond import cli, packing_files
+from sintercond import cli, mechanics, packing, packing_files, settle, walls
 from sintercond import run as runner
 from sintercond.scene import SceneError, load_scene, validate_scene
 from sintercond.scene.build import build_model
@@ -191,3 +191,33 @@ def test_a_file_packing_run_resumes_after_the_file_moved(tmp_path):
     resumed, summary = runner.resume(tmp_path / "cut", progress=False, pictures=False)
     assert summary["steps"] == 10 and (tmp_path / "cut" / "packing.csv").exists()  # checkpointed at step 5 of 10
     np.testing.assert_array_equal(np.asarray(resumed), np.asarray(whole))
+
+
+NEGATIVE = np.float64(-0.00052)
+
+
+@pytest.mark.parametrize("call", [
+    lambda: settle.DemMaterial(density=NEGATIVE),
+    lambda: walls.PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "held", NEGATIVE),
+    lambda: packing.powder_bed(3e-4, NEGATIVE, (2e-5, 6e-5)),
+    lambda: mechanics.validate_mechanical_params({"E0": NEGATIVE}),
+], ids=["DemMaterial", "PlaneWall", "powder_bed", "validate_mechanical_params"])
+def test_messages_show_numbers_as_numbers(call):
+    """Before: ``got np.float64(-0.00052)``; the number a user gave is shown as the number."""
+    with pytest.raises(ValueError) as err:
+        call()
+    assert "got -0.00052" in str(err.value) and "np." not in str(err.value), str(err.value)
+
+
+def test_a_dump_cut_inside_a_row_names_the_line_and_a_table_row_reads_plainly(tmp_path):
+    """Before: NumPy's own advice ("use `usecols` to select a subset") for a dump cut inside its last row, and
+    "must be a list of 2 numbers a [T, c] pair of positive numbers" for a short specific_heat_table row."""
+    dump = tmp_path / "pour.dump"
+    dump.write_text(_dump([*DUMP_ROWS[:7], "8 1 16.0 0"])[:-1])  # cut inside the last row, after its x
+    with pytest.raises(packing_files.PackingFileError, match=r"pour\.dump, line 17: 4 fields \['8', '1', '16\.0', "
+                                                             r"'0'\], expected 6 numbers \(id type x y z radius\)") as e:
+        packing_files.read_packing(dump)
+    assert "usecols" not in str(e.value)
+    with pytest.raises(SceneError, match=r"material\.specific_heat_table\[1\] must be a list of 2 numbers \[T, c\] in "
+                                         r"\(0, 1e5\]; got \[400\.0\]$"):
+        validate_scene(_lattice_scene(material={"specific_heat_table": [[300.0, 500.0], [400.0]]}))

@@ -353,8 +353,8 @@ def _check_property_table(material, key, symbol, low, high):
     rule = _SCHEMA["material"][key].rule[0]
     if len(table) < 2:
         raise SceneError(f"material.{key} must be {rule}; got {table!r}")
-    rows = [_numbers(f"material.{key}[{k}]", row, 2, (f"a [T, {symbol}] pair of positive numbers",
-                                                      lambda v: 0 < v <= 1e5)) for k, row in enumerate(table)]
+    rows = [_numbers(f"material.{key}[{k}]", row, 2, (f"[T, {symbol}] in (0, 1e5]", lambda v: 0 < v <= 1e5))
+            for k, row in enumerate(table)]
     temperatures, values = zip(*rows)
     if any(b <= a for a, b in zip(temperatures, temperatures[1:])) or not all(low <= v <= high for v in values):
         raise SceneError(f"material.{key} must be {rule}; got {table!r}")
