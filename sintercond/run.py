@@ -248,14 +248,14 @@ def _write_outputs(scene, out, model, state, obs: Observation):
                   "coordination": coordination(len(model.radii), obs.pairs)}
     if model.physics.sintering is not None:
         fields["neck_ratio"] = np.asarray(neck_growth.particle_neck_ratio(state))
+    p = state.particles  # both formats carry the same fields
+    fields = {**fields, "held": np.asarray(p.fixed, np.int64) if p.fixed is not None else
+              np.zeros(len(model.radii), np.int64), "material": np.asarray(p.material, np.int64)}
+    if obs.power is not None:
+        fields["heat_power"] = np.asarray(obs.power)
     if "lammps" in formats:
-        append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields)
+        append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields, t)
     if "vtp" in formats:
-        p = state.particles
-        fields = {**fields, "held": np.asarray(p.fixed, np.int64) if p.fixed is not None else
-                  np.zeros(len(model.radii), np.int64), "material": np.asarray(p.material, np.int64)}
-        if obs.power is not None:
-            fields["heat_power"] = np.asarray(obs.power)
         (out / "vtp").mkdir(exist_ok=True)
         write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields,
                   encoding=scene["run"]["vtp_encoding"])

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sintercond import cli, mechanics, packing, packing_files, settle, walls
+from sintercond import cli, io, mechanics, packing, packing_files, settle, walls
 from sintercond import run as runner
 from sintercond.scene import SceneError, load_scene, validate_scene
 from sintercond.scene.build import build_model
@@ -221,3 +221,36 @@ def test_a_dump_cut_inside_a_row_names_the_line_and_a_table_row_reads_plainly(tm
     with pytest.raises(SceneError, match=r"material\.specific_heat_table\[1\] must be a list of 2 numbers \[T, c\] in "
                                          r"\(0, 1e5\]; got \[400\.0\]$"):
         validate_scene(_lattice_scene(material={"specific_heat_table": [[300.0, 500.0], [400.0]]}))
+
+
+def test_the_lammps_dump_carries_the_time_and_the_fields_of_the_vtp_frames(tmp_path):
+    """Before: the dump had no ITEM: TIME and no held or heat_power columns, which the VTP frames carry. Each
+    frame's time and columns equal the VTP frame's (VTK's own field data)."""
+    scene = _lattice_scene(walls=[{"axis": 0, "side": "min", "mode": "held", "temperature": 500.0}],
+                           run={"duration": 2e-4, "dt": 1e-5, "formats": ["vtp", "lammps"]})  # 20 steps, 4 frames
+    runner.run_scene(validate_scene(scene), tmp_path, progress=False, pictures=False)
+    frames = (tmp_path / "dump.lammpstrj").read_text().split("ITEM: TIME\n")[1:]
+    vtps = sorted((tmp_path / "vtp").glob("step_*.vtp"))
+    assert len(frames) == len(vtps) == 5
+    for frame, path in zip(frames, vtps):
+        lines = frame.splitlines()
+        vtp = io.read_vtp(path)
+        assert float(lines[0]) == float(vtp["TIME"]) and int(lines[2]) == int(vtp["STEP"])
+        columns = lines[9].split()[2:]
+        rows = np.array([line.split() for line in lines[10:]], np.float64)
+        for name in ("held", "heat_power", "temperature"):
+            np.testing.assert_array_equal(rows[:, columns.index(name)], vtp[name])
+    assert np.asarray(vtp["held"]).sum() == 1 and np.any(np.asarray(vtp["heat_power"]) != 0)
+
+
+def test_a_resume_truncates_the_dump_at_a_frames_time(tmp_path):
+    """A frame now starts at its ITEM: TIME: truncated after step 10 (a resume), the dump is its first three frames,
+    and it stays a dump the packing reader takes."""
+    centres, radii = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]), np.ones(2)
+    frames = [io.lammps_frame(centres + step, radii, np.full(2, 300.0), step, time=step * 1e-3)
+              for step in (0, 5, 10, 15)]
+    path = tmp_path / "dump.lammpstrj"
+    path.write_text("".join(frames))
+    io.truncate_lammps(path, 10)
+    assert path.read_text() == "".join(frames[:3])
+    np.testing.assert_array_equal(packing_files.read_packing(path)[0], centres + 10)
