@@ -32,7 +32,7 @@ from sintercond.packing_files import write_table
 from sintercond.scene import SceneError, validate_scene
 from sintercond.scene.validate import held_temperatures
 
-from sintercond.scene.build import build_model
+from sintercond.scene.build import PackingBoxWarning, build_model, escaped_particles
 from sintercond.observe import (Observation, _history_row, _probe_fn, contact_network, coordination, history_columns, observe,
                                 read_history, state_time)
 
@@ -117,6 +117,21 @@ def run_check(scene, model, state):
     return check
 
 
+def _warn_escaped(scene, model, state) -> list:
+    """Warn (:class:`~sintercond.scene.build.PackingBoxWarning`) and log if particles of a moving packing left the
+    box it was made in (:func:`~sintercond.scene.build.escaped_particles`); returns them."""
+    out = escaped_particles(scene, np.asarray(state.particles.positions), model.radii)
+    if out.size:
+        fix = ("physics.container = false lets it spread: drop it, or give [[walls]] on the open faces"
+               if not scene["physics"].get("container", True) else "give [[walls]] on its open faces")
+        message = (f"{out.size} of {len(model.radii)} particles (particle {int(out[0])} first) left the packing's "
+                   f"box by step {int(state.step)} (t = {state_time(state):.6g} s): the bed spreads, and its "
+                   f"figures (shrinkage, density, k*) are not the bed's; {fix}")
+        warnings.warn(message, PackingBoxWarning, stacklevel=2)
+        _log(f"warning: {message} (said once)")
+    return out.tolist()
+
+
 def _log(message):
     print(f"sintercond: {message}", file=sys.stderr, flush=True)
 
@@ -165,6 +180,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
          f"dt {model.dt:.4g} s, {model.n_steps} steps to {model.n_steps * model.dt:.6g} s; compiling the step")
 
     last = [int(state.step)]
+    escaped = []  # warned once
 
     def on_chunk(s):
         nonlocal chunks_done
@@ -175,6 +191,8 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         last[0] = step  # are off the output grid: checkpoint once a multiple of checkpoint_every is passed
         start = time.perf_counter()
         obs = observe(scene, model, s, probe)
+        if model.physics.mechanics is not None and not escaped:
+            escaped.extend(_warn_escaped(scene, model, s))
         _write_outputs(scene, out, model, s, obs)
         with open(out / "history.csv", "a") as f:
             f.write(_history_row(model, s, obs))

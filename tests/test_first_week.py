@@ -254,3 +254,41 @@ def test_a_resume_truncates_the_dump_at_a_frames_time(tmp_path):
     io.truncate_lammps(path, 10)
     assert path.read_text() == "".join(frames[:3])
     np.testing.assert_array_equal(packing_files.read_packing(path)[0], centres + 10)
+
+
+def _moving_bed(**physics):
+    scene = _lattice_scene(boundary={"floor_temperature": 300.0}, physics={"mechanics": True, **physics},
+                           mechanics={"young_modulus": 1e6, "poisson_ratio": 0.3})
+    scene["packing"] = {"kind": "powder_bed", "lateral_size": 4e-4, "height": 2e-4, "diameter_range": [8e-5, 1e-4]}
+    return validate_scene(scene)
+
+
+def test_a_moving_powder_bed_is_held_in_its_box():
+    """Before: with the mechanics a powder bed had no container and spread over its floor into a monolayer five
+    times its box, the summary reporting a shrinkage of 0.4967. The box [0, L]^2 now holds it (insulated walls on
+    the faces the scene leaves open, the floor being the scene's), unless physics.container = false."""
+    from sintercond.scene import build
+
+    L = 4e-4
+    centres, radii = np.array([[1e-4, 1e-4, 5e-5], [3e-4, 3e-4, 5e-5]]), np.full(2, 5e-5)
+    floor = ((0, 0, 1), 0.0 + 0.02 * 5e-5)  # the scene's floor: the bed's bottom moved 0.02 mean radii in
+    for container, faces in ((True, {floor, ((1, 0, 0), 0.0), ((-1, 0, 0), L), ((0, 1, 0), 0.0), ((0, -1, 0), L)}),
+                             (False, {floor})):
+        scene = _moving_bed(container=container)
+        planes = build.scene_walls(scene, centres, radii)  # the held floor, at the bed's bottom
+        spec = build.mechanical_physics(scene, build.scene_physics(scene), planes).mechanics
+        got = {(tuple(int(v) for v in w.normal), float(np.dot(w.point, np.abs(w.normal)))) for w in spec.walls}
+        assert got == faces, (container, got)
+
+
+def test_particles_leaving_the_box_are_warned_about():
+    scene = _moving_bed(container=False)
+    model = SimpleNamespace(radii=np.full(3, 5e-5))
+    state = SimpleNamespace(step=np.int64(300), dt=np.float64(1e-7),
+                            particles=SimpleNamespace(positions=np.array([[2e-4, 2e-4, 5e-5], [4.6e-4, 2e-4, 5e-5],
+                                                                          [-0.6e-4, 1e-4, 5e-5]])))
+    with pytest.warns(runner.PackingBoxWarning, match=r"2 of 3 particles \(particle 1 first\) left the packing's box "
+                                                      r"by step 300.*physics\.container = false"):
+        assert runner._warn_escaped(scene, model, state) == [1, 2]
+    state.particles.positions[1:, 0] = [4.4e-4, -0.4e-4]  # out by less than their radius: still at the wall
+    assert runner._warn_escaped(scene, model, state) == []

@@ -213,7 +213,7 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     """
     p, c = scene["physics"], contact_material(scene)
     walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
-                   for w in planes)
+                   for w in planes) + container_walls(scene)
     spec = mechanics.Mechanics.create(
         walls_, gravity=p["gravity"], shear=p["shear"], slip_direction=p["slip_direction"],
         rolling_projection=p["rolling_projection"], damping_clamp=p["damping_clamp"], softening="softening" in scene,
@@ -221,6 +221,46 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
         wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
     conduction = dataclasses.replace(thermal_physics.conduction, conductance="lifted", conducting_walls=0)
     return dataclasses.replace(thermal_physics, conduction=conduction, contacts="dynamic", mechanics=spec)
+
+
+_BOX_FACES = ((2, "min"), (0, "min"), (0, "max"), (1, "min"), (1, "max"))
+"""The faces of :func:`sintercond.settle.box_walls`, in its order: floor, x = 0, x = L, y = 0, y = L."""
+
+
+def packing_box(scene):
+    """``(lo [3], hi [3])`` (m) of the box a validated scene's packing fills, ``hi[2]`` infinite (an open top), or
+    None for a packing without one (a powder bed's container ``[0, lateral_size]^2`` over ``z = 0``)."""
+    p = scene["packing"]
+    if p["kind"] != "powder_bed":
+        return None
+    return np.zeros(3), np.array([p["lateral_size"], p["lateral_size"], np.inf])
+
+
+def container_walls(scene) -> tuple:
+    """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.settle.box_walls`) on each face
+    the scene gives no wall of its own (``physics.container``, true by default): without them the moving bed
+    spreads over the floor, or falls."""
+    if not scene["physics"].get("container", False) or packing_box(scene) is None:
+        return ()
+    given = {(w["axis"], w["side"]) for w in _walls(scene)}
+    box = settle.box_walls(scene["packing"]["lateral_size"])
+    return tuple(wall for face, wall in zip(_BOX_FACES, box) if face not in given)
+
+
+def escaped_particles(scene, positions, radii) -> np.ndarray:
+    """Indices of the particles whose centres lie more than their radius outside the packing's box
+    (:func:`packing_box`): they left it; empty for a packing without a box."""
+    box = packing_box(scene)
+    if box is None:
+        return np.zeros(0, int)
+    lo, hi = box
+    r = np.asarray(radii)[:, None]
+    outside = (np.asarray(positions) < lo - r) | (np.asarray(positions) > hi + r)
+    return np.flatnonzero(outside.any(axis=1))
+
+
+class PackingBoxWarning(UserWarning):
+    """Particles of a moving packing left the box it was made in."""
 
 
 def scene_params(scene) -> simulate.Params:

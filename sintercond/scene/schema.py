@@ -210,6 +210,11 @@ _SCHEMA = {
                                   doc="roll on the tangential part of the relative spin only (LAMMPS sds; erratum 5)"),
         "damping_clamp": Key(bool, None, False, default=False,
                              doc="no tensile normal force while a contact opens (LAMMPS limit_damping)"),
+        "container": Key(bool, None, False, default=True,
+                         doc="with a powder_bed: its box [0, lateral_size]^2 over the floor z = 0 holds the moving "
+                             "particles, an insulated wall on each face the scene gives no [[walls]] of its own "
+                             "(sintercond.settle.box_walls); false: only the scene's walls, and the bed spreads. A "
+                             "run warns (PackingBoxWarning) when particles leave the box"),
         "skin": Key(float, _within(0.0, 10.0, low_open=True), False, "largest radii", default=0.1,
                     doc="Verlet skin of the contact list; it is rebuilt once a particle moved half of it"),
         "impact_velocity": Key(float, _within(0.0, 1e3, "m/s", low_open=True), False, "m/s", default=0.05,
