@@ -292,3 +292,17 @@ def test_particles_leaving_the_box_are_warned_about():
         assert runner._warn_escaped(scene, model, state) == [1, 2]
     state.particles.positions[1:, 0] = [4.4e-4, -0.4e-4]  # out by less than their radius: still at the wall
     assert runner._warn_escaped(scene, model, state) == []
+
+
+def test_a_relaxation_that_does_not_settle_names_the_unsupported_sphere():
+    """Before: "largest net force 1 of a sphere's weight" for 140 s, then "did not settle", never saying which
+    sphere: here sphere 2, dropped from 40 radii, still falls (its net force its weight) when the steps run out."""
+    centres = np.array([[1e-4, 1e-4, 5e-5], [2e-4, 1e-4, 5e-5], [1.5e-4, 1e-4, 2e-3]])
+    seen = []
+    with pytest.raises(settle.PackingError, match=r"largest net force is 1 of a sphere's weight \(allowed < 0\.002\), "
+                                                  r"on sphere 2 at \[0\.00015, 0\.0001, 0\.00"):
+        settle.relax_under_gravity(centres, np.full(3, 5e-5), 3e-4, max_steps=500,
+                                   progress=lambda *figures, worst: seen.append(worst))
+    assert seen and all(w.startswith("sphere 2 at") for w in seen)
+    with pytest.raises(settle.PackingError):  # a callback of the five documented figures still works
+        settle.relax_under_gravity(centres, np.full(3, 5e-5), 3e-4, max_steps=100, progress=lambda *a: seen.append(a))

@@ -68,14 +68,15 @@ class SettlingProgress:
     """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.packing`: a line through ``log``
     at most every :data:`PROGRESS_EVERY_S` seconds with the steps taken, the settling figure against its target
     and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially); a
-    rolled bed (phase ``"rolling"``) gives the spheres down and the time left at their rate."""
+    rolled bed (phase ``"rolling"``) gives the spheres down and the time left at their rate; ``worst``, the sphere
+    the net force is largest on (:func:`sintercond.settle.sphere_text`)."""
 
     def __init__(self, log, particles):
         self.log, self.particles = log, particles
         self.start = self.last = time.perf_counter()
         self.points = []  # (seconds, ln figure) at the lines written
 
-    def __call__(self, phase, steps, max_steps, figure, target):
+    def __call__(self, phase, steps, max_steps, figure, target, worst=None):
         now = time.perf_counter()
         if now - self.last < PROGRESS_EVERY_S:
             return
@@ -95,8 +96,9 @@ class SettlingProgress:
                 left = f", about {(y1 - math.log(target)) / rate:.0f} s left at this rate"
         what = (f"largest net force {figure:.3g} of a sphere's weight" if phase == "relaxing" else
                 f"kinetic energy and net force at {figure:.3g} times their thresholds")
+        on = "" if worst is None else f", largest on {worst}"
         self.log(f"packing: {phase} {self.particles:,} spheres: {steps:,} steps (at most {max_steps:,}), {what} "
-                 f"(settled below {target:g}), {now - self.start:.0f} s{left}")
+                 f"(settled below {target:g}{on}), {now - self.start:.0f} s{left}")
 
 
 def initial_temperatures(scene):
