@@ -52,7 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond._validation import shown
+from sintercond._validation import all_concrete, shown
 from sintercond import forces
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
@@ -315,6 +315,10 @@ def mechanical_state(spec, positions, contacts, velocity=None, spin=None) -> Mec
         :class:`sintercond.pair_list.HalfPairs`): the springs are laid on
         its half pair list.
     """
+    for name, value in (("velocity", velocity), ("spin", spin)):
+        if value is not None and np.shape(value) != np.shape(positions):  # [n, 2] or [3] broadcast in the step
+            raise ValueError(f"mechanical_state: {name} must be [n, 3] like the positions {np.shape(positions)}; "
+                             f"got shape {np.shape(value)}")
     half = getattr(contacts, "pairs", None) if not isinstance(contacts, HalfPairs) else contacts
     if not isinstance(half, HalfPairs):
         raise TypeError("mechanical_state needs the DynamicContacts of simulate.dynamic_contacts (the springs live on "
@@ -616,7 +620,6 @@ def integrate(positions, state: MechanicalState, force, torque, mass, radii, dt)
 # time step
 
 
-@functools.partial(jax.jit, static_argnums=0, static_argnames=("fraction", "safety"))
 def mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
     """Time step of the packing: :func:`sintercond.forces.contact_time_step` for its stiffest contact (s).
 
@@ -628,8 +631,26 @@ def mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v
     The tangential and rolling modes count only when friction or rolling is
     on. ``kwargs`` go to :func:`sintercond.forces.contact_time_step`
     (``fraction``, ``safety``). Compiled once per :class:`Mechanics` spec and shapes
-    (eagerly it dispatches ~100 operations: seconds at set-up).
+    (eagerly it dispatches ~100 operations: seconds at set-up). Concrete inputs are checked first: ``v_rel``
+    finite and > 0 m/s, ``delta`` None or finite and >= 0 m, ``params`` by :func:`validate_mechanical_params`
+    (a NaN step came back for v_rel = 0 or E0 = -1).
     """
+    if all_concrete(v_rel, delta, params):
+        for name, value, rule, ok in (("v_rel", v_rel, "finite and > 0 m/s", lambda v: v > 0),
+                                      ("delta", delta, "None or finite and >= 0 m", lambda v: v >= 0)):
+            if value is None and name == "delta":
+                continue
+            v = np.asarray(value, np.float64)
+            bad = ~(np.isfinite(v) & ok(v))
+            if bad.any():
+                raise ValueError(f"mechanical_time_step: {name} must be {rule}; got {shown(v[bad].ravel()[0])}")
+        validate_mechanical_params(params)
+    return _mechanical_time_step(spec, particles, neighbors, params, v_rel, delta, **kwargs)
+
+
+@functools.partial(jax.jit, static_argnums=0, static_argnames=("fraction", "safety"))
+def _mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
+    """:func:`mechanical_time_step` without the checks, compiled."""
     radii, mass = particles.radii, particles.mass
     n = radii.shape[0]
     modulus = jnp.atleast_1d(jnp.asarray(params.E0, radii.dtype))[particles.material]

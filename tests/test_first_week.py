@@ -306,3 +306,46 @@ def test_a_relaxation_that_does_not_settle_names_the_unsupported_sphere():
     assert seen and all(w.startswith("sphere 2 at") for w in seen)
     with pytest.raises(settle.PackingError):  # a callback of the five documented figures still works
         settle.relax_under_gravity(centres, np.full(3, 5e-5), 3e-4, max_steps=100, progress=lambda *a: seen.append(a))
+
+
+def _two_spheres():
+    from sintercond.state import particle_state
+
+    return particle_state(np.array([[0.0, 0.0, 1e-3], [2e-3, 0.0, 1e-3]]), np.full(2, 1e-3), 300.0, 4430.0, 560.0)
+
+
+@pytest.mark.parametrize("v_rel, params, message", [
+    (0.0, {}, r"v_rel must be finite and > 0 m/s; got 0\.0"),
+    (-1.0, {}, r"v_rel must be finite and > 0 m/s; got -1\.0"),
+    (float("nan"), {}, r"v_rel must be finite and > 0 m/s; got nan"),
+    (0.05, {"E0": -1.0}, r"MechanicalParams\.E0 must be finite and in \[1, 1e\+13\] Pa; got -1\.0"),
+])
+def test_the_mechanical_time_step_refuses_what_gave_nan(v_rel, params, message):
+    """Before: mechanical_time_step returned NaN for v_rel = 0, -1 or NaN and for E0 = -1."""
+    spec = mechanics.Mechanics.create()
+    material = mechanics.MechanicalParams(**{"E0": 1e6, "nu": 0.3, **params})
+    with pytest.raises(ValueError, match=message):
+        mechanics.mechanical_time_step(spec, _two_spheres(), np.array([[1], [0]]), material, v_rel)
+
+
+def test_a_velocity_of_the_wrong_shape_is_refused():
+    """Before: a velocity [n, 2] (or [3]) broadcast silently into the step."""
+    for bad in (np.zeros((2, 2)), np.zeros(3)):  # refused before the contacts are looked at
+        with pytest.raises(ValueError, match=r"velocity must be \[n, 3\] like the positions \(2, 3\); got shape"):
+            mechanics.mechanical_state(mechanics.Mechanics.create(), _two_spheres().positions, None, velocity=bad)
+
+
+def test_softening_readings_and_synthetic_data_refuse_what_ran():
+    """Before: readings at E0 < 0 or theta* = 0, and synthetic_data with sigma = -1, ran. The checks come before
+    the run, so a stand-in experiment (only its channels) reaches them."""
+    from fitting import softening
+
+    experiment = SimpleNamespace(channels=("temperature", "overlap"))
+    for values, message in (({"E0": -1.0}, r"values\['E0'\] must be finite and in \[1, 1e\+13\] Pa; got -1\.0"),
+                            ({"theta_star": 0.0}, r"values\['theta_star'\] must be finite and in \[1, 10000\] K"),
+                            ({"conductivity": 0.0}, r"values\['conductivity'\] must be finite and > 0")):
+        with pytest.raises(ValueError, match=message):
+            softening.SofteningExperiment.readings(experiment, values)
+    with pytest.raises(ValueError, match=r"sigma \(noise standard deviation per channel\) must be finite and > 0; "
+                                         r"got \[-1\.0, -1\.0\]"):
+        softening.synthetic_data(experiment, {}, sigma=-1.0)
