@@ -349,3 +349,45 @@ def test_softening_readings_and_synthetic_data_refuse_what_ran():
     with pytest.raises(ValueError, match=r"sigma \(noise standard deviation per channel\) must be finite and > 0; "
                                          r"got \[-1\.0, -1\.0\]"):
         softening.synthetic_data(experiment, {}, sigma=-1.0)
+
+
+def _temperature_at(series, t):
+    """The temperature a series' history holds at times ``t`` (s): its piecewise-constant steps."""
+    ends = np.cumsum(series.durations)
+    return np.asarray(series.temperatures)[np.searchsorted(ends, t)]
+
+
+def test_a_neck_series_is_read_from_a_csv_with_its_temperature_history(tmp_path):
+    """Before: fitting one's own necks meant building a NeckSeries by hand. Rizza & Galati's 80-80 couple (Table
+    3) written as a CSV, with their preheating staircase as a [t, T] table, reads back as the hand-built series:
+    the same readings and the same temperature at every moment."""
+    from fitting import sintering as fs
+    from fitting.reference import rizza_galati_table
+
+    t3 = rizza_galati_table(3)
+    path = tmp_path / "couple.csv"
+    path.write_text("# my couple\ntime_s,neck_um\n0,0\n" + "".join(f"{t!r},{a!r}\n" for t, a in
+                                                                  zip(t3["time_s"].tolist(), t3["x_couple1_um"].tolist())))
+    steps = 845.0 + np.arange(1, 26) * (1273.0 - 845.0) / 25  # Eq. 6: each 0.38 s step held at its end temperature
+    staircase = [[0.38 * k + d, float(steps[k])] for k in range(25) for d in (1e-9, 0.38 - 1e-9)]
+    got = fs.read_neck_series(path, 40 * fs.UM, temperature=staircase)  # Table 3: r = 40 um
+    want = fs.neck_series("80-80")
+    np.testing.assert_array_equal(got.times, want.times)
+    np.testing.assert_array_equal(got.necks_um, want.necks_um)
+    assert (got.r_i.tolist(), got.r_j.tolist(), got.name) == (want.r_i.tolist(), want.r_j.tolist(), "couple")
+    t = (np.arange(950) + 0.5) * 0.01  # every 10 ms of the 9.5 s, off the steps' edges
+    np.testing.assert_array_equal(_temperature_at(got, t), _temperature_at(want, t))
+    np.testing.assert_array_equal(np.cumsum(got.durations)[got.interval], got.times)  # each reading ends a row
+
+    ratio = tmp_path / "ratio.csv"  # the neck over the smaller radius, at a temperature column: 1000 K
+    ratio.write_text("t neck_ratio temperature_K\n1.0 0.1 1000\n2.0 0.15 1000\n")
+    series = fs.read_neck_series(ratio, 40e-6, 29.3e-6, temperature="column")
+    np.testing.assert_allclose(series.necks_um, [0.1 * 29.3, 0.15 * 29.3], rtol=1e-15)
+    assert np.all(np.asarray(series.temperatures) == 1000.0) and np.sum(series.durations) == 2.0
+    ramp = fs.read_neck_series(ratio, 40e-6, temperature=[[0.0, 800.0], [2.0, 1200.0]])
+    middles = np.cumsum(ramp.durations) - 0.5 * np.asarray(ramp.durations)
+    np.testing.assert_allclose(ramp.temperatures, 800.0 + 200.0 * middles, rtol=1e-12)  # the line at each middle
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,a\n1,2\n")
+    with pytest.raises(ValueError, match=r"must name a time column .* and a neck column"):
+        fs.read_neck_series(bad, 40e-6, temperature=1000.0)
