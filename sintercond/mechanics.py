@@ -150,7 +150,8 @@ class Mechanics:
         mean the same step compare equal and compile once. ``flags``: the other fields."""
         from sintercond.walls import PlaneWall
 
-        for name, value in (("wall_friction", wall_friction), ("wall_rolling", wall_rolling)):
+        for name, value in (("friction", friction), ("rolling", rolling), ("wall_friction", wall_friction),
+                            ("wall_rolling", wall_rolling)):  # bool("no") is True: friction="no" turned it on
             if not isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"Mechanics.{name} must be True or False; got {shown(value)}")
         try:

@@ -391,3 +391,12 @@ def test_a_neck_series_is_read_from_a_csv_with_its_temperature_history(tmp_path)
     bad.write_text("t,a\n1,2\n")
     with pytest.raises(ValueError, match=r"must name a time column .* and a neck column"):
         fs.read_neck_series(bad, 40e-6, temperature=1000.0)
+
+
+@pytest.mark.parametrize("flag", ["friction", "rolling"])
+def test_a_mechanics_flag_that_is_not_a_boolean_is_refused(flag):
+    """Before: Physics.create(friction="no") turned friction on (bool("no") is True)."""
+    from sintercond import simulate
+
+    with pytest.raises(ValueError, match=rf"Mechanics\.{flag} must be True or False; got 'no'"):
+        simulate.Physics.create(mechanics=True, **{flag: "no"})
