@@ -123,7 +123,7 @@ def _warn_escaped(scene, model, state) -> list:
     out = escaped_particles(scene, np.asarray(state.particles.positions), model.radii)
     if out.size:
         fix = ("physics.container = false lets it spread: drop it, or give [[walls]] on the open faces"
-               if not scene["physics"].get("container", True) else "give [[walls]] on its open faces")
+               if not scene["physics"]["container"] else "give [[walls]] on its open faces")
         message = (f"{out.size} of {len(model.radii)} particles (particle {int(out[0])} first) left the packing's "
                    f"box by step {int(state.step)} (t = {state_time(state):.6g} s): the bed spreads, and its "
                    f"figures (shrinkage, density, k*) are not the bed's; {fix}")

@@ -242,7 +242,7 @@ def container_walls(scene) -> tuple:
     """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.settle.box_walls`) on each face
     the scene gives no wall of its own (``physics.container``, true by default): without them the moving bed
     spreads over the floor, or falls."""
-    if not scene["physics"].get("container", False) or packing_box(scene) is None:
+    if not scene["physics"]["container"] or packing_box(scene) is None:  # filled with the mechanics
         return ()
     given = {(w["axis"], w["side"]) for w in _walls(scene)}
     box = settle.box_walls(scene["packing"]["lateral_size"])
