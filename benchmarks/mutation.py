@@ -161,8 +161,9 @@ MUTANTS = [
      SCENE[:1]),
     ("nu and re", "sintercond/scene/validate.py", 'if "reynolds" in convection and "nusselt" in convection:', "if False:",
      SCENE[:1]),
-    ("checkpoint multiple", "sintercond/scene/validate.py", 'if run["checkpoint_every"] % run["output_every"]:', "if False:",
-     SCENE),
+    ("checkpoint multiple", "sintercond/scene/validate.py",
+     'if "output_every" in run and run.get("checkpoint_every", run["output_every"]) % run["output_every"]:',
+     "if False:", SCENE),
     # --- sintercond/state.py, sweep.py, cli.py, __init__.py
     ("mass", "sintercond/state.py", "mass = 4.0 / 3.0 * np.pi * radii**3 * rho",
      "mass = 4.0 / 3.0 * np.pi * radii**2 * rho", [T + "test_state.py"]),

@@ -128,6 +128,78 @@ def neck_series(name: str, *, leave_out_times=(3.5,)) -> NeckSeries:
                       np.asarray(necks, float), name)
 
 
+TIME_COLUMNS = ("time_s", "time", "t")
+NECK_COLUMNS = {"neck_um": UM, "neck_m": 1.0, "neck_ratio": None}
+"""Columns of :func:`read_neck_series`: the neck in um, in m, or over the smaller radius of the couple."""
+TEMPERATURE_STEPS = 400
+"""Steps a temperature table is held over in :func:`read_neck_series` (each at the table's value at its middle)."""
+
+
+def read_neck_series(path, r_i, r_j=None, *, temperature, name=None) -> NeckSeries:
+    """One couple's necks over time from a CSV file, as a :class:`NeckSeries` for :func:`fit_kinetics`.
+
+    The file: a header naming the time (``time_s``, ``time`` or ``t``; s) and the neck (``neck_um``, ``neck_m`` or
+    ``neck_ratio``, the neck radius over ``min(r_i, r_j)``), and with ``temperature="column"`` a ``temperature_K``
+    column; commas or whitespace, ``#`` comments. Rows at ``t = 0`` give the start (a point contact) and are not
+    readings.
+
+    Args:
+      path: the CSV file.
+      r_i, r_j: the couple's radii (m); ``r_j`` defaults to ``r_i``.
+      temperature: the history the couple went through: a number (K, isothermal); a table ``[[t, T], ...]``
+        (s, K), linear between its points and held beyond them (a ramp is two points), held in
+        :data:`TEMPERATURE_STEPS` equal steps each at its middle's value; or ``"column"``: the file's
+        ``temperature_K`` read as such a table.
+      name: the series' name (default the file's stem).
+    """
+    from pathlib import Path
+
+    path = Path(path)
+    lines = [line.split("#", 1)[0].replace(",", " ").split() for line in path.read_text().splitlines()]
+    lines = [fields for fields in lines if fields]
+    if not lines:
+        raise ValueError(f"{path}: no header and no rows")
+    header = [h.lower() for h in lines[0]]
+    time_name = next((c for c in TIME_COLUMNS if c in header), None)
+    neck_name = next((c for c in NECK_COLUMNS if c in header), None)
+    if time_name is None or neck_name is None:
+        raise ValueError(f"{path}: the header {lines[0]} must name a time column (one of {list(TIME_COLUMNS)}) and "
+                         f"a neck column (one of {list(NECK_COLUMNS)})")
+    try:
+        table = np.array([[float(v) for v in fields] for fields in lines[1:]], np.float64).reshape(-1, len(header))
+    except ValueError:
+        raise ValueError(f"{path}: every row must hold {len(header)} numbers ({' '.join(lines[0])})") from None
+    column = {h: table[:, k] for k, h in enumerate(header)}
+    times, necks = column[time_name], column[neck_name]
+    r_i = float(r_i)
+    r_j = r_i if r_j is None else float(r_j)
+    if not (np.all(np.isfinite(table)) and np.all(np.diff(times) > 0) and times[0] >= 0 and np.all(necks >= 0)):
+        raise ValueError(f"{path}: times must be finite, >= 0 and strictly increasing, necks finite and >= 0")
+    if not (math.isfinite(r_i) and math.isfinite(r_j) and r_i > 0 and r_j > 0):
+        raise ValueError(f"r_i and r_j must be finite and > 0 (m); got {r_i!r}, {r_j!r}")
+    scale = NECK_COLUMNS[neck_name]
+    necks_um = necks * (min(r_i, r_j) if scale is None else scale) / UM
+    if isinstance(temperature, str):
+        if temperature != "column" or "temperature_k" not in column:
+            raise ValueError(f"temperature must be a number (K), a table [[t, T], ...] or \"column\" with a "
+                             f"temperature_K column in {path}; got {temperature!r} (columns {lines[0]})")
+        temperature = np.column_stack([times, column["temperature_k"]])
+    history = np.atleast_2d(np.asarray(temperature, np.float64))
+    if history.shape == (1, 1):
+        history = np.array([[0.0, history[0, 0]]])
+    if history.ndim != 2 or history.shape[1] != 2 or not np.all(np.isfinite(history)) or \
+            np.any(history[:, 1] <= 0) or np.any(np.diff(history[:, 0]) <= 0):
+        raise ValueError(f"temperature must be a number (K) or [[t, T], ...] pairs, t increasing, T > 0 K; "
+                         f"got {np.asarray(temperature).tolist()}")
+    readings = times > 0
+    ends = np.linspace(0.0, times[-1], TEMPERATURE_STEPS + 1)[1:]
+    middles = ends - 0.5 * times[-1] / TEMPERATURE_STEPS
+    durations, temperatures, interval = st.piecewise_history(ends, np.interp(middles, *history.T), times[readings])
+    return NeckSeries(np.array([r_i]), np.array([r_j]), durations, temperatures, interval,
+                      np.zeros(int(readings.sum()), np.int64), times[readings], necks_um[readings],
+                      path.stem if name is None else name)
+
+
 def ramp_temperature_mean(series: NeckSeries) -> float:
     """Time-weighted mean temperature of the series' history up to its last reading (K)."""
     end = int(np.max(series.interval)) + 1

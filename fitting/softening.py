@@ -129,6 +129,7 @@ class SofteningExperiment:
           ValueError: a neighbour or pair list of the run ran out of room (pairs were dropped, so the
             readings would be wrong); :func:`bed_experiment`'s ``capacity_multiplier`` gives more.
         """
+        _check_values(values, "values")
         saved, overflow = self._predict({k: float(v) for k, v in values.items()})
         if bool(overflow):
             raise ValueError(f"the contact lists overflowed during the run at {dict(values)} (pairs were dropped); "
@@ -324,6 +325,30 @@ def ridge_combination(result: SofteningFit, exponent=-2.0 / 3.0):
     return value, float(np.sqrt(grad @ result.log_covariance @ grad))
 
 
+def _checked_sigma(sigma, channels) -> np.ndarray:
+    """``sigma`` broadcast to ``[channels]``; ``ValueError`` unless every entry is finite and > 0."""
+    sigma = np.broadcast_to(np.asarray(sigma, np.float64), (channels,))
+    if not np.all(np.isfinite(sigma) & (sigma > 0)):
+        raise ValueError(f"sigma (noise standard deviation per channel) must be finite and > 0; got {sigma.tolist()}")
+    return sigma
+
+
+def _check_values(values: Mapping, name):
+    """``ValueError`` naming ``name[key]`` unless each of ``values`` is a quantity of :data:`FITTABLE` in its range:
+    the mechanical ones in :data:`sintercond.mechanics.PARAMETER_RANGES`, the conductivity finite and > 0 W/(m K)
+    (readings at E0 < 0 or theta* = 0 ran)."""
+    from sintercond.mechanics import validate_mechanical_params
+
+    for k, v in values.items():
+        if k not in FITTABLE:
+            raise ValueError(f"{name}[{k!r}] is not a quantity among {list(FITTABLE)}")
+        if k == "conductivity":
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name}['conductivity'] must be finite and > 0 W/(m K); got {float(v)!r}")
+        else:
+            validate_mechanical_params({k: v}, names={k: f"{name}[{k!r}]"})
+
+
 def _check_fit_inputs(experiment, data, sigma, fit, channels, start):
     if not isinstance(experiment, SofteningExperiment):
         raise ValueError(f"experiment must be a SofteningExperiment; got {type(experiment).__name__}")
@@ -339,9 +364,7 @@ def _check_fit_inputs(experiment, data, sigma, fit, channels, start):
         raise ValueError(f"data must be [n_saves, n_channels] = {list(shape)}; got shape {list(data.shape)}")
     if not np.all(np.isfinite(data)):
         raise ValueError("data must be finite")
-    sigma = np.broadcast_to(np.asarray(sigma, np.float64), (len(experiment.channels),))
-    if not np.all(np.isfinite(sigma) & (sigma > 0)):
-        raise ValueError(f"sigma (noise standard deviation per channel) must be finite and > 0; got {sigma}")
+    sigma = _checked_sigma(sigma, len(experiment.channels))
     for k, v in start.items():
         if k not in FITTABLE or not (np.isfinite(v) and v > 0):
             raise ValueError(f"start[{k!r}] must be a quantity among {list(FITTABLE)} with a finite value > 0; "
@@ -433,8 +456,8 @@ class UnidentifiedWarning(UserWarning):
 
 def synthetic_data(experiment: SofteningExperiment, truth: Mapping, sigma, seed=0):
     """``(clean, noisy)`` readings ``[n_saves, n_channels]`` for ``truth`` plus Gaussian noise of std ``sigma``."""
+    sigma = _checked_sigma(sigma, len(experiment.channels))  # before the run
     clean = experiment.readings(truth)
-    sigma = np.broadcast_to(np.asarray(sigma, np.float64), (clean.shape[1],))
     rng = np.random.default_rng(seed)
     return clean, clean + sigma * rng.standard_normal(clean.shape)
 

@@ -12,6 +12,14 @@ import jax.numpy as jnp
 import numpy as np
 
 
+def shown(value) -> str:
+    """``repr`` of a value a user gave, NumPy and JAX scalars and arrays as the plain numbers and lists they hold:
+    a message says ``-0.00052``, not ``np.float64(-0.00052)``."""
+    if isinstance(value, (np.generic, np.ndarray, jax.Array)):
+        value = np.asarray(value).tolist()
+    return repr(value)
+
+
 def all_concrete(*values) -> bool:
     """No leaf of ``values`` (any pytrees) is a tracer: the input can be checked on the host."""
     return not any(isinstance(v, jax.core.Tracer) for v in jax.tree.leaves(values))

@@ -13,7 +13,7 @@ with the ``readers`` extra):
   round-trip ``repr`` of each float; both hold the exact float64 values.
   ``read_vtp`` reads either back; ``write_pvd`` lists the frames with their
   physical times for ParaView.
-* ``append_lammps``: one ``ITEM: TIMESTEP`` frame per call, box bounds the
+* ``append_lammps``: one ``ITEM: TIMESTEP`` frame per call (after its ``ITEM: TIME``, s), box bounds the
   particles' bounding box widened by the largest radius, columns
   ``id radius x y z temperature`` (OVITO maps ``radius`` and ``x y z`` to its
   Radius and Position properties).
@@ -22,6 +22,7 @@ with the ``readers`` extra):
 from __future__ import annotations
 
 import os
+import re
 import zlib
 from pathlib import Path
 from xml.etree import ElementTree
@@ -186,13 +187,15 @@ def _lammps_columns(fields):
     return names
 
 
-def lammps_frame(centres, radii, temperature, step, fields=None) -> str:
-    """One LAMMPS dump frame (text) of the particles; ``fields`` as :func:`write_vtp`'s, as more columns."""
+def lammps_frame(centres, radii, temperature, step, fields=None, time=None) -> str:
+    """One LAMMPS dump frame (text) of the particles; ``fields`` as :func:`write_vtp`'s, as more columns; with
+    ``time`` (s) an ``ITEM: TIME`` before its ``ITEM: TIMESTEP``, as LAMMPS' ``dump_modify time yes`` writes it."""
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     fields = _extra_fields(fields, len(radii))
     lo, hi = centres.min(axis=0) - radii.max(), centres.max(axis=0) + radii.max()
-    lines = [f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
+    lines = [] if time is None else [f"ITEM: TIME\n{float(time)!r}\n"]
+    lines += [f"ITEM: TIMESTEP\n{int(step)}\nITEM: NUMBER OF ATOMS\n{len(radii)}\nITEM: BOX BOUNDS ff ff ff\n"]
     lines += [f"{_number(lo[k])} {_number(hi[k])}\n" for k in range(3)]
     lines.append(" ".join(["ITEM: ATOMS id radius x y z temperature"] + _lammps_columns(fields)) + "\n")
     columns = [radii, *centres.T, np.asarray(temperature, dtype=np.float64)]
@@ -203,18 +206,18 @@ def lammps_frame(centres, radii, temperature, step, fields=None) -> str:
     return "".join(lines)
 
 
-def append_lammps(path, centres, radii, temperature, step, fields=None):
-    """Append one frame to the LAMMPS dump at ``path``."""
+def append_lammps(path, centres, radii, temperature, step, fields=None, time=None):
+    """Append one frame (:func:`lammps_frame`) to the LAMMPS dump at ``path``."""
     with open(path, "a") as f:
-        f.write(lammps_frame(centres, radii, temperature, step, fields))
+        f.write(lammps_frame(centres, radii, temperature, step, fields, time))
 
 
 def truncate_lammps(path, last_step):
     """Drop the frames after ``last_step`` from the LAMMPS dump at ``path`` (for a resumed run)."""
     text = Path(path).read_text()
-    frames = text.split("ITEM: TIMESTEP\n")
-    kept = [f for f in frames[1:] if int(f.split("\n", 1)[0]) <= last_step]
-    atomic_write_text(path, "".join("ITEM: TIMESTEP\n" + f for f in kept))
+    later = next((m.start() for m in re.finditer(r"(?m)^(?:ITEM: TIME\n[^\n]*\n)?ITEM: TIMESTEP\n(\d+)\n", text)
+                  if int(m.group(1)) > last_step), len(text))  # a frame starts at its ITEM: TIME, if any
+    atomic_write_text(path, text[:later])
 
 
 def atomic_write_text(path, text):

@@ -52,6 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from sintercond._validation import all_concrete, shown
 from sintercond import forces
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
@@ -150,9 +151,9 @@ class Mechanics:
         from sintercond.walls import PlaneWall
 
         for name, value in (("friction", friction), ("rolling", rolling), ("wall_friction", wall_friction),
-                            ("wall_rolling", wall_rolling)):
+                            ("wall_rolling", wall_rolling)):  # bool("no") is True: friction="no" turned it on
             if not isinstance(value, (bool, np.bool_)):
-                raise ValueError(f"Mechanics.{name} must be True or False; got {value!r}")
+                raise ValueError(f"Mechanics.{name} must be True or False; got {shown(value)}")
         try:
             gravity = tuple(float(g) for g in gravity)
         except (TypeError, ValueError):
@@ -253,7 +254,7 @@ def validate_mechanical_params(params, n_materials=None, names=None) -> None:
         try:
             v = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
-            raise ValueError(f"{what}; got {value!r}") from None
+            raise ValueError(f"{what}; got {shown(value)}") from None
         allowed_shapes = [()] + ([(n_materials,)] if field in PER_MATERIAL and n_materials else [])
         if field in PER_MATERIAL and n_materials is None and v.ndim <= 1:
             allowed_shapes.append(v.shape)
@@ -262,7 +263,7 @@ def validate_mechanical_params(params, n_materials=None, names=None) -> None:
             raise ValueError(f"{label(field)} must be a scalar{per}; got shape {v.shape}")
         bad = ~(np.isfinite(v) & (v >= low) & (v <= high))
         if bad.any():
-            raise ValueError(f"{what}; got {v[bad].ravel()[0]!r}" + ("" if v.ndim == 0 else
+            raise ValueError(f"{what}; got {shown(v[bad].ravel()[0])}" + ("" if v.ndim == 0 else
                                                                      f" at material {int(np.argwhere(bad)[0][0])}"))
         arrays[field] = v
     if "E0" in arrays and "E_min" in arrays:
@@ -315,6 +316,10 @@ def mechanical_state(spec, positions, contacts, velocity=None, spin=None) -> Mec
         :class:`sintercond.pair_list.HalfPairs`): the springs are laid on
         its half pair list.
     """
+    for name, value in (("velocity", velocity), ("spin", spin)):
+        if value is not None and np.shape(value) != np.shape(positions):  # [n, 2] or [3] broadcast in the step
+            raise ValueError(f"mechanical_state: {name} must be [n, 3] like the positions {np.shape(positions)}; "
+                             f"got shape {np.shape(value)}")
     half = getattr(contacts, "pairs", None) if not isinstance(contacts, HalfPairs) else contacts
     if not isinstance(half, HalfPairs):
         raise TypeError("mechanical_state needs the DynamicContacts of simulate.dynamic_contacts (the springs live on "
@@ -624,7 +629,6 @@ def integrate(positions, state: MechanicalState, force, torque, mass, radii, dt)
 # time step
 
 
-@functools.partial(jax.jit, static_argnums=0, static_argnames=("fraction", "safety"))
 def mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
     """Time step of the packing: :func:`sintercond.forces.contact_time_step` for its stiffest contact (s).
 
@@ -636,8 +640,26 @@ def mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v
     The tangential and rolling modes count only when friction or rolling is
     on. ``kwargs`` go to :func:`sintercond.forces.contact_time_step`
     (``fraction``, ``safety``). Compiled once per :class:`Mechanics` spec and shapes
-    (eagerly it dispatches ~100 operations: seconds at set-up).
+    (eagerly it dispatches ~100 operations: seconds at set-up). Concrete inputs are checked first: ``v_rel``
+    finite and > 0 m/s, ``delta`` None or finite and >= 0 m, ``params`` by :func:`validate_mechanical_params`
+    (a NaN step came back for v_rel = 0 or E0 = -1).
     """
+    if all_concrete(v_rel, delta, params):
+        for name, value, rule, ok in (("v_rel", v_rel, "finite and > 0 m/s", lambda v: v > 0),
+                                      ("delta", delta, "None or finite and >= 0 m", lambda v: v >= 0)):
+            if value is None and name == "delta":
+                continue
+            v = np.asarray(value, np.float64)
+            bad = ~(np.isfinite(v) & ok(v))
+            if bad.any():
+                raise ValueError(f"mechanical_time_step: {name} must be {rule}; got {shown(v[bad].ravel()[0])}")
+        validate_mechanical_params(params)
+    return _mechanical_time_step(spec, particles, neighbors, params, v_rel, delta, **kwargs)
+
+
+@functools.partial(jax.jit, static_argnums=0, static_argnames=("fraction", "safety"))
+def _mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
+    """:func:`mechanical_time_step` without the checks, compiled."""
     radii, mass = particles.radii, particles.mass
     n = radii.shape[0]
     modulus = jnp.atleast_1d(jnp.asarray(params.E0, radii.dtype))[particles.material]
@@ -670,7 +692,7 @@ def check_mechanical_time_step(dt, spec, particles, neighbors, params: Mechanica
         raise ValueError(f"the mechanical time step is undefined for v_rel = {float(v_rel)!r} m/s (the largest "
                          f"normal approach speed must be finite and > 0) and delta = {delta!r}")
     if not (math.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be finite and > 0 s; got {dt!r}")
+        raise ValueError(f"dt must be finite and > 0 s; got {shown(dt)}")
     if dt > limit:
         raise ValueError(f"dt = {dt:.6g} s exceeds the mechanical time step {limit:.6g} s (Eq. 47 and the "
                          f"symplectic-Euler bounds of the stiffest contact at v_rel = {float(v_rel):.3g} m/s); "

@@ -45,6 +45,7 @@ import math
 
 import numpy as np
 
+from sintercond._validation import shown
 from sintercond import rolling as _rolling
 from sintercond import settle as _settle
 from sintercond._deprecation import old_names
@@ -182,7 +183,7 @@ def check_bed(lateral_size, height, diameter_range, max_particles=MAX_PARTICLES,
     for key, value in (("lateral_size", lateral_size), ("height", height)):
         if (isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer))
                 or not math.isfinite(value) or value <= 0):
-            raise PackingError(f"{names[key]} must be a finite number > 0 (length); got {value!r}")
+            raise PackingError(f"{names[key]} must be a finite number > 0 (length); got {shown(value)}")
     try:
         low, high = (float(v) for v in diameter_range)
     except (TypeError, ValueError):

@@ -53,14 +53,14 @@ def read_packing(path, format="auto", length_unit="m") -> tuple[np.ndarray, np.n
     path, format = _checked(path, format)
     if length_unit not in LENGTH_UNITS:
         raise PackingFileError(f"length_unit must be one of {list(LENGTH_UNITS)}; got {length_unit!r}")
-    centres, radii, _ = _read(path, format)
+    centres, radii, _, lines = _read(path, format)
     scale = LENGTH_UNITS[length_unit]
     centres, radii = centres * scale, radii * scale
     bad = ~(np.all(np.isfinite(centres), axis=1) & np.isfinite(radii) & (radii > 0))
     if bad.any():
         k = int(np.argmax(bad))
-        raise PackingFileError(f"{path}: particle {k} (row {k + 1}) has centre {centres[k].tolist()} and radius "
-                               f"{radii[k]!r}: centres must be finite and radii > 0")
+        raise PackingFileError(f"{path}, line {lines[k]}: particle {k} has centre {centres[k].tolist()} and radius "
+                               f"{float(radii[k])!r}: centres must be finite and radii > 0")
     return centres, radii
 
 
@@ -82,6 +82,13 @@ def read_temperatures(path, format="auto") -> np.ndarray:
     return temperature
 
 
+def particle_lines(path, format="auto") -> np.ndarray:
+    """``[n]`` line numbers (1-based) of each particle's row in ``path``, in :func:`read_packing`'s order: where a
+    message about particle k sends the user."""
+    path, format = _checked(path, format)
+    return _read(path, format)[3]
+
+
 def _checked(path, format):
     path = Path(path)
     if format == "auto":
@@ -101,26 +108,26 @@ def _read(path, format):
 @functools.lru_cache(maxsize=8)
 def _read_cached(path, mtime, size, format):
     """The file read once per version (validation and the build both ask), in the file's units:
-    ``(centres, radii, temperatures or None)``."""
+    ``(centres, radii, temperatures or None, line of each particle's row)``."""
     text = Path(path).read_text(errors="replace")
     reader = {"table": _read_table, "lammps_data": _read_lammps_data, "lammps_dump": _read_lammps_dump}[format]
-    centres, radii, temperature = reader(text, path)
+    centres, radii, temperature, lines = reader(text, path)
     if len(radii) == 0:
         raise PackingFileError(f"{path}: no particles found (read as {format!r})")
-    for array in (centres, radii, temperature):
+    for array in (centres, radii, temperature, lines):
         if array is not None:
             array.setflags(write=False)
-    return centres, radii, temperature
+    return centres, radii, temperature, lines
 
 
 def _read_table(text, path):
-    fast = _read_uniform_table(text)
-    if fast is not None:
-        return fast
     lines = [line.split("#", 1)[0].strip() for line in text.splitlines()]
     rows = [(k + 1, line.replace(",", " ").replace(";", " ").split()) for k, line in enumerate(lines) if line]
+    fast = _read_uniform_table(text)
+    if fast is not None:
+        return (*fast, np.array([line for line, _ in rows[len(rows) - len(fast[1]):]]))
     if not rows:
-        return np.zeros((0, 3)), np.zeros(0), None
+        return np.zeros((0, 3)), np.zeros(0), None, np.zeros(0, int)
     columns = {"x": 0, "y": 1, "z": 2, "r": 3}
     diameter = False
     first = rows[0][1]
@@ -163,7 +170,8 @@ def _read_table(text, path):
             except ValueError:
                 raise PackingFileError(f"{path}, line {line}: {fields} are not all numbers") from None
     radii = values[:, 3] / 2 if diameter else values[:, 3]
-    return values[:, :3].copy(), radii.copy(), values[:, 4].copy() if "t" in columns else None
+    return (values[:, :3].copy(), radii.copy(), values[:, 4].copy() if "t" in columns else None,
+            np.array([line for line, _ in rows]))
 
 
 def _read_uniform_table(text):
@@ -218,7 +226,7 @@ def _read_lammps_data(text, path):
     if style != "sphere":
         raise PackingFileError(f"{path}: the Atoms section is atom_style {style!r}; sphere (id type diameter "
                                "density x y z) is read")
-    rows = []
+    rows, at = [], []
     for k in range(start + 1, len(lines)):
         line = lines[k].split("#", 1)[0].strip()
         if not line:
@@ -232,9 +240,14 @@ def _read_lammps_data(text, path):
             raise PackingFileError(f"{path}, line {k + 1}: {len(fields)} columns in Atoms, expected id type "
                                    "diameter density x y z")
         rows.append([float(v) for v in fields[:7]])
+        at.append(k + 1)
     data = np.asarray(rows).reshape(-1, 7)
-    data = data[np.argsort(data[:, 0], kind="stable")]
-    return data[:, 4:7].copy(), data[:, 2] / 2, None
+    declared = next((line.split()[0] for line in lines[:start] if line.split("#", 1)[0].split()[1:] == ["atoms"]),
+                    None)
+    _check_count(path, declared, len(data), "the header's 'N atoms'", "rows in its Atoms section")
+    order = np.argsort(data[:, 0], kind="stable")
+    data = data[order]
+    return data[:, 4:7].copy(), data[:, 2] / 2, None, np.asarray(at, int)[order]
 
 
 def _read_lammps_dump(text, path):
@@ -248,12 +261,21 @@ def _read_lammps_dump(text, path):
         raise PackingFileError(f"{path}: the last frame has no 'ITEM: ATOMS' section")
     header, _, body = frame[atoms_at:].partition("\n")
     names = header.split()[2:]
+    first = text.count("\n", 0, len(text) - len(frame) + atoms_at) + 2  # the line after the ITEM: ATOMS header
     try:
         data = np.loadtxt(_io.StringIO(body), ndmin=2) if body.strip() else np.zeros((0, len(names)))
-    except ValueError as err:
-        raise PackingFileError(f"{path}: the last frame's atoms cannot be read ({err}); a dump cut short?") from None
+    except ValueError:  # name the row at fault (NumPy's message advises its own arguments)
+        for k, line in enumerate(body.splitlines()):
+            fields = line.split()
+            if fields and (len(fields) != len(names) or not all(_is_number(v) for v in fields)):
+                raise PackingFileError(f"{path}, line {first + k}: {len(fields)} fields {fields}, expected "
+                                       f"{len(names)} numbers ({' '.join(names)}); a dump cut short?") from None
+        raise
     if data.shape[1] != len(names):
         raise PackingFileError(f"{path}: {data.shape[1]} columns for the {len(names)} names {names}")
+    count_at = frame.find("ITEM: NUMBER OF ATOMS")
+    declared = frame[count_at:].splitlines()[1].strip() if count_at >= 0 and frame[count_at:].count("\n") else None
+    _check_count(path, declared, len(data), "the last frame's 'ITEM: NUMBER OF ATOMS'", "rows under its ITEM: ATOMS")
     column = {name: data[:, k] for k, name in enumerate(names)}
     heat = next((data[:, k] for k, name in enumerate(names) if name.lower() in TEMPERATURE_COLUMNS), None)
     if "radius" in column:
@@ -275,11 +297,30 @@ def _read_lammps_dump(text, path):
     else:
         raise PackingFileError(f"{path}: the dump has no x y z (or xu yu zu, xs ys zs) columns (columns: {names})")
     order = np.argsort(column["id"], kind="stable") if "id" in column else np.arange(len(radii))
-    return centres[order].copy(), radii[order].copy(), None if heat is None else heat[order].copy()
+    body_lines = [first + k for k, line in enumerate(body.splitlines()) if line.strip()]
+    return (centres[order].copy(), radii[order].copy(), None if heat is None else heat[order].copy(),
+            np.asarray(body_lines, int)[order])
 
 
-def write_table(path, centres, radii, length_unit="m"):
-    """Write ``centres``, ``radii`` (m) as a CSV table with a header, in ``length_unit``."""
+def _check_count(path, declared, found, where, what):
+    """Raise :class:`PackingFileError` unless the particle count a file declares (``declared``, its text, None
+    if it declares none) is the ``found`` rows read: a file cut short at a line boundary reads cleanly otherwise."""
+    if declared is None:
+        return
+    try:
+        count = int(declared)
+    except ValueError:
+        raise PackingFileError(f"{path}: {where} is {declared!r}, not a whole number") from None
+    if count != found:
+        cut = "; the file is cut short?" if found < count else ""
+        raise PackingFileError(f"{path}: {where} says {count} particles, but {found} {what} were read{cut}")
+
+
+def write_table(path, centres, radii, length_unit="m", temperature=None):
+    """Write ``centres``, ``radii`` (m) as a CSV table with a header, in ``length_unit``, and with ``temperature``
+    (K, [n]) a column ``T`` (read back by :func:`read_temperatures`)."""
     scale = LENGTH_UNITS[length_unit]
-    data = np.column_stack([np.asarray(centres) / scale, np.asarray(radii) / scale])
-    np.savetxt(path, data, delimiter=",", header="x,y,z,r", comments="", fmt="%.17g")
+    columns = [np.asarray(centres) / scale, np.asarray(radii) / scale]
+    columns += [] if temperature is None else [np.asarray(temperature)]
+    header = "x,y,z,r" + ("" if temperature is None else ",T")
+    np.savetxt(path, np.column_stack(columns), delimiter=",", header=header, comments="", fmt="%.17g")

@@ -28,9 +28,11 @@ from sintercond._deprecation import old_names
 from sintercond.rollout import advance
 from sintercond.io import (append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_network_vtp, write_pvd,
                            write_vtp)
+from sintercond.packing_files import write_table
 from sintercond.scene import SceneError, validate_scene
+from sintercond.scene.validate import held_temperatures
 
-from sintercond.scene.build import build_model
+from sintercond.scene.build import PackingBoxWarning, build_model, escaped_particles
 from sintercond.observe import (Observation, _history_row, _probe_fn, contact_network, coordination, history_columns, observe,
                                 read_history, state_time)
 
@@ -53,6 +55,7 @@ def physical_range_check(scene):
 
     melting = scene["material"].get("melting_point")
     warned = []
+    inputs = heat_inputs(scene)
 
     def check(state):
         neck_growth.check_stable(state)
@@ -70,12 +73,25 @@ def physical_range_check(scene):
                            f"material.melting_point = {melting:g} K: the model has no melting (no latent heat, no "
                            "liquid), so what follows is not physical")
                 if scene["material"]["on_melting"] == "stop":
-                    raise MeltingPointCrossed(message + "; lower the heat input (beam.intensity or beam.power), or "
+                    raise MeltingPointCrossed(message + f"; lower the heat input ({', '.join(inputs)}), or "
                                               'set material.on_melting = "warn" to go on')
                 warned.append(int(state.step))
                 warnings.warn(message, MeltingPointWarning, stacklevel=2)
                 _log(f"warning: {message} (said once)")
     return check
+
+
+def heat_inputs(scene) -> list[str]:
+    """The keys of a scene that put heat in (a beam's power, held or conducting walls' and the surroundings'
+    temperatures above the start, a preheating ramp's end): what a run that grows too hot can lower."""
+    start = scene["initial"]["temperature"]
+    keys = ["beam.intensity or beam.power"] if "beam" in scene else []
+    hotter = {**held_temperatures(scene), **{f"walls[{k}].temperature": w["temperature"]
+                                            for k, w in enumerate(scene["walls"]) if w["mode"] == "conducting"}}
+    hotter.update({f"{section}.environment_temperature": scene[section]["environment_temperature"]
+                   for section in ("convection", "radiation") if section in scene})
+    keys += [key for key, value in hotter.items() if value > start]
+    return keys or ["none is named in the scene: initial.temperature"]
 
 
 class MeltingPointCrossed(FloatingPointError):
@@ -99,6 +115,21 @@ def run_check(scene, model, state):
         motion(new)
 
     return check
+
+
+def _warn_escaped(scene, model, state) -> list:
+    """Warn (:class:`~sintercond.scene.build.PackingBoxWarning`) and log if particles of a moving packing left the
+    box it was made in (:func:`~sintercond.scene.build.escaped_particles`); returns them."""
+    out = escaped_particles(scene, np.asarray(state.particles.positions), model.radii)
+    if out.size:
+        fix = ("physics.container = false lets it spread: drop it, or give [[walls]] on the open faces"
+               if not scene["physics"]["container"] else "give [[walls]] on its open faces")
+        message = (f"{out.size} of {len(model.radii)} particles (particle {int(out[0])} first) left the packing's "
+                   f"box by step {int(state.step)} (t = {state_time(state):.6g} s): the bed spreads, and its "
+                   f"figures (shrinkage, density, k*) are not the bed's; {fix}")
+        warnings.warn(message, PackingBoxWarning, stacklevel=2)
+        _log(f"warning: {message} (said once)")
+    return out.tolist()
 
 
 def _log(message):
@@ -128,6 +159,10 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         _clear_outputs(out)
         (out / "scene.json").write_text(json.dumps(scene, indent=1))
         model = build_model(scene, log=_log)
+        if "output_every" not in scene["run"]:  # the intervals the build chose: a resume keeps them
+            scene = {**scene, "run": {**scene["run"], "output_every": model.output_every,
+                                      "checkpoint_every": model.checkpoint_every}}
+            (out / "scene.json").write_text(json.dumps(scene, indent=1))
         np.savez(out / "packing.npz", centres=model.centres, radii=model.radii)
         (out / "bed.json").write_text(json.dumps(model.bed))
         probe = _probe_fn(model)
@@ -139,23 +174,25 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     else:
         model, state = _start
         probe = _probe_fn(model)
-    run = scene["run"]
-    chunk = run["output_every"]
+    chunk, checkpoint_every = model.output_every, model.checkpoint_every
     chunks_done = 0
     _log(f"{len(model.radii)} particles, {model.contacts} contacts; stable step {model.stable_step:.4g} s, "
          f"dt {model.dt:.4g} s, {model.n_steps} steps to {model.n_steps * model.dt:.6g} s; compiling the step")
 
     last = [int(state.step)]
+    escaped = []  # warned once
 
     def on_chunk(s):
         nonlocal chunks_done
         step = int(s.step)
         if chunks_done == 0:  # the first chunk carries the compile
             _log(f"compiled the step and ran steps {last[0]:,} to {step:,} in {time.perf_counter() - wall:.1f} s")
-        crossed = step // run["checkpoint_every"] > last[0] // run["checkpoint_every"]  # an extension's steps
+        crossed = step // checkpoint_every > last[0] // checkpoint_every  # an extension's steps
         last[0] = step  # are off the output grid: checkpoint once a multiple of checkpoint_every is passed
         start = time.perf_counter()
         obs = observe(scene, model, s, probe)
+        if model.physics.mechanics is not None and not escaped:
+            escaped.extend(_warn_escaped(scene, model, s))
         _write_outputs(scene, out, model, s, obs)
         with open(out / "history.csv", "a") as f:
             f.write(_history_row(model, s, obs))
@@ -164,7 +201,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         writing = time.perf_counter() - start
         if writing > SLOW_OUTPUT_S:
             _log(f"outputs of step {step:,} written in {writing:.1f} s ({', '.join(scene['run']['formats'])}"
-                 f"{', checkpoint' if crossed or step >= model.n_steps else ''}); {scene['run']['output_every']:,} "
+                 f"{', checkpoint' if crossed or step >= model.n_steps else ''}); {chunk:,} "
                  "steps between outputs (run.output_every)")
         chunks_done += 1
         return stop_after_chunks is not None and chunks_done >= stop_after_chunks and step < model.n_steps
@@ -229,14 +266,14 @@ def _write_outputs(scene, out, model, state, obs: Observation):
                   "coordination": coordination(len(model.radii), obs.pairs)}
     if model.physics.sintering is not None:
         fields["neck_ratio"] = np.asarray(neck_growth.particle_neck_ratio(state))
+    p = state.particles  # both formats carry the same fields
+    fields = {**fields, "held": np.asarray(p.fixed, np.int64) if p.fixed is not None else
+              np.zeros(len(model.radii), np.int64), "material": np.asarray(p.material, np.int64)}
+    if obs.power is not None:
+        fields["heat_power"] = np.asarray(obs.power)
     if "lammps" in formats:
-        append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields)
+        append_lammps(out / "dump.lammpstrj", positions, model.radii, temperature, step, fields, t)
     if "vtp" in formats:
-        p = state.particles
-        fields = {**fields, "held": np.asarray(p.fixed, np.int64) if p.fixed is not None else
-                  np.zeros(len(model.radii), np.int64), "material": np.asarray(p.material, np.int64)}
-        if obs.power is not None:
-            fields["heat_power"] = np.asarray(obs.power)
         (out / "vtp").mkdir(exist_ok=True)
         write_vtp(out / "vtp" / f"step_{step:08d}.vtp", positions, model.radii, temperature, step, t, fields,
                   encoding=scene["run"]["vtp_encoding"])
@@ -287,8 +324,9 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
         if summary.get("steps") == step:
             _log(f"the run in {out} is finished (step {step}); nothing to resume (--duration S extends it)")
             return jnp.asarray(saved["temperature"]), summary
-    scene = validate_scene(raw)
     packed = np.load(out / "packing.npz")
+    _packing_from_run_folder(raw, out, packed, saved)
+    scene = validate_scene(raw)
     model = build_model(scene, packed["centres"], packed["radii"], log=_log)
     if (out / "bed.json").exists():
         model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
@@ -315,6 +353,20 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
         lines = (out / "history.csv").read_text().splitlines(keepends=True)
         (out / "history.csv").write_text("".join([lines[0]] + [r for r in lines[1:] if int(r.split(",")[0]) <= step]))
     return run_scene(scene, out, progress, stop_after_chunks, _start=(model, state), pictures=pictures)
+
+
+def _packing_from_run_folder(raw, out, packed, saved):
+    """A file packing whose file has moved since the run started is read from the run folder: ``raw``'s packing
+    then points at ``out/packing.csv``, the table of ``packing.npz`` (m; with ``initial.from_file``, the
+    checkpoint's temperatures as its column, which the checkpoint then replaces anyway)."""
+    packing = raw["packing"]
+    if packing["kind"] != "file" or Path(packing["path"]).is_file():
+        return
+    table = out / "packing.csv"
+    write_table(table, packed["centres"], packed["radii"],
+                temperature=saved["temperature"] if raw["initial"].get("from_file") else None)
+    _log(f"the packing file {packing['path']} is gone; resuming from the run folder's packing ({table})")
+    raw["packing"] = {**packing, "path": str(table), "format": "table", "length_unit": "m"}
 
 
 def summary_table(summary) -> str:

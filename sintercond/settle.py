@@ -41,6 +41,7 @@ imports this module, never the other way.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import time
 import typing
@@ -48,6 +49,8 @@ import typing
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from sintercond._validation import shown
 
 
 class PackingError(ValueError):
@@ -126,9 +129,25 @@ def _damped_chunk(x, v, pile: _Pile, stiffness, damping, contact_damping, dt, st
 
     x_new, v_new = jax.lax.fori_loop(0, steps, step, (x, v))  # steps traced: one compilation per capacity
     static = _net_force(x_new, jnp.zeros_like(v_new), pile, stiffness, contact_damping)
-    residual = jnp.max(jnp.linalg.norm(static, axis=1) / pile.weight)
+    ratio = jnp.linalg.norm(static, axis=1) / pile.weight
     moved = jnp.max(jnp.linalg.norm(x_new - x, axis=1))
-    return x_new, v_new, residual, moved
+    return x_new, v_new, jnp.max(ratio), moved, jnp.argmax(ratio)
+
+
+def sphere_text(index, centre, radius) -> str:
+    """``sphere k at [x, y, z] m (radius r m)``: the sphere a settling figure is worst on, for its progress and
+    its error (a net force of 1 weight is a sphere that touches nothing: falling, or bouncing)."""
+    return f"sphere {int(index)} at {[float(f'{c:.4g}') for c in centre]} m (radius {float(radius):.3g} m)"
+
+
+def _report(progress, *figures, worst):
+    """``progress(*figures)``, with ``worst=`` where the callback takes it (a callback of the five figures alone, as
+    documented before it was added, still works)."""
+    parameters = inspect.signature(progress).parameters.values()
+    if any(p.name == "worst" or p.kind is p.VAR_KEYWORD for p in parameters):
+        progress(*figures, worst=worst)
+    else:
+        progress(*figures)
 
 
 def relax_under_gravity(centres, radii, lateral_size, *, max_steps=None, stiffness=None, damping=0.3, contact_damping=0.3,
@@ -146,7 +165,8 @@ def relax_under_gravity(centres, radii, lateral_size, *, max_steps=None, stiffne
     ``skin`` mean radii of contact and is rebuilt whenever a sphere may have
     moved half of it. Stops when the net force on every sphere is below
     ``force_tol`` of its weight. ``progress(phase, steps, max_steps, figure, target)`` is called after every
-    chunk with the largest net force over a weight (``figure``) and ``force_tol`` (``target``).
+    chunk with the largest net force over a weight (``figure``) and ``force_tol`` (``target``), and ``worst``,
+    the sphere it is on (:func:`sphere_text`).
 
     Raises:
       PackingError: the pile did not settle within ``max_steps`` (default:
@@ -173,27 +193,29 @@ def relax_under_gravity(centres, radii, lateral_size, *, max_steps=None, stiffne
         x, v = jnp.asarray(x_np), jnp.zeros((len(r_np), 3), jnp.float64)
         size = jnp.float64(size)
         args = tuple(jnp.float64(a) for a in (stiffness, damping, contact_damping, dt))
-        done, capacity, residual = 0, 0, math.inf
+        done, capacity, residual, worst = 0, 0, math.inf, 0
         chunk = 64
         while done < max_steps:
             i, j, mask = _pair_list(np.asarray(x), r_np, skin, capacity)
             capacity = len(i)
             pile = _Pile(r, mass, weight, jnp.asarray(i), jnp.asarray(j), jnp.asarray(mask), size)
-            x_new, v_new, residual, moved = _damped_chunk(x, v, pile, *args, jnp.int32(chunk))
+            x_new, v_new, residual, moved, worst = _damped_chunk(x, v, pile, *args, jnp.int32(chunk))
             if float(moved) > 0.5 * skin and chunk > 1:  # a pair may have been missed: redo it shorter
                 chunk //= 2
                 continue
             x, v, done = x_new, v_new, done + chunk
-            residual = float(residual)
+            residual, worst = float(residual), int(worst)
             if progress is not None:
-                progress("relaxing", done, max_steps, residual, force_tol)
+                _report(progress, "relaxing", done, max_steps, residual, force_tol,
+                        worst=sphere_text(worst, np.asarray(x)[worst] * scale, radii[worst]))
             if residual < force_tol:
                 break
             chunk = min(2 * chunk, 4096) if float(moved) < 0.2 * skin else chunk
         settled = np.asarray(x) * scale
     if not residual < force_tol:
         raise PackingError(f"the bed did not settle within {max_steps} steps: the largest net force is "
-                           f"{residual:.3g} of a sphere's weight (allowed < {force_tol:g})")
+                           f"{residual:.3g} of a sphere's weight (allowed < {force_tol:g}), on "
+                           f"{sphere_text(worst, settled[worst], radii[worst])}")
     return settled, residual
 
 
@@ -241,12 +263,12 @@ class DemMaterial:
             value = getattr(self, field.name)
             if (isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer))
                     or not math.isfinite(value)):
-                raise PackingError(f"DemMaterial.{field.name} must be a finite number; got {value!r}")
+                raise PackingError(f"DemMaterial.{field.name} must be a finite number; got {shown(value)}")
             low, closed = ranges.get(field.name, (0.0, True))
             if value < low or (value == low and not closed):
-                raise PackingError(f"DemMaterial.{field.name} must be {'>=' if closed else '>'} {low:g}; got {value!r}")
+                raise PackingError(f"DemMaterial.{field.name} must be {'>=' if closed else '>'} {low:g}; got {shown(value)}")
         if not self.nu < 0.5:
-            raise PackingError(f"DemMaterial.nu must be in [0, 0.5); got {self.nu!r}")
+            raise PackingError(f"DemMaterial.nu must be in [0, 0.5); got {shown(self.nu)}")
 
     def mechanical_params(self):
         """The :class:`sintercond.mechanics.MechanicalParams` of this material (float64 scalars)."""
@@ -435,7 +457,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     if soft_modulus is not None:
         if (isinstance(soft_modulus, bool) or not isinstance(soft_modulus, (int, float))
                 or not 0.0 < soft_modulus < material.E):
-            raise PackingError(f"soft_modulus must be a number in (0, E = {material.E:g}) Pa; got {soft_modulus!r}")
+            raise PackingError(f"soft_modulus must be a number in (0, E = {material.E:g}) Pa; got {shown(soft_modulus)}")
         if softening:
             raise PackingError("soft_modulus needs softening=False: the stiffening scales every contact by one "
                                "modulus ratio, which softening would make differ from particle to particle")
@@ -472,7 +494,7 @@ def _check_settle_options(kinetic_tol, force_tol, max_time, check_every, skin_fr
     for name, value in (("kinetic_tol", kinetic_tol), ("force_tol", force_tol), ("max_time", max_time),
                         ("skin_fraction", skin_fraction)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise PackingError(f"{name} must be a finite number > 0; got {value!r}")
+            raise PackingError(f"{name} must be a finite number > 0; got {shown(value)}")
     if not (isinstance(check_every, int) and check_every >= 1):
         raise PackingError(f"check_every must be an int >= 1; got {check_every!r}")
 
@@ -505,14 +527,16 @@ def _settle(sim, physics, state, fns, material, v_rel, start, phase, *, kinetic_
     params = simulate.Params(conductivity=jnp.asarray([1.0]), specific_heat=jnp.asarray([1.0]), mechanics=mp)
     energy_scale = float(jnp.sum(particles.mass * GRAVITY * particles.radii))
     max_steps = check_every * int(math.ceil(max_time / dt / check_every))
-    figures = {"kinetic": math.inf, "force": math.inf}
+    figures = {"kinetic": math.inf, "force": math.inf, "worst": "no sphere yet"}
 
     def settled(s, measured):
-        kinetic, force = measured
-        figures.update(kinetic=float(kinetic) / energy_scale, force=float(force))
+        kinetic, force, worst = measured
+        k = int(worst)
+        figures.update(kinetic=float(kinetic) / energy_scale, force=float(force),
+                       worst=sphere_text(k, np.asarray(s.particles.positions[k]), radii[k]))
         if progress is not None:  # settled when both are below their thresholds: the larger ratio below 1
-            progress(phase, int(s.step), max_steps, max(figures["kinetic"] / kinetic_tol, figures["force"] / force_tol),
-                     1.0)
+            _report(progress, phase, int(s.step), max_steps,
+                    max(figures["kinetic"] / kinetic_tol, figures["force"] / force_tol), 1.0, worst=figures["worst"])
         return figures["kinetic"] < kinetic_tol and figures["force"] < force_tol
 
     first, began = int(state.step), float(state.time)
@@ -529,7 +553,8 @@ def _settle(sim, physics, state, fns, material, v_rel, start, phase, *, kinetic_
         if not figures["kinetic"] < kinetic_tol:
             missed.append(f"kinetic energy {figures['kinetic']:.3g} of sum m g r (allowed < {kinetic_tol:g})")
         if not figures["force"] < force_tol:
-            missed.append(f"largest net force {figures['force']:.3g} of a sphere's weight (allowed < {force_tol:g})")
+            missed.append(f"largest net force {figures['force']:.3g} of a sphere's weight (allowed < {force_tol:g}), "
+                          f"on {figures['worst']}")
         what = ("the DEM bed did not settle" if soft is None else
                 f"the DEM bed settled at {soft[0]:g} Pa did not settle once stiffened to {material.E:g} Pa")
         raise PackingError(f"{what} within {max_time:g} s ({steps} steps of {dt:.3g} s): " + " and ".join(missed))
@@ -657,12 +682,14 @@ def stiffen(settled: DemSettled, material: DemMaterial, *, kinetic_tol=KINETIC_T
 
 def _settle_figures(sim, state, params):
     """:func:`dem_settle`'s figures of a chunk's end state, from one probe step: ``((kinetic energy (J), largest net
-    force over weight), the probe step overflowed)``; the net force is ``m dv/dt`` over that step."""
+    force over weight, the sphere it is on), the probe step overflowed)``; the net force is ``m dv/dt`` over that
+    step."""
     probe = sim.step_fn(state, params)
     p, v, w = state.particles, state.mechanics.velocity, state.mechanics.spin
     kinetic = 0.5 * jnp.sum(p.mass[:, None] * v**2) + 0.5 * jnp.sum(0.4 * p.mass[:, None] * p.radii[:, None]**2 * w**2)
     force = p.mass[:, None] * (probe.mechanics.velocity - v) / state.dt
-    return (kinetic, jnp.max(jnp.linalg.norm(force, axis=1) / (p.mass * GRAVITY))), probe.overflow
+    ratio = jnp.linalg.norm(force, axis=1) / (p.mass * GRAVITY)
+    return (kinetic, jnp.max(ratio), jnp.argmax(ratio)), probe.overflow
 
 
 def _finite_positions(state):

@@ -28,6 +28,7 @@ import numpy as np
 from jax.scipy.sparse.linalg import cg
 
 from sintercond import heat_sources, materials
+from sintercond._validation import shown
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
 from sintercond._symmetric import linear_call
@@ -60,7 +61,7 @@ def check_table_time_step(dt, capacity, table: ContactTable) -> float:
     """
     limit = float(table_time_step(capacity, table))
     if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be finite and > 0 s; got {dt!r}")
+        raise ValueError(f"dt must be finite and > 0 s; got {shown(dt)}")
     if dt > limit:
         raise ValueError(f"dt = {dt:.6g} s exceeds the explicit stability limit min(C_i / sum_j K_ij) = {limit:.6g} s; "
                          f"use dt <= {limit:.6g} s or the implicit integrator")

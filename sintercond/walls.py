@@ -40,6 +40,7 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
+from sintercond._validation import shown
 from sintercond._numerics import as_float_arrays, safe_sqrt
 from sintercond.conductance import (_feng_half_conductance, _merge_params, _resolve_law, _resolve_neck_model,
                                     fitted_half_conductance_ratio, series_conductance)
@@ -72,9 +73,9 @@ class PlaneWall:
         if self.mode not in WALL_MODES:
             raise ValueError(f"PlaneWall.mode must be one of {list(WALL_MODES)}; got {self.mode!r}")
         if normal.shape != (3,) or not np.isclose(np.linalg.norm(normal), 1.0, rtol=1e-12):
-            raise ValueError(f"PlaneWall.normal must be a unit [3] vector; got {self.normal!r}")
+            raise ValueError(f"PlaneWall.normal must be a unit [3] vector; got {shown(self.normal)}")
         if self.mode != "insulated" and (self.temperature is None or not self.temperature > 0):
-            raise ValueError(f"PlaneWall.temperature must be > 0 K for a {self.mode} wall; got {self.temperature!r}")
+            raise ValueError(f"PlaneWall.temperature must be > 0 K for a {self.mode} wall; got {shown(self.temperature)}")
 
     def penetration(self, positions, radii):
         """How far each sphere cuts the plane, ``r - (x - p) . n`` (m; <= 0: not touching)."""

@@ -27,6 +27,7 @@ hypothesis.settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default")
 LONGEST_FIRST = (
     "test_notebooks_alone.py",  # (350) calibrate_softening
     "test_fit_softening.py",  # (470)
+    "test_doc_scenes.py",  # (460 on a loaded machine) every scene of the docs, reduced
     "test_mechanics.py",  # (190)
     "test_sintering_mechanics.py",  # (180)
     "test_notebooks.py",  # (220) the other six notebooks

@@ -79,10 +79,3 @@ def test_a_wall_coefficient_with_friction_off_everywhere_is_refused():
     sim, state, params = _resting(0.1 / OMEGA, _params(mu_wall=0.3))
     with pytest.raises(ValueError, match=r"Mechanics\.friction=False makes the walls frictionless.*mu_wall"):
         simulate.rollout(sim, state, params, 1)
-
-
-@pytest.mark.parametrize("flag", ["friction", "rolling"])
-@pytest.mark.parametrize("value", ["no", 1, None])
-def test_a_law_switch_must_be_a_boolean(flag, value):
-    with pytest.raises(ValueError, match=rf"Mechanics\.{flag} must be True or False; got"):
-        simulate.Physics.create(conductance="lifted", contacts="dynamic", mechanics=True, **{flag: value})

@@ -137,7 +137,7 @@ def test_a_bad_packing_file_is_named(tmp_path):
         load_scene(_scene_file(tmp_path, bad))
     negative = tmp_path / "negative.csv"
     negative.write_text("0 0 0 1\n1 0 0 -1\n")
-    with pytest.raises(SceneError, match=r"particle 1 \(row 2\) .* radii > 0"):
+    with pytest.raises(SceneError, match=r"line 2: particle 1 .* radii > 0"):
         load_scene(_scene_file(tmp_path, negative))
     assert math.isfinite(_expected_k_star(1.0))
 

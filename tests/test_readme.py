@@ -99,25 +99,36 @@ def test_readme_is_short():
     assert length <= README_LIMIT, f"README.md has {length} characters; the limit is {README_LIMIT}: move detail to docs/"
 
 
-def test_every_scene_block_of_the_docs_is_a_valid_scene(tmp_path):
-    """The ```toml blocks of docs/ are whole scenes: each validates (a file packing against a packing written for it)."""
+def _doc_scene_blocks():
+    """``[(where, raw scene)]``: every ```toml block of README.md and docs/*.md that is a whole scene."""
     import tomllib
 
+    return [(f"{page.name} toml block {k}", tomllib.loads(b)) for page in [README, *_docs_pages()]
+            for k, b in enumerate(re.findall(r"```toml\n(.*?)```", page.read_text(), re.S)) if "[packing]" in b]
+
+
+def _write_doc_packing(raw, tmp_path):
+    """A ``kind = "file"`` scene of the docs given a packing to read: 27 touching spheres in a dump at its path."""
     from sintercond import packing_files
+
+    if raw["packing"]["kind"] != "file":
+        return
+    unit = packing_files.LENGTH_UNITS[raw["packing"].get("length_unit", "m")]
+    path = tmp_path / raw["packing"]["path"]
+    grid = [[x, y, z] for x in range(3) for y in range(3) for z in range(3)]
+    text = "".join(f"{i + 1} 1 {x * 60e-6 / unit!r} {y * 60e-6 / unit!r} {z * 60e-6 / unit!r} {31e-6 / unit!r}\n"
+                   for i, (x, y, z) in enumerate(grid))
+    path.write_text("ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n27\nITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\n"
+                    "ITEM: ATOMS id type x y z radius\n" + text)
+    raw["packing"]["path"] = str(path)
+
+
+def test_every_scene_block_of_the_docs_is_a_valid_scene(tmp_path):
+    """The ```toml blocks of docs/ are whole scenes: each validates (a file packing against a packing written for it)."""
     from sintercond.scene import validate_scene
 
-    blocks = [b for page in sorted((ROOT / "docs").glob("*.md"))
-              for b in re.findall(r"```toml\n(.*?)```", page.read_text(), re.S)]
-    scenes = [tomllib.loads(b) for b in blocks if "[packing]" in b]
+    scenes = _doc_scene_blocks()
     assert scenes
-    for raw in scenes:
-        if raw["packing"]["kind"] == "file":
-            unit = packing_files.LENGTH_UNITS[raw["packing"].get("length_unit", "m")]
-            path = tmp_path / raw["packing"]["path"]
-            grid = [[x, y, z] for x in range(3) for y in range(3) for z in range(3)]
-            text = "".join(f"{i + 1} 1 {x * 60e-6 / unit!r} {y * 60e-6 / unit!r} {z * 60e-6 / unit!r} {31e-6 / unit!r}\n"
-                           for i, (x, y, z) in enumerate(grid))
-            path.write_text("ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n27\nITEM: BOX BOUNDS ff ff ff\n0 1\n0 1\n0 1\n"
-                            "ITEM: ATOMS id type x y z radius\n" + text)
-            raw["packing"]["path"] = str(path)
+    for _, raw in scenes:
+        _write_doc_packing(raw, tmp_path)
         validate_scene(raw)

@@ -103,6 +103,7 @@ ELSEWHERE = {
     "boundary.floor_temperature": "test_floor_temperature_is_a_held_floor (below)",
     "physics.mechanics": "every row above builds the coupled model; test_scene_mechanics builds the thermal one",
     "physics.skin": "test_the_skin_reaches_the_contact_list (below)",
+    "physics.container": "test_first_week.py: test_a_moving_powder_bed_is_held_in_its_box (the box's walls)",
     "mechanics.restitution": "test_restitution_sets_the_tsuji_damping_ratio (below)",
     "convection.reynolds": "test_reynolds_and_prandtl_give_whitakers_nusselt (below)",
     "convection.prandtl": "test_reynolds_and_prandtl_give_whitakers_nusselt (below)",

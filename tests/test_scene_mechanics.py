@@ -120,8 +120,8 @@ def test_mechanics_run_resumes_bitwise_springs_included(tmp_path):
     assert frames == sorted(p.name for p in (tmp_path / "cut" / "vtp").iterdir())
     assert all((tmp_path / "full" / "vtp" / f).read_bytes() == (tmp_path / "cut" / "vtp" / f).read_bytes()
                for f in frames)
-    header = (tmp_path / "full" / "dump.lammpstrj").read_text().splitlines()[8]
-    assert header == "ITEM: ATOMS id radius x y z temperature vx vy vz fx fy fz coordination"
+    header = (tmp_path / "full" / "dump.lammpstrj").read_text().splitlines()[10]  # after ITEM: TIME, the step, ...
+    assert header == "ITEM: ATOMS id radius x y z temperature vx vy vz fx fy fz coordination held material heat_power"
 
 
 @pytest.mark.slow

@@ -14,6 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
+from sintercond.scene.schema import output_interval
+from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
+from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, file_temperatures, restitution_damping_ratio)
 from sintercond.state import particle_state
@@ -37,6 +40,8 @@ class Model:
     sized_speed: float | None = None  # with mechanics: the approach speed (m/s) the mechanical step is sized for
     k_star_axis: int | None = None  # with [sintering] k_star_axis: the axis of k* at each output
     lattice: bool = False  # a simple cubic packing (k* between its end layers)
+    output_every: int = 1  # steps between outputs: run.output_every, or about DEFAULT_OUTPUTS over the run
+    checkpoint_every: int = 1  # steps between checkpoints (run.checkpoint_every or DEFAULT_CHECKPOINT_OUTPUTS outputs)
 
     @property
     def physics(self) -> simulate.Physics:
@@ -63,14 +68,15 @@ class SettlingProgress:
     """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.packing`: a line through ``log``
     at most every :data:`PROGRESS_EVERY_S` seconds with the steps taken, the settling figure against its target
     and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially); a
-    rolled bed (phase ``"rolling"``) gives the spheres down and the time left at their rate."""
+    rolled bed (phase ``"rolling"``) gives the spheres down and the time left at their rate; ``worst``, the sphere
+    the net force is largest on (:func:`sintercond.settle.sphere_text`)."""
 
     def __init__(self, log, particles):
         self.log, self.particles = log, particles
         self.start = self.last = time.perf_counter()
         self.points = []  # (seconds, ln figure) at the lines written
 
-    def __call__(self, phase, steps, max_steps, figure, target):
+    def __call__(self, phase, steps, max_steps, figure, target, worst=None):
         now = time.perf_counter()
         if now - self.last < PROGRESS_EVERY_S:
             return
@@ -90,8 +96,9 @@ class SettlingProgress:
                 left = f", about {(y1 - math.log(target)) / rate:.0f} s left at this rate"
         what = (f"largest net force {figure:.3g} of a sphere's weight" if phase == "relaxing" else
                 f"kinetic energy and net force at {figure:.3g} times their thresholds")
+        on = "" if worst is None else f", largest on {worst}"
         self.log(f"packing: {phase} {self.particles:,} spheres: {steps:,} steps (at most {max_steps:,}), {what} "
-                 f"(settled below {target:g}), {now - self.start:.0f} s{left}")
+                 f"(settled below {target:g}{on}), {now - self.start:.0f} s{left}")
 
 
 def initial_temperatures(scene):
@@ -208,7 +215,7 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     """
     p, c = scene["physics"], contact_material(scene)
     walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
-                   for w in planes)
+                   for w in planes) + container_walls(scene)
     spec = mechanics.Mechanics.create(
         walls_, gravity=p["gravity"], shear=p["shear"], slip_direction=p["slip_direction"],
         rolling_projection=p["rolling_projection"], damping_clamp=p["damping_clamp"], softening="softening" in scene,
@@ -216,6 +223,46 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
         wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
     conduction = dataclasses.replace(thermal_physics.conduction, conductance="lifted", conducting_walls=0)
     return dataclasses.replace(thermal_physics, conduction=conduction, contacts="dynamic", mechanics=spec)
+
+
+_BOX_FACES = ((2, "min"), (0, "min"), (0, "max"), (1, "min"), (1, "max"))
+"""The faces of :func:`sintercond.settle.box_walls`, in its order: floor, x = 0, x = L, y = 0, y = L."""
+
+
+def packing_box(scene):
+    """``(lo [3], hi [3])`` (m) of the box a validated scene's packing fills, ``hi[2]`` infinite (an open top), or
+    None for a packing without one (a powder bed's container ``[0, lateral_size]^2`` over ``z = 0``)."""
+    p = scene["packing"]
+    if p["kind"] != "powder_bed":
+        return None
+    return np.zeros(3), np.array([p["lateral_size"], p["lateral_size"], np.inf])
+
+
+def container_walls(scene) -> tuple:
+    """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.settle.box_walls`) on each face
+    the scene gives no wall of its own (``physics.container``, true by default): without them the moving bed
+    spreads over the floor, or falls."""
+    if not scene["physics"]["container"] or packing_box(scene) is None:  # filled with the mechanics
+        return ()
+    given = {(w["axis"], w["side"]) for w in _walls(scene)}
+    box = settle.box_walls(scene["packing"]["lateral_size"])
+    return tuple(wall for face, wall in zip(_BOX_FACES, box) if face not in given)
+
+
+def escaped_particles(scene, positions, radii) -> np.ndarray:
+    """Indices of the particles whose centres lie more than their radius outside the packing's box
+    (:func:`packing_box`): they left it; empty for a packing without a box."""
+    box = packing_box(scene)
+    if box is None:
+        return np.zeros(0, int)
+    lo, hi = box
+    r = np.asarray(radii)[:, None]
+    outside = (np.asarray(positions) < lo - r) | (np.asarray(positions) > hi + r)
+    return np.flatnonzero(outside.any(axis=1))
+
+
+class PackingBoxWarning(UserWarning):
+    """Particles of a moving packing left the box it was made in."""
 
 
 def scene_params(scene) -> simulate.Params:
@@ -271,6 +318,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         start = time.perf_counter()
         centres, radii, bed = build_packing(scene, log)
         log(f"packing: {len(radii):,} particles in {time.perf_counter() - start:.1f} s")
+    check_distinct_centres(None, centres)  # a pour, a bed, or a run folder's packing.npz as well
     m, c = scene["material"], scene["conduction"]
     physics = scene_physics(scene)
     log(f"network: contacts and conductances of {len(radii):,} particles")
@@ -322,9 +370,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                          f"{thermal_limit:.6g} s{at_cap} (G_i: linearised convection and "
                                          "radiation)")}
     if "preheating" in scene:
-        ramp = scene["preheating"]
         every = scene["sintering"]["every"] if "sintering" in scene else 1  # a growth interval spans every steps
-        step = RAMP_STEP_FRACTION * ramp["duration"] / ramp["steps"] / every
+        step = ramp_step(scene)
         bounds["preheating"] = (step, f"{step:.6g} s, in which {every} step(s) (sintering.every) span "
                                       f"{RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
                                       "(preheating.duration / preheating.steps)")
@@ -374,13 +421,14 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                  + (" or the implicit integrator" if kind == "thermal" and motion is None else ""))
     n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
     dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
+    check_sintering_every(scene, n_steps)
     state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
     return Model(sim, params, state, n_steps, contact_count, limit, bed, reallocate,
                  _wall_heat_specs(scene, centres, radii),
                  {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None,
                  scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
-                 scene["packing"]["kind"] == "simple_cubic")
+                 scene["packing"]["kind"] == "simple_cubic", *output_interval(run, n_steps))
 
 
 def _fastest_wall(scene) -> tuple[float, int | None]:
@@ -538,10 +586,3 @@ def _merged_wall_conductance(scene, centres, radii, conducting):
                           t_wall)
         k_wall = k_wall + k_w
     return k_wall, t_wall
-
-
-RAMP_STEP_FRACTION = 0.1
-"""A growth interval (``sintering.every`` time steps; one without ``[sintering]``) spans at most this fraction of a
-step of a ``[preheating]`` ramp: each level is resolved in ten intervals (necks grow over an interval at the mean of
-its start and end temperatures, so the interval that straddles a level's edge takes the mean of two levels)."""
-

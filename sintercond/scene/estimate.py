@@ -11,7 +11,7 @@ import numpy as np
 
 from sintercond.scene.schema import (
     MAX_FRAMES, MAX_MEMORY_BYTES, MAX_OUTPUT_BYTES, MAX_STEPS, SceneError, file_packing, file_temperatures,
-    restitution_damping_ratio,
+    output_interval, restitution_damping_ratio,
 )
 
 
@@ -90,11 +90,15 @@ def estimate_run(scene) -> RunEstimate:
             dt = min(dt, 0.9 * WALL_STEP_FRACTION * r / wall_speed)
     if "beam" in scene and beam_step(scene["beam"]) is not None:
         dt = min(dt, 0.9 * beam_step(scene["beam"]))
+    if ramp_step(scene) is not None:
+        dt = min(dt, 0.9 * ramp_step(scene))
     dt = dt if run["dt"] == "auto" else run["dt"]
     steps = max(1, math.ceil(run["duration"] / dt))
-    frames = steps // run["output_every"] + 1
+    frames = steps // output_interval(run, steps)[0] + 1
     per_frame = n * (("vtp" in run["formats"]) * 230 + ("lammps" in run["formats"]) * 140)
     estimate = RunEstimate(n, dt, steps, frames, frames * per_frame, 4e3 * n)
+    if run["dt"] != "auto":  # the step count is exact; with the automatic step the build checks it
+        check_sintering_every(scene, steps)
     if estimate.memory_bytes > MAX_MEMORY_BYTES:
         raise SceneError(f"the packing needs about {estimate.memory_bytes / 1e9:.3g} GB ({n} particles); the limit "
                          f"is {MAX_MEMORY_BYTES / 1e9:g} GB: make [packing] smaller")
@@ -109,6 +113,32 @@ def estimate_run(scene) -> RunEstimate:
                                  f"{value:.3g} {what}; the limit is {limit:g}: {advice}, or set "
                                  f"run.override_limits = true")
     return estimate
+
+
+def check_sintering_every(scene, steps):
+    """Refuse ``sintering.every`` above a run's ``steps`` (its step count, or an upper estimate of it): the necks
+    grow only at the end of each interval of ``every`` steps, so such a run grows none."""
+    every = scene.get("sintering", {}).get("every", 1)
+    if every > steps:
+        raise SceneError(f"sintering.every = {every} steps is more than the run's {steps} steps (run.duration "
+                         f"{scene['run']['duration']:g} s): no neck would grow; lower sintering.every or lengthen "
+                         "run.duration")
+
+
+RAMP_STEP_FRACTION = 0.1
+"""A growth interval (``sintering.every`` time steps; one without ``[sintering]``) spans at most this fraction of a
+step of a ``[preheating]`` ramp: each level is resolved in ten intervals (necks grow over an interval at the mean of
+its start and end temperatures, so the interval that straddles a level's edge takes the mean of two levels)."""
+
+
+def ramp_step(scene) -> float | None:
+    """The step (s) in which a growth interval spans :data:`RAMP_STEP_FRACTION` of a step of the scene's
+    ``[preheating]`` ramp (``preheating.duration / preheating.steps``); None without a ramp."""
+    if "preheating" not in scene:
+        return None
+    ramp = scene["preheating"]
+    every = scene["sintering"]["every"] if "sintering" in scene else 1  # a growth interval spans every steps
+    return RAMP_STEP_FRACTION * ramp["duration"] / ramp["steps"] / every
 
 
 WALL_STEP_FRACTION = 0.1

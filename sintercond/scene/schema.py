@@ -94,6 +94,22 @@ MAX_OUTPUT_BYTES = 2e9
 """Most bytes of outputs of a run (about 230 B a particle and frame in VTP, 140 B in the LAMMPS dump)."""
 
 
+DEFAULT_OUTPUTS = 100
+"""Outputs of a run whose scene gives no ``run.output_every`` (:func:`output_interval`)."""
+
+
+DEFAULT_CHECKPOINT_OUTPUTS = 10
+"""Outputs between two checkpoints of a run whose scene gives no ``run.checkpoint_every``."""
+
+
+def output_interval(run, steps) -> tuple[int, int]:
+    """``(output_every, checkpoint_every)`` (steps) of a validated ``[run]`` table for a run of ``steps`` steps: the
+    scene's, or :data:`DEFAULT_OUTPUTS` outputs over the run and a checkpoint every
+    :data:`DEFAULT_CHECKPOINT_OUTPUTS` of them."""
+    every = run.get("output_every") or max(1, math.ceil(steps / DEFAULT_OUTPUTS))
+    return every, run.get("checkpoint_every") or every * DEFAULT_CHECKPOINT_OUTPUTS
+
+
 MAX_MEMORY_BYTES = 8e9
 """Most memory of the network build (about 4 kB a particle)."""
 
@@ -194,6 +210,11 @@ _SCHEMA = {
                                   doc="roll on the tangential part of the relative spin only (LAMMPS sds; erratum 5)"),
         "damping_clamp": Key(bool, None, False, default=False,
                              doc="no tensile normal force while a contact opens (LAMMPS limit_damping)"),
+        "container": Key(bool, None, False, default=True,
+                         doc="with a powder_bed: its box [0, lateral_size]^2 over the floor z = 0 holds the moving "
+                             "particles, an insulated wall on each face the scene gives no [[walls]] of its own "
+                             "(sintercond.settle.box_walls); false: only the scene's walls, and the bed spreads. A "
+                             "run warns (PackingBoxWarning) when particles leave the box"),
         "skin": Key(float, _within(0.0, 10.0, low_open=True), False, "largest radii", default=0.1,
                     doc="Verlet skin of the contact list; it is rebuilt once a particle moved half of it"),
         "impact_velocity": Key(float, _within(0.0, 1e3, "m/s", low_open=True), False, "m/s", default=0.05,
@@ -275,9 +296,13 @@ _SCHEMA = {
         "dt": Key(object, ('"auto" or a number in (0, 1e3] s', lambda v: v == "auto" or (
             not isinstance(v, (bool, str)) and isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1e3)),
             False, "s", default="auto", doc='explicit step; "auto" = 0.9 x the stable step'),
-        "output_every": Key(int, _within(1, 1e9), True, "steps", doc="steps between output frames"),
-        "checkpoint_every": Key(int, _within(1, 1e9), True, "steps",
-                                doc="steps between checkpoints, a multiple of output_every"),
+        "output_every": Key(int, _within(1, 1e9), False, "steps", default=f"about {DEFAULT_OUTPUTS} outputs",
+                            doc=f"steps between output frames; not given, the run's steps / {DEFAULT_OUTPUTS} (rounded "
+                                "up), so that the outputs follow run.duration (and --duration)"),
+        "checkpoint_every": Key(int, _within(1, 1e9), False, "steps",
+                                default=f"{DEFAULT_CHECKPOINT_OUTPUTS} outputs",
+                                doc="steps between checkpoints, a multiple of output_every (given only with it); not "
+                                    f"given, every {DEFAULT_CHECKPOINT_OUTPUTS} outputs"),
         "formats": Key(list, ("a non-empty list of distinct names from ['lammps', 'vtp']", lambda v: True), False,
                        default=["vtp"],
                        doc='non-empty list of distinct "vtp" (ParaView) and "lammps" (OVITO)'),

@@ -16,7 +16,8 @@ from sintercond.mechanics import validate_mechanical_params
 from sintercond.sintering import KINETIC_LAWS
 from sintercond.scene.estimate import estimate_run
 from sintercond.scene.schema import (
-    Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, POUR_START, SceneError, _LAW_PARAMS, _PACKING,
+    DEFAULT_CHECKPOINT_OUTPUTS, Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, POUR_START,
+    SceneError, _LAW_PARAMS, _PACKING,
     TEMPERATURE, _REQUIRED_SECTIONS, _SCHEMA, _SECTIONS, _SINTERING_PARAMS, _WALL, _check_keys, _check_section,
     _describe, _numbers, _suggest, _value, _within, file_packing, file_temperatures,
 )
@@ -195,13 +196,55 @@ def _check_mechanics(scene):
         raise SceneError(str(err)) from None
 
 
+def check_distinct_centres(packing, centres):
+    """Raise :class:`SceneError` if two particles have the same centre ``centres`` [n, 3] (m), naming both: for
+    ``packing`` a validated ``[packing]`` table whose particles they are, a file's lines or the listed spheres' keys,
+    for None (a packing built or read back from a run folder) their indices. The
+    contact laws divide by the centre distance, so such a run crashed after the build or took a step of 0 s."""
+    centres = np.asarray(centres, np.float64)
+    _, first, inverse = np.unique(centres, axis=0, return_index=True, return_inverse=True)
+    duplicates = np.flatnonzero(first[inverse.reshape(-1)] != np.arange(len(centres)))  # each after its first
+    if duplicates.size == 0:
+        return
+    j = int(duplicates[0])
+    i = int(first[inverse.reshape(-1)[j]])
+    where, fix = f"particles {i} and {j} of the packing", ""
+    kind = None if packing is None else packing["kind"]
+    if kind == "file":
+        from sintercond.packing_files import particle_lines
+
+        lines = particle_lines(packing["path"], packing["format"])
+        where = f"packing.path: particles {i} and {j} (lines {int(lines[i])} and {int(lines[j])} of the file)"
+        fix = "; remove the duplicated rows"
+    elif kind == "spheres":
+        where, fix = f"packing.centres[{i}] and packing.centres[{j}]", "; remove the duplicated centres"
+    raise SceneError(f"{where} have the same centre {centres[i].tolist()} m ({duplicates.size} such "
+                     f"duplicate(s) in all): two particles cannot sit in one place{fix}")
+
+
+RADIUS_RANGE = (1e-8, 1.0)
+RADIUS = _within(*RADIUS_RANGE, "m")
+"""The radius range of a sphere of any packing kind (listed, lattice, bed, file)."""
+
+
 def _check_packing(packing, conduction, sintering=False):
     from sintercond import neck
     from sintercond.packing import MAX_PARTICLES, MAX_ROLLED_PARTICLES, PackingError, check_bed
+    from sintercond.packing_files import LENGTH_UNITS, particle_lines
 
     if packing["kind"] == "file":
         packing["path"] = str(Path(packing["path"]).resolve())  # scene.json then finds it from anywhere
-        file_packing(packing)  # read (once) and checked now: a bad file is named before anything is built
+        centres, radii = file_packing(packing)  # read (once) and checked now: a bad file is named before anything is built
+        check_distinct_centres(packing, centres)
+        low, high = RADIUS_RANGE
+        outside = np.flatnonzero(~((radii >= low) & (radii <= high)))
+        if outside.size:
+            k, unit = int(outside[0]), packing["length_unit"]
+            others = [u for u in LENGTH_UNITS if u != unit]
+            line = int(particle_lines(packing["path"], packing["format"])[k])
+            raise SceneError(f"packing.path: particle {k} (line {line} of the file) has radius {float(radii[k]):g} m, "
+                             f"its file value read in packing.length_unit = {unit!r}; radii must be {RADIUS[0]}: is "
+                             f"the file in other units? set packing.length_unit to one of {others}")
         return
     if packing["kind"] == "spheres":
         centres, radii = packing["centres"], packing["radii"]
@@ -210,10 +253,11 @@ def _check_packing(packing, conduction, sintering=False):
             raise SceneError(f"packing.centres must be {_describe(_PACKING['spheres']['centres'])}; got "
                              f"{len(centres)} points")
         packing["centres"] = [_numbers(f"packing.centres[{k}]", c, 3, rule) for k, c in enumerate(centres)]
-        radius_rule = _within(1e-8, 1.0, "m")
+        radius_rule = RADIUS
         if not isinstance(radii, list):
             radii = [radii] * len(centres)
         packing["radii"] = _numbers("packing.radii", radii, len(centres), radius_rule)
+        check_distinct_centres(packing, packing["centres"])
         return
     if packing["kind"] == "poured":
         from sintercond.packing import check_radius_distribution
@@ -309,8 +353,8 @@ def _check_property_table(material, key, symbol, low, high):
     rule = _SCHEMA["material"][key].rule[0]
     if len(table) < 2:
         raise SceneError(f"material.{key} must be {rule}; got {table!r}")
-    rows = [_numbers(f"material.{key}[{k}]", row, 2, (f"a [T, {symbol}] pair of positive numbers",
-                                                      lambda v: 0 < v <= 1e5)) for k, row in enumerate(table)]
+    rows = [_numbers(f"material.{key}[{k}]", row, 2, (f"[T, {symbol}] in (0, 1e5]", lambda v: 0 < v <= 1e5))
+            for k, row in enumerate(table)]
     temperatures, values = zip(*rows)
     if any(b <= a for a, b in zip(temperatures, temperatures[1:])) or not all(low <= v <= high for v in values):
         raise SceneError(f"material.{key} must be {rule}; got {table!r}")
@@ -366,6 +410,7 @@ def _check_details(scene):
                                or any(not isinstance(v, bool) for v in on)):
             raise SceneError(f"beam.segments_on must be a list of {len(path) - 1} booleans (true or false), one per "
                              f"segment of beam.path; got {on!r}")
+    _check_melting_point(scene)
     convection = scene.get("convection", {})
     if ("reynolds" in convection) != ("prandtl" in convection):
         raise SceneError("convection.reynolds and convection.prandtl go together (Whitaker's correlation)")
@@ -373,7 +418,10 @@ def _check_details(scene):
         raise SceneError("give convection.nusselt or convection.reynolds and prandtl, not both")
     run = scene["run"]
     run["dt"] = run["dt"] if run["dt"] == "auto" else float(run["dt"])
-    if run["checkpoint_every"] % run["output_every"]:
+    if "checkpoint_every" in run and "output_every" not in run:
+        raise SceneError(f"run.checkpoint_every ({run['checkpoint_every']}) needs run.output_every (it is a multiple "
+                         f"of it); without both, the run checkpoints every {DEFAULT_CHECKPOINT_OUTPUTS} outputs")
+    if "output_every" in run and run.get("checkpoint_every", run["output_every"]) % run["output_every"]:
         raise SceneError(f"run.checkpoint_every ({run['checkpoint_every']}) must be a multiple of "
                          f"run.output_every ({run['output_every']})")
     formats = run["formats"]
@@ -383,6 +431,34 @@ def _check_details(scene):
         raise SceneError(f"run.formats must be a non-empty list of distinct names from {list(allowed)}; "
                          f"got {formats!r}")
     run["formats"] = list(formats)
+
+
+def held_temperatures(scene) -> dict:
+    """``{key: temperature (K)}`` of what a scene holds particles at: held walls, the floor, a preheating ramp's end."""
+    held = {f"walls[{k}].temperature": w["temperature"] for k, w in enumerate(scene["walls"]) if w["mode"] == "held"}
+    if "floor_temperature" in scene.get("boundary", {}):
+        held["boundary.floor_temperature"] = scene["boundary"]["floor_temperature"]
+    if "preheating" in scene:
+        held["preheating.end_temperature"] = scene["preheating"]["end_temperature"]
+    return held
+
+
+def _check_melting_point(scene):
+    """``material.melting_point`` above the start: the initial temperatures (a run starting molten stopped after
+    its first output chunk), and with ``on_melting = "stop"`` the temperatures particles are held at."""
+    melting = scene["material"].get("melting_point")
+    if melting is None:
+        return
+    start = {"initial.temperature": scene["initial"]["temperature"]}
+    if scene["initial"]["from_file"]:
+        start = {"initial.from_file (the file's hottest particle)": float(np.max(file_temperatures(scene["packing"])))}
+    if scene["material"]["on_melting"] == "stop":
+        start.update(held_temperatures(scene))
+    for key, value in start.items():
+        if value > melting:
+            raise SceneError(f"material.melting_point = {melting:g} K is below {key} = {value:g} K: the run would "
+                             f"stop at its first output (the model has no melting); {key} must be below the melting "
+                             "point (check both: a solidus in K, not in degrees Celsius?)")
 
 
 def _builtin_dir():
