@@ -111,7 +111,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond import sintering
-from sintercond._validation import all_concrete, require_law_params
+from sintercond._validation import all_concrete, require_law_params, shown
 from sintercond.mechanics import MechanicalState, pair_geometry
 from sintercond.neck import neck_radius
 from sintercond.pair_list import pair_sum
@@ -179,11 +179,11 @@ class Sintering:
         for name in ("every", "quadrature_nodes", "newton_iterations"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"Sintering.{name} must be an integer >= 1; got {value!r}")
+                raise ValueError(f"Sintering.{name} must be an integer >= 1; got {shown(value)}")
         if self.shrinkage not in SHRINKAGE_MODES:
             raise ValueError(f"Sintering.shrinkage must be one of {list(SHRINKAGE_MODES)}; got {self.shrinkage!r}")
         if not (isinstance(self.balance_tol, (int, float)) and 0.0 < self.balance_tol < 1.0):
-            raise ValueError(f"Sintering.balance_tol must be in (0, 1); got {self.balance_tol!r}")
+            raise ValueError(f"Sintering.balance_tol must be in (0, 1); got {shown(self.balance_tol)}")
 
 
 @pytree_dataclass
@@ -343,7 +343,7 @@ def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii,
     if bad.any():
         i, k = map(int, np.argwhere(bad)[0])
         raise ValueError(f"contact necks must lie in [0, min(r_i, r_j)]; the neck of particles {i} and "
-                         f"{int(neighbors[i, k])} is {neck[i, k]!r} m")
+                         f"{int(neighbors[i, k])} is {shown(neck[i, k])} m")
 
 
 def _validate_law(spec: Sintering, merged: dict) -> None:
@@ -355,7 +355,7 @@ def _validate_law(spec: Sintering, merged: dict) -> None:
                        lambda name: f"Params.sintering[{name!r}] of kinetic law {law.name!r} ({law.units[name]})")
     if "dihedral_angle" in merged and not float(np.max(merged["dihedral_angle"])) <= 180.0:
         raise ValueError(f"Params.sintering['dihedral_angle'] must be in (0, 180] degrees; got "
-                         f"{merged['dihedral_angle']!r}")
+                         f"{shown(merged['dihedral_angle'])}")
 
 
 def validate_pair_necks(motion: MechanicalState, radii, pairs) -> None:
@@ -378,7 +378,7 @@ def validate_pair_necks(motion: MechanicalState, radii, pairs) -> None:
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise ValueError(f"MechanicalState.neck must lie in [0, min(r_i, r_j)] and neck_overlap be >= 0; pair {k} "
-                         f"{tuple(int(v) for v in pairs[k])} has neck {neck[k]!r} m, neck_overlap {h[k]!r} m")
+                         f"{tuple(int(v) for v in pairs[k])} has neck {shown(neck[k])} m, neck_overlap {shown(h[k])} m")
 
 
 def _pairs(neighbors, n):

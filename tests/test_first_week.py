@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sintercond import cli, io, mechanics, packing, packing_files, settle, walls
+from sintercond import cli, io, mechanics, neck_growth, packing, packing_files, settle, walls
 from sintercond import run as runner
 from sintercond.scene import SceneError, load_scene, validate_scene
 from sintercond.scene.build import build_model
@@ -201,7 +201,8 @@ NEGATIVE = np.float64(-0.00052)
     lambda: walls.PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), "held", NEGATIVE),
     lambda: packing.powder_bed(3e-4, NEGATIVE, (2e-5, 6e-5)),
     lambda: mechanics.validate_mechanical_params({"E0": NEGATIVE}),
-], ids=["DemMaterial", "PlaneWall", "powder_bed", "validate_mechanical_params"])
+    lambda: neck_growth.Sintering(balance_tol=NEGATIVE),
+], ids=["DemMaterial", "PlaneWall", "powder_bed", "validate_mechanical_params", "Sintering"])
 def test_messages_show_numbers_as_numbers(call):
     """Before: ``got np.float64(-0.00052)``; the number a user gave is shown as the number."""
     with pytest.raises(ValueError) as err:
