@@ -4,6 +4,7 @@ and initial state (:func:`build_model`), built once; the scene's walls as planes
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 import math
 import time
 import warnings
@@ -375,41 +376,85 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         bounds["preheating"] = (step, f"{step:.6g} s, in which {every} step(s) (sintering.every) span "
                                       f"{RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
                                       "(preheating.duration / preheating.steps)")
-    reallocate = None
-    motion = None
-    if mechanics_on(scene):
-        log("mechanics: contact list and the mechanical time step")
-        planes = scene_walls(scene, centres, radii)
-        physics = mechanical_physics(scene, physics, planes)
-        skin = scene["physics"]["skin"] * float(np.max(radii))
-        contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
-        sim = simulate.simulator(physics, fns)
-        reallocate = simulate.reallocate_neighbors(fns)
-        impact = scene["physics"]["impact_velocity"]
-        wall_speed, fastest = _fastest_wall(scene)
-        v_rel = impact + wall_speed
-        mechanical_limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors,
-                                                            params.mechanics, v_rel))
-        speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
-            f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")
-        bounds["mechanical"] = (mechanical_limit, f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and "
-                                                  f"the symplectic-Euler bounds of the stiffest contact, unsoftened, "
-                                                  f"at the approach speed {v_rel:g} m/s: {speed_source})")
-        if wall_speed > 0:
-            step = WALL_STEP_FRACTION * float(np.min(radii)) / wall_speed
-            bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
-                                    f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
-        motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
-        if physics.sintering is not None:  # the necks on the half pair list, carried as the springs are
-            motion = neck_growth.with_pair_necks(motion, contacts, centres, radii,
-                                                 scene["sintering"].get("start_necks", "point"))
-            necks = neck_growth.neck_state(contacts, particles.temperature, supports=necks.supports,
-                                           positions=particles.positions)
+    coupled = _coupled_model(scene, physics, centres, radii, particles, params, necks, log) if mechanics_on(scene) else None
+    if coupled is not None:
+        physics, sim, contacts, necks = coupled.physics, coupled.sim, coupled.contacts, coupled.necks
+        bounds.update(coupled.bounds)
+    motion = None if coupled is None else coupled.motion
+    bounds.update(_beam_bound(scene))
+    dt, n_steps, limit = _time_step(scene["run"], bounds, coupled is None)
+    check_sintering_every(scene, n_steps)
+    state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
+    bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
+    return Model(sim, params, state, n_steps, contact_count, limit, bed, None if coupled is None else coupled.reallocate,
+                 _wall_heat_specs(scene, centres, radii),
+                 {kind: bound for kind, (bound, _) in bounds.items()}, None if coupled is None else coupled.v_rel,
+                 scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
+                 scene["packing"]["kind"] == "simple_cubic", *output_interval(run, n_steps))
+
+
+class _Coupled(NamedTuple):
+    """What the mechanics add to a scene's model: the coupled spec and its simulator on dynamic contacts, their
+    reallocation, the mechanical state (with the necks on the pair list when sintering), the approach speed the
+    step is sized for (m/s) and the step bounds it sets."""
+
+    physics: simulate.Physics
+    sim: simulate.Simulator
+    contacts: object
+    reallocate: object
+    motion: object
+    necks: object
+    v_rel: float
+    bounds: dict
+
+
+def _coupled_model(scene, physics, centres, radii, particles, params, necks, log) -> _Coupled:
+    """The coupled thermo-mechanical part of :func:`build_model` (``physics.mechanics = true``)."""
+    log("mechanics: contact list and the mechanical time step")
+    bounds = {}
+    planes = scene_walls(scene, centres, radii)
+    physics = mechanical_physics(scene, physics, planes)
+    skin = scene["physics"]["skin"] * float(np.max(radii))
+    contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
+    sim = simulate.simulator(physics, fns)
+    reallocate = simulate.reallocate_neighbors(fns)
+    impact = scene["physics"]["impact_velocity"]
+    wall_speed, fastest = _fastest_wall(scene)
+    v_rel = impact + wall_speed
+    mechanical_limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors,
+                                                        params.mechanics, v_rel))
+    speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
+        f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")
+    bounds["mechanical"] = (mechanical_limit, f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and "
+                                              f"the symplectic-Euler bounds of the stiffest contact, unsoftened, "
+                                              f"at the approach speed {v_rel:g} m/s: {speed_source})")
+    if wall_speed > 0:
+        step = WALL_STEP_FRACTION * float(np.min(radii)) / wall_speed
+        bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
+                                f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
+    motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
+    if physics.sintering is not None:  # the necks on the half pair list, carried as the springs are
+        motion = neck_growth.with_pair_necks(motion, contacts, centres, radii,
+                                             scene["sintering"].get("start_necks", "point"))
+        necks = neck_growth.neck_state(contacts, particles.temperature, supports=necks.supports,
+                                       positions=particles.positions)
+    return _Coupled(physics, sim, contacts, reallocate, motion, necks, v_rel, bounds)
+
+
+def _beam_bound(scene) -> dict:
+    """``{"beam": (step, why)}``: the step in which the beam's spot moves :data:`BEAM_STEP_FRACTION` of its radius,
+    or nothing without a moving beam."""
     beam = scene.get("beam")
     if beam is not None and beam_step(beam) is not None:
         step = beam_step(beam)
-        bounds["beam"] = (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam['speed']:g} m/s) moves "
-                                f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam['spot_radius']:g} m")
+        return {"beam": (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam['speed']:g} m/s) moves "
+                               f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam['spot_radius']:g} m")}
+    return {}
+
+
+def _time_step(run, bounds, thermal_only) -> tuple[float, int, float]:
+    """``(dt, n_steps, limit)``: ``run.dt`` checked against every bound (``{kind: (step, why)}``, s) or 0.9 of the
+    smallest, shortened to ``duration / n_steps`` so that the run ends exactly at ``run.duration``."""
     limit = min(bound for bound, _ in bounds.values())
     if run["dt"] == "auto":
         dt = 0.9 * limit if np.isfinite(limit) else run["duration"]
@@ -418,17 +463,9 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         for kind, (bound, name) in bounds.items():
             if dt > bound:
                 raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds {name}; use dt <= {limit:.6g} s"
-                                 + (" or the implicit integrator" if kind == "thermal" and motion is None else ""))
+                                 + (" or the implicit integrator" if kind == "thermal" and thermal_only else ""))
     n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
-    dt = run["duration"] / n_steps  # equal steps that end at the duration, none above the stable one
-    check_sintering_every(scene, n_steps)
-    state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
-    bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
-    return Model(sim, params, state, n_steps, contact_count, limit, bed, reallocate,
-                 _wall_heat_specs(scene, centres, radii),
-                 {kind: bound for kind, (bound, _) in bounds.items()}, v_rel if motion is not None else None,
-                 scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
-                 scene["packing"]["kind"] == "simple_cubic", *output_interval(run, n_steps))
+    return run["duration"] / n_steps, n_steps, limit  # equal steps that end at the duration, none above the stable one
 
 
 def _fastest_wall(scene) -> tuple[float, int | None]:
