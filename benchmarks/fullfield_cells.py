@@ -31,8 +31,9 @@ from scipy.interpolate import CubicSpline  # noqa: E402
 CSV = ROOT / "tests" / "data" / "fullfield_cells.csv"
 FE = ROOT / "tests" / "data" / "fe_neck_conductance.csv"
 RATIO = np.sqrt(2.0)
-FIELDS = ["structure", "a_over_r", "h_over_r", "quantity", "n_voxels", "value_grids", "order", "fullfield",
-          "err_est", "network", "ratio", "ratio_err", "fe_pair", "seconds"]
+FIELDS = ["structure", "a_over_r", "h_over_r", "quantity", "n_voxels", "value_grids", "order", "plain_finest",
+          "fullfield", "err_est", "network", "ratio", "ratio_err", "coupled", "coupled_ratio", "pair_law_over_fe", "fe_pair",
+          "seconds"]
 
 
 def fe_half(a_over_r):
@@ -46,9 +47,9 @@ def fe_half(a_over_r):
 
 def grids(kind, a_over_r, half):
     """Three cube sizes (voxels a side of the eighth cell), neck resolution a/h about 5.7, 8, 11.3 (4, 5.7, 8
-    below a/r = 0.15, where the finer grids would not fit a few tens of seconds)."""
-    m0 = 4.0 if a_over_r < 0.15 else 5.66
-    return [int(round(half / a_over_r * m0 * RATIO ** k)) for k in range(3)]
+    below a/r = 0.15, where the finer grids would not fit a few tens of seconds), at least 24 voxels."""
+    n0 = max(half / a_over_r * (4.0 if a_over_r < 0.15 else 5.66), 24.0)
+    return [int(round(n0 * RATIO ** k)) for k in range(3)]
 
 
 def lattice_row(kind, a_over_r):
@@ -56,13 +57,15 @@ def lattice_row(kind, a_over_r):
     t0 = time.perf_counter()
     ns = grids(kind, a_over_r, length / 2)
     values = [ff.solve_lattice(length, sites, 1.0, n, cylinders).k_star for n in ns]
+    plain = ff.solve_lattice(length, sites, 1.0, ns[-1], cylinders, split=False).k_star
     ext, err, p = ff.richardson(values, RATIO)
     net = ff.network_lattice_kstar(kind, a_over_r, length)
     fe = np.pi * fe_half(a_over_r) / 2.0 / (2.0 - h) if kind == "SC" else float("nan")
-    return dict(structure=kind, a_over_r=a_over_r, h_over_r=h, quantity="k_star_over_kappa",
-                n_voxels=";".join(map(str, ns)), value_grids=";".join(f"{v:.6g}" for v in values), order=p,
-                fullfield=ext, err_est=err, network=net, ratio=net / ext, ratio_err=net / ext * err / ext,
-                fe_pair=fe, seconds=time.perf_counter() - t0)
+    return finish(dict(structure=kind, a_over_r=a_over_r, h_over_r=h, quantity="k_star_over_kappa",
+                       n_voxels=";".join(map(str, ns)), value_grids=";".join(f"{v:.6g}" for v in values), order=p,
+                       plain_finest=plain,
+                       fullfield=ext, err_est=err, network=net, ratio=net / ext, ratio_err=net / ext * err / ext,
+                       fe_pair=fe, seconds=time.perf_counter() - t0))
 
 
 def _on_circle(p1, d1, p2, d2):
@@ -114,21 +117,40 @@ def cluster_row():
     lo = np.array([centres[:, 0].min() - 1.15, centres[:, 1].min() - 1.15, 0.0])
     hi = np.array([centres[:, 0].max() + 1.15, centres[:, 1].max() + 1.15, centres[:, 2].max()])
     t0 = time.perf_counter()
-    h0 = 0.06  # voxel side (r ~ 1): neck a/h ~ 3-4.7 coarse, 6-9.4 fine
+    h0 = 0.09  # voxel side (r ~ 1): neck a/h ~ 1.9-3.2 coarse, 3.8-6.5 fine
     ns = []
     values = []
     for k in range(3):
         hk = h0 / RATIO ** k
         shape = np.maximum(np.round((hi - lo) / hk).astype(int), 1)
         ns.append("x".join(map(str, shape)))
-        values.append(ff.solve_box(centres, radii, lo, hi, shape, axis=2, cylinders=cylinders).conductance)
+        values.append(ff.solve_box_split(centres, radii, lo, hi, shape, axis=2, cylinders=cylinders).conductance)
+    plain = ff.solve_box(centres, radii, lo, hi, shape, axis=2, cylinders=cylinders).conductance
     ext, err, p = ff.richardson(values, RATIO)
     net = ff.network_cluster_conductance(len(centres), pairs, hot, cold)
     mean_ar = float(np.mean([p[2] / min(radii[p[0]], radii[p[1]]) for p in pairs]))
-    return dict(structure="cluster7", a_over_r=mean_ar, h_over_r=float("nan"), quantity="Q_over_kappa_dT_r",
+    return finish(dict(structure="cluster7", a_over_r=mean_ar, h_over_r=float("nan"), quantity="Q_over_kappa_dT_r",
                 n_voxels=";".join(ns), value_grids=";".join(f"{v:.6g}" for v in values), order=p,
+                plain_finest=plain,
                 fullfield=ext, err_est=err, network=net, ratio=net / ext, ratio_err=net / ext * err / ext,
-                fe_pair=float("nan"), seconds=time.perf_counter() - t0)
+                fe_pair=float("nan"), seconds=time.perf_counter() - t0))
+
+
+def finish(r):
+    """Fill a row's derived columns from its value_grids, network and geometry."""
+    values = [float(v) for v in r["value_grids"].split(";")]
+    ext, err, p = ff.richardson(values, RATIO)
+    err = max(err, 0.5 * abs(r["plain_finest"] - values[-1]))  # the two schemes' spread on the finest grid
+    r.update(fullfield=ext, err_est=err, order=p, ratio=r["network"] / ext, ratio_err=r["network"] / ext * err / ext)
+    if r["structure"] in ff.LATTICES:
+        ar = r["a_over_r"]
+        length = (2.0 - r["h_over_r"]) / ff.LATTICES[r["structure"]][1]
+        r["coupled"] = ff.coupled_lattice_kstar(r["structure"], ar, length)
+        r["coupled_ratio"] = r["coupled"] / ext
+        r["pair_law_over_fe"] = ff.ROJEK_SLOPE * ar / fe_half(ar)
+    else:
+        r.update(coupled=float("nan"), coupled_ratio=float("nan"), pair_law_over_fe=float("nan"))
+    return r
 
 
 def read():
@@ -136,7 +158,7 @@ def read():
     with open(CSV) as f:
         rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
     keep = ("structure", "quantity", "n_voxels", "value_grids")
-    return [{k: (v if k in keep else float(v)) for k, v in r.items()} for r in rows]
+    return [{k: (v if k in keep else float(v)) for k, v in r.items() if k in FIELDS} for r in rows]
 
 
 def write(rows, command):
@@ -156,7 +178,7 @@ def write(rows, command):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--ar", default="0.22,0.16,0.3,0.1,0.4")
+    ap.add_argument("--ar", default="0.22,0.16,0.3,0.4")
     ap.add_argument("--kinds", default="SC,FCC,BCC")
     ap.add_argument("--no-cluster", action="store_true")
     ap.add_argument("--cluster-only", action="store_true", help="recompute the cluster row of the existing CSV")
@@ -170,9 +192,7 @@ def main():
             rows = [r for r in rows if not r["structure"].startswith("cluster")] + [cluster_row()]
             print(rows[-1], flush=True)
         for r in rows:
-            ext, err, p = ff.richardson([float(v) for v in r["value_grids"].split(";")], RATIO)
-            r.update(fullfield=ext, err_est=err, order=p, ratio=r["network"] / ext,
-                     ratio_err=r["network"] / ext * err / ext)
+            finish(r)
         write(rows, command)
         return
     rows = []

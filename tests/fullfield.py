@@ -205,7 +205,106 @@ def solve_box(centres, radii, lo, hi, shape, axis=0, sub=2, tol=1e-10, use_amg=T
     q_out = float(np.sum(cold_g * t[cold_idx]))
     length = hi[axis] - lo[axis]
     cross = float(np.prod(np.delete(hi - lo, axis)))
-    return FieldResult(q_in, q_in * length / cross, tuple(h), shape, int(a.shape[0]), abs(q_in - q_out) / q_in)
+    return FieldResult(q_in, q_in * length / cross, tuple(h), shape, int(a.shape[0]), abs(q_in - q_out) / max(abs(q_in), 1e-300))
+
+
+def solve_box_split(centres, radii, lo, hi, shape, axis=0, sub=2, tol=1e-10, use_amg=True,
+                    cylinders=()) -> FieldResult:
+    """As :func:`solve_box`, but a voxel holding the solid of several spheres has one unknown per sphere.
+
+    Each solid sub-cell belongs to the sphere of least power ``|x - c|^2 - r^2`` (the radical plane of two
+    spheres is their neck plane), so a voxel that straddles the thin void wedge beside a neck no longer joins
+    the two spheres across it: heat passes between spheres only where solid sub-cells of both touch, i.e.
+    through the neck disc. Conductances: ``kappa * (sub-face area) / (voxel spacing)`` per pair of adjacent
+    solid sub-cells in different voxels or of different spheres (the plain scheme's face fraction, counted
+    per sphere); each solid sub-cell of a held face's layer links its unknown to the face over half a spacing.
+    """
+    centres = np.reshape(np.asarray(centres, float), (-1, 3))
+    radii = np.ravel(np.asarray(radii, float))
+    lo = np.asarray(lo, float)
+    hi = np.asarray(hi, float)
+    shape = tuple(int(n) for n in shape)
+    h = (hi - lo) / np.asarray(shape)
+    fshape = tuple(n * sub for n in shape)
+    f = [lo[k] + (np.arange(fshape[k]) + 0.5) * h[k] / sub for k in range(3)]
+    best = np.full(fshape, np.inf, np.float32)
+    lab = np.full(fshape, -1, np.int32)
+    for k, (c, r) in enumerate(zip(centres, radii)):
+        reach = 1.25 * r
+        idx = [np.nonzero(np.abs(f[d] - c[d]) < reach)[0] for d in range(3)]
+        if not all(i.size for i in idx):
+            continue
+        sl = tuple(slice(i[0], i[-1] + 1) for i in idx)
+        pw = ((f[0][sl[0]] - c[0]) ** 2)[:, None, None] + ((f[1][sl[1]] - c[1]) ** 2)[None, :, None] \
+            + ((f[2][sl[2]] - c[2]) ** 2)[None, None, :] - r * r
+        sub_best = best[sl]
+        better = pw < sub_best
+        sub_best[better] = pw[better]
+        lab[sl][better] = k
+    solid = best < 0
+    for p0, p1, rad in cylinders:
+        _add_cylinder(solid, f[0], f[1], f[2], np.asarray(p0, float), np.asarray(p1, float), rad)
+    del best
+    lab[~solid] = -1
+    n_lab = max(len(centres), 1)
+    ii, jj, kk = (np.arange(fshape[d]) // sub for d in range(3))
+    vox = (ii[:, None, None] * shape[1] + jj[None, :, None]) * shape[2] + kk[None, None, :]
+    key = np.where(solid, vox.astype(np.int64) * n_lab + lab, -1)
+    del vox
+    nodes = np.unique(key[solid])
+    n = nodes.size
+    rows, cols, vals = [], [], []
+    for ax in range(3):
+        g = np.prod(np.delete(h, ax)) / sub ** 2 / h[ax]
+        sa = [slice(None)] * 3
+        sb = [slice(None)] * 3
+        sa[ax] = slice(0, -1)
+        sb[ax] = slice(1, None)
+        ka, kb = key[tuple(sa)], key[tuple(sb)]
+        cross_voxel = (np.arange(fshape[ax] - 1) % sub == sub - 1)
+        cshape = [1, 1, 1]
+        cshape[ax] = -1
+        m = (ka >= 0) & (kb >= 0) & (cross_voxel.reshape(cshape) | (ka != kb))
+        ia = np.searchsorted(nodes, ka[m])
+        ib = np.searchsorted(nodes, kb[m])
+        keep = ia != ib
+        ia, ib = ia[keep], ib[keep]
+        gv = np.full(ia.size, g)
+        rows += [ia, ib, ia, ib]
+        cols += [ib, ia, ia, ib]
+        vals += [-gv, -gv, gv, gv]
+    gb = np.prod(np.delete(h, axis)) / sub ** 2 / (0.5 * h[axis])
+    held = []
+    for side in (0, fshape[axis] - 1):
+        sl = [slice(None)] * 3
+        sl[axis] = side
+        kl = key[tuple(sl)]
+        idx = np.searchsorted(nodes, kl[kl >= 0])
+        uniq, counts = np.unique(idx, return_counts=True)
+        held.append((uniq, gb * counts))
+        rows.append(uniq)
+        cols.append(uniq)
+        vals.append(gb * counts)
+    del key
+    a = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)).tocsr()
+    _, label = connected_components(a, directed=False)
+    anchored = np.zeros(label.max() + 1, bool)
+    anchored[label[held[0][0]]] = True
+    anchored[label[held[1][0]]] = True
+    live = anchored[label]
+    renum = -np.ones(n, np.int64)
+    renum[live] = np.arange(int(live.sum()))
+    a = a[live][:, live].tocsr()
+    b = np.zeros(a.shape[0])
+    hot_idx, hot_g = renum[held[0][0]], held[0][1]
+    cold_idx, cold_g = renum[held[1][0]], held[1][1]
+    np.add.at(b, hot_idx, hot_g)
+    t = _solve_spd(a, b, tol, use_amg)
+    q_in = float(np.sum(hot_g * (1.0 - t[hot_idx])))
+    q_out = float(np.sum(cold_g * t[cold_idx]))
+    length = hi[axis] - lo[axis]
+    cross = float(np.prod(np.delete(hi - lo, axis)))
+    return FieldResult(q_in, q_in * length / cross, tuple(h), shape, int(a.shape[0]), abs(q_in - q_out) / max(abs(q_in), 1e-300))
 
 
 # --- cubic lattices ---------------------------------------------------------------------------------------
@@ -306,12 +405,14 @@ def rizza_bcc_geometry(a_corner, a_centre, r_corner=40.0):
     return length, r_centre, sites[near], radii[near]
 
 
-def solve_lattice(length, sites, radii, n, cylinders=(), sub=2, tol=1e-10, use_amg=True) -> FieldResult:
-    """k*/kappa along x of a cubic cell of side ``length``: the eighth ``[0, L/2]^3``, ``n`` voxels a side."""
+def solve_lattice(length, sites, radii, n, cylinders=(), sub=2, tol=1e-10, use_amg=True, split=True) -> FieldResult:
+    """k*/kappa along x of a cubic cell of side ``length``: the eighth ``[0, L/2]^3``, ``n`` voxels a side
+    (:func:`solve_box_split`, or :func:`solve_box` with ``split=False``)."""
     radii = np.broadcast_to(np.asarray(radii, float), (len(sites),))
     half = length / 2
-    return solve_box(sites, radii, np.zeros(3), np.full(3, half), (n, n, n), axis=0, sub=sub, tol=tol,
-                     use_amg=use_amg, cylinders=cylinders)
+    solver = solve_box_split if split else solve_box
+    return solver(sites, radii, np.zeros(3), np.full(3, half), (n, n, n), axis=0, sub=sub, tol=tol,
+                  use_amg=use_amg, cylinders=cylinders)
 
 
 def network_lattice_kstar(kind, a_over_r, length, slope=ROJEK_SLOPE):
@@ -322,6 +423,34 @@ def network_lattice_kstar(kind, a_over_r, length, slope=ROJEK_SLOPE):
     k = slope * np.pi * a_over_r / 2.0
     bonds_dx2 = {"SC": 1.0, "BCC": 2.0, "FCC": 4.0}[kind]  # sum over a cell's bonds of (d_x / L)^2
     return k * bonds_dx2 / length
+
+
+def coupled_lattice_kstar(kind, a_over_r, length, slope=ROJEK_SLOPE):
+    """k*/kappa of the same lattice from the coupled neck network of /work/shared/NECK_COUPLING.md, for
+    comparison only (not part of the reference): necks as point sources on the sphere (``r = 1``),
+    ``T_s - T_i = q_i / K_self + sum_j q_j G(theta_ij)``, ``G = [1/s - 2 - ln(s (1 + s))] / (4 pi)`` with
+    ``s = sin(theta/2)``, ``1/K_self = 1/K_half + G(pi)``, ``K_half = slope pi a``. Under a unit gradient
+    along x the neck midway between two sites sits at their mean temperature (inversion centre), so
+    ``T_s - T_i = -d_x,i / 2``; ``k* = -(1 / 2 V_site) sum_i q_i d_x,i``."""
+    basis, dnn = LATTICES[kind]
+    d = dnn * length
+    cand = np.array([[i, j, k] for i in (-1, -0.5, 0, 0.5, 1) for j in (-1, -0.5, 0, 0.5, 1)
+                     for k in (-1, -0.5, 0, 0.5, 1)], float) * length
+    vec = cand[np.isclose(np.linalg.norm(cand, axis=1), d)]
+    if kind == "FCC":
+        vec = vec[np.isclose(np.abs(vec).sum(axis=1) / length, 1.0)]
+    n = vec / d
+    cos = np.clip(n @ n.T, -1.0, 1.0)
+    sig = np.sqrt((1.0 - cos) / 2.0)
+    off = ~np.eye(len(n), dtype=bool)
+    g = np.zeros_like(cos)
+    g[off] = (1.0 / sig[off] - 2.0 - np.log(sig[off] * (1.0 + sig[off]))) / (4.0 * np.pi)
+    g_pi = -(1.0 + np.log(2.0)) / (4.0 * np.pi)
+    g[~off] = 1.0 / (slope * np.pi * a_over_r) + g_pi
+    dx = vec[:, 0]
+    q = np.linalg.solve(g, -dx / 2.0)
+    v_site = length ** 3 / len(basis)
+    return float(-(q @ dx) / (2.0 * v_site))
 
 
 def network_rizza_kstar(length, a_corner, a_centre, slope=ROJEK_SLOPE):

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import mechanics, neck_growth, simulate
+from sintercond import mechanics, simulate
 from sintercond.scene import validate_scene
 from sintercond.scene.build import build_model
 from sintercond.state import ParticleState
