@@ -390,19 +390,39 @@ def lattice_geometry(kind, a_over_r, shape="rojek"):
 
 
 def rizza_bcc_geometry(a_corner, a_centre, r_corner=40.0):
-    """BCC cell of Rizza & Galati (2024) with lens necks: corner spheres of radius ``r_corner`` (80 um
-    diameter) joined along the cube edges by necks ``a_corner``, a centre sphere whose radius gives the neck
-    ``a_centre`` with each corner sphere. Returns ``(L, r_centre, sites, radii)``."""
-    length = 2.0 * np.sqrt(r_corner ** 2 - a_corner ** 2)
+    """BCC cell of Rizza & Galati (2024) with Rojek necks: corner spheres of radius ``r_corner`` (80 um
+    diameter) joined along the cube edges by necks ``a_corner`` (which sets the overlap, hence ``L``), and a
+    centre sphere whose radius is chosen so that its neck with each corner sphere is ``a_centre`` (the
+    paper's 58.6 um diameter and both necks cannot all hold with one ``L``). Returns
+    ``(L, r_centre, sites, radii, cylinders)``, spheres and necks touching the eighth ``[0, L/2]^3``."""
+    from scipy.optimize import brentq
+
+    from sintercond.neck import max_overlap, neck_radius
+
+    hmax = float(max_overlap(r_corner, r_corner))
+    h1 = brentq(lambda h: float(neck_radius(r_corner, r_corner, h)) - a_corner, 1e-12 * r_corner, hmax * (1 - 1e-12))
+    length = 2.0 * r_corner - h1
     dc = np.sqrt(3) / 2 * length
-    x = np.sqrt(r_corner ** 2 - a_centre ** 2)  # corner centre to neck plane
-    r_centre = float(np.sqrt((dc - x) ** 2 + a_centre ** 2))
+
+    def miss(r2):
+        h2 = r_corner + r2 - dc
+        return (float(neck_radius(r_corner, r2, h2)) if h2 > 0 else 0.0) - a_centre
+
+    grid = np.linspace(dc - r_corner + 1e-9, dc, 400)
+    values = np.array([miss(r2) for r2 in grid])
+    k = int(np.argmax(values > 0))  # first radius whose neck exceeds a_centre (neck grows with r2)
+    r_centre = brentq(miss, grid[k - 1], grid[k], xtol=1e-12)
     shifts = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)], float)
     sites = np.concatenate([shifts * length, (shifts + 0.5) * length])
     radii = np.concatenate([np.full(len(shifts), r_corner), np.full(len(shifts), r_centre)])
     half = length / 2
-    near = np.all((sites > -radii[:, None]) & (sites < half + radii[:, None]), axis=1)
-    return length, r_centre, sites[near], radii[near]
+    near = np.all((sites > -radii[:, None] - half) & (sites < half + radii[:, None] + half), axis=1)
+    sites, radii = sites[near], radii[near]
+    _, cylinders = necks(sites, radii)
+    touch = np.all((sites > -radii[:, None]) & (sites < half + radii[:, None]), axis=1)
+    cylinders = [c for c in cylinders
+                 if np.all(np.minimum(c[0], c[1]) < half + c[2]) and np.all(np.maximum(c[0], c[1]) > -c[2])]
+    return length, float(r_centre), sites[touch], radii[touch], cylinders
 
 
 def solve_lattice(length, sites, radii, n, cylinders=(), sub=2, tol=1e-10, use_amg=True, split=True) -> FieldResult:

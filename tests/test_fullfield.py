@@ -105,25 +105,25 @@ def test_richardson_recovers_a_power_law():
 
 
 def test_committed_sc_cells_match_the_fe_pair():
-    """The converged SC values (a chain: no neck coupling) agree with the FE pair within their stated
-    error plus 1 %, and the network (Rojek's linear law on the same neck) within 3 %."""
+    """The committed SC values (a chain: no neck coupling) agree with the independent FE pair within their
+    stated error, and the isolated network's ratio there is the pair law's own accuracy (Rojek's linear law
+    against that FE), not a coupling effect."""
     rows = [r for r in cells() if r["structure"] == "SC"]
-    assert rows
+    assert len(rows) >= 3
     for r in rows:
         ff, err, fe = float(r["fullfield"]), float(r["err_est"]), float(r["fe_pair"])
-        assert abs(ff - fe) <= err + 0.01 * fe, r
-        assert float(r["ratio"]) == pytest.approx(1.0, abs=0.03), r
+        assert abs(ff - fe) <= err, r
+        assert float(r["ratio"]) == pytest.approx(float(r["pair_law_over_fe"]), abs=float(r["ratio_err"])), r
 
 
 def test_committed_multi_neck_cells_over_conduct():
     """The isolated network over-conducts on cells with more than two necks per sphere: FCC (12 necks) by
-    over 10 % at a/r = 0.22; FCC and BCC (8 necks) both more than the SC chain at the same a/r."""
+    over 10 % at a/r = 0.22; FCC and BCC (8 necks) by more than the SC chain plus the stated errors."""
     rows = cells()
     sc = {r["a_over_r"]: float(r["ratio"]) for r in rows if r["structure"] == "SC"}
-    fcc = {r["a_over_r"]: float(r["ratio"]) for r in rows if r["structure"] == "FCC"}
-    bcc = {r["a_over_r"]: float(r["ratio"]) for r in rows if r["structure"] == "BCC"}
-    assert fcc["0.22"] > 1.1
-    for ar, ratio in bcc.items():
-        assert ratio > sc[ar], ar
-    for ar, ratio in fcc.items():
-        assert ratio > sc[ar], ar
+    fcc = [r for r in rows if r["structure"] == "FCC"]
+    bcc = [r for r in rows if r["structure"] == "BCC"]
+    assert fcc and bcc
+    assert next(float(r["ratio"]) for r in fcc if r["a_over_r"] == "0.22") > 1.1
+    for r in fcc + bcc:
+        assert float(r["ratio"]) - float(r["ratio_err"]) > sc[r["a_over_r"]], r
