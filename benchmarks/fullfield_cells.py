@@ -240,6 +240,7 @@ def main():
     ap.add_argument("--cluster-only", action="store_true", help="recompute the cluster row of the existing CSV")
     ap.add_argument("--rizza-only", action="store_true",
                     help="recompute the rows of Rizza & Galati's BCC cell (2.5, 5.5, 9.5 s) in the existing CSV")
+    ap.add_argument("--add", action="store_true", help="keep the existing CSV's other rows (replace same cells)")
     ap.add_argument("--refit", action="store_true",
                     help="recompute fullfield, err_est, order and ratio of the existing CSV from its value_grids")
     args = ap.parse_args()
@@ -260,15 +261,15 @@ def main():
         write(rows, command)
         write_md(rows, command)
         return
-    rows = []
+    rows = read() if args.add else []
     for k, ar in enumerate(map(float, args.ar.split(","))):
-        if k == 1 and not args.no_cluster:
+        if k == 1 and not (args.no_cluster or args.add):
             rows.append(cluster_row())
             write(rows, command)
             print(rows[-1], flush=True)
         for kind in args.kinds.split(","):
             row = lattice_row(kind, ar)
-            rows.append(row)
+            rows = [r for r in rows if not (r["structure"] == kind and r["a_over_r"] == ar)] + [row]
             write(rows, command)
             print(f"{kind:4s} a/r={ar:.2f} grids {row['n_voxels']:>12s} {row['value_grids']:>28s} "
                   f"ff={row['fullfield']:.5f}+-{row['err_est']:.5f} net={row['network']:.5f} "
