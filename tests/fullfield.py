@@ -1,8 +1,10 @@
 """Full-field verification solver: steady conduction in the solid of a cell of overlapping spheres.
 
-An independent reference for the conductance network (issue 40, part 3), NOT the library's hot path: it
-imports nothing from ``sintercond`` except where it evaluates the project's network on the same geometry
-(:func:`network_lattice_kstar`, :func:`network_cluster_conductance`).
+An independent reference for the conductance network (issue 40, part 3), NOT the library's hot path. The
+solve imports nothing from ``sintercond``; the geometry takes the project's neck radius
+(``sintercond.neck.neck_radius``) so that the network (:func:`network_lattice_kstar`,
+:func:`network_cluster_conductance`) and the full field see the same necks. Reference values, method and
+errors: ``tests/data/fullfield_cells.md`` (written by ``benchmarks/fullfield_cells.py``).
 
 Geometry: spheres (centre ``c_s``, radius ``r_s``); two closer than ``r_i + r_j`` (overlap ``h``) share a
 neck of one of two shapes (:func:`necks`). ``"rojek"`` (default, the project's own neck): Rojek et al. (2022)'s
@@ -17,13 +19,17 @@ fraction of the two sub-cell layers that touch the face (a 7-point Laplacian who
 solid; ``sub = 1`` is the plain staircase scheme, where a face conducts only between two solid voxels).
 No flux crosses the solid/void surface or the box's side faces (Neumann: insulated walls, or mirror planes
 of a lattice). The two box faces normal to ``axis`` are held at ``T = 1`` (``lo``) and ``T = 0`` (``hi``),
-each voxel touching one linked to it over half a spacing. ``Q`` is the heat entering at ``lo``.
+each voxel touching one linked to it over half a spacing. ``Q`` is the heat entering at ``lo``. This
+*plain* scheme (:func:`solve_box`) joins two spheres through any voxel that holds both, across the thin void
+wedge beside a neck, and over-conducts; the *split* scheme (:func:`solve_box_split`, the default of
+:func:`solve_lattice`) keeps one unknown per sphere in such a voxel and joins spheres only through the neck
+disc, and under-conducts through the staircase neck. The reference is the midpoint of the two.
 
 Symmetric cells: for a cubic lattice (SC, BCC, FCC) the planes ``x = 0`` and ``x = L/2`` of the conventional
 cell (side ``L``) are mirror planes, so under an imposed mean gradient along ``x`` the temperature is odd
 about each and both are isothermal; the transverse planes ``y, z = 0, L/2`` are mirror planes with no flux.
 The eighth ``[0, L/2]^3`` between held faces is therefore the exact periodic problem, and
-``k* = Q (L/2) / (L/2)^2`` per unit ``kappa`` and temperature difference (:func:`lattice_cell`).
+``k* = Q (L/2) / (L/2)^2`` per unit ``kappa`` and temperature difference (:func:`solve_lattice`).
 
 Solve: symmetric positive-definite sparse system, conjugate gradients preconditioned by pyamg's classical
 (Ruge-Stuben) AMG V-cycle when pyamg is installed (benchmarks), else by Jacobi (tiny test grids).
