@@ -406,28 +406,36 @@ def sample_posterior_replicates(model: Callable, x, ys, params0, *, priors=None,
             raise ValueError(f"ys[{k}] must be finite")
     _check_sampler_settings(num_samples, num_chains, num_warmup, warmup, seed, target_acceptance, max_doublings)
     program = problem.program()
-    u0 = program.initial_u(params0)
-    m = int(np.prod(ys.shape[1:]))
+    run = _replicates_program(program, problem.estimate_sigma, len(problem.layout.names), int(np.prod(ys.shape[1:])),
+                              num_chains, num_warmup, num_samples, warmup, float(target_acceptance), int(max_doublings),
+                              problem.sigma is None or problem.sigma.ndim)
+    keys = jax.random.split(jax.random.PRNGKey(int(seed)), ys.shape[0])
+    w = problem.w(jnp.asarray(ys[0]))
+    with jax.numpy_dtype_promotion("standard"):
+        out = run(keys, program.initial_u(params0), x, jnp.asarray(ys), w)
+    return np.asarray(out, dtype=np.float64)
 
-    def one(key, y):
-        w = problem.w(y)
+
+@functools.lru_cache(maxsize=8)
+def _replicates_program(program, estimate_sigma, p, m, num_chains, num_warmup, num_samples, warmup, target,
+                        doublings, _):
+    """The compiled, vmapped fit-and-sample of :func:`sample_posterior_replicates` (cached: one compilation)."""
+
+    def one(key, u0, x, y, w):
         u, _, _, _ = program.fit.run(u0, x, y, w)
         theta_hat = program.fit.constrained(u)
-        if problem.estimate_sigma:
+        if estimate_sigma:
             r, _ = program.fit.residuals(theta_hat, x, y, w)
-            sigma_hat = jnp.sqrt(jnp.sum(r**2) / max(m - len(problem.layout.names), 1))
+            sigma_hat = jnp.sqrt(jnp.sum(r**2) / max(m - p, 1))
         else:
             sigma_hat = 1.0
         cov = program.laplace(theta_hat, x, y, w / sigma_hat)
         u_hat, cov_u = program.start(theta_hat, cov, sigma_hat, m)
         draws, *_ = program.sample(jax.random.split(key, num_chains), u_hat, cov_u, x, y, w, num_warmup,
-                                   num_samples, warmup, float(target_acceptance), int(max_doublings))
+                                   num_samples, warmup, target, doublings)
         return program.constrained_all(draws).reshape(-1, draws.shape[-1])
 
-    keys = jax.random.split(jax.random.PRNGKey(int(seed)), ys.shape[0])
-    with jax.numpy_dtype_promotion("standard"):
-        out = jax.jit(jax.vmap(one))(keys, jnp.asarray(ys))
-    return np.asarray(out, dtype=np.float64)
+    return jax.jit(jax.vmap(one, in_axes=(0, None, None, 0, None)))
 
 
 def _check_sampler_settings(num_samples, num_chains, num_warmup, warmup, seed, target_acceptance, max_doublings):
