@@ -201,7 +201,8 @@ class PosteriorResult:
       rhat, ess: per name, split R-hat and the effective sample size over all chains.
       divergences: divergent transitions after warmup (all chains).
       evaluations: model evaluations with their derivatives: ``least_squares`` (each a value and a forward-mode
-        Jacobian), ``warmup`` and ``sampling`` (each a value and a reverse-mode gradient, one per leapfrog step).
+        Jacobian: the optimiser's steps plus its start, and at most two per polish step, an upper bound), ``warmup``
+        and ``sampling`` (each a value and a reverse-mode gradient: one per leapfrog step, and one per chain to start).
       step_size: per chain, after warmup (in the whitened ``u`` of the mass matrix).
       warnings: the diagnostics that failed (also issued as :class:`PosteriorWarning`).
     """
