@@ -41,7 +41,7 @@ LONGEST_FIRST = (
     "test_simulate.py",  # (80)
     "test_first_day.py",  # (70)
     "test_fitting.py",  # (65)
-    "test_posterior.py",  # (65 on a loaded 2-core machine, 26 s of CPU)
+    "test_posterior.py",  # (30; 65 on a loaded 2-core machine)
     "test_teeth_thermal.py",  # (60)
     "test_readme.py",  # (60)
     "test_stiffen.py",  # (45)
