@@ -46,6 +46,14 @@ class Free:
     def inverse(self, x):
         return x
 
+    def log_det_jacobian(self, u):
+        """``ln |dx/du|`` elementwise (the change of variables of a density, :mod:`fitting.posterior`)."""
+        return jnp.zeros_like(u)
+
+    def range(self) -> tuple:
+        """``(low, high)``: the values ``forward`` reaches."""
+        return (-math.inf, math.inf)
+
 
 @dataclasses.dataclass(frozen=True)
 class Positive:
@@ -56,6 +64,13 @@ class Positive:
 
     def inverse(self, x):
         return x + jnp.log(-jnp.expm1(-x))  # softplus^-1, stable for small and large x
+
+    def log_det_jacobian(self, u):
+        """``ln |dx/du| = ln sigmoid(u)`` elementwise."""
+        return jax.nn.log_sigmoid(u)
+
+    def range(self) -> tuple:
+        return (0.0, math.inf)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,6 +86,13 @@ class Bounded:
     def inverse(self, x):
         p = (x - self.low) / (self.high - self.low)
         return jnp.log(p) - jnp.log1p(-p)
+
+    def log_det_jacobian(self, u):
+        """``ln |dx/du| = ln(high - low) + ln sigmoid(u) + ln sigmoid(-u)`` elementwise."""
+        return math.log(self.high - self.low) + jax.nn.log_sigmoid(u) + jax.nn.log_sigmoid(-u)
+
+    def range(self) -> tuple:
+        return (float(self.low), float(self.high))
 
 
 class InvalidEvaluation(RuntimeError):
@@ -316,25 +338,37 @@ def _check_in_range(where, v, t):
 _TRANSFORMS = (Free, Positive, Bounded)
 
 
-def _leaf_transforms(params0, transforms) -> tuple:
+def _leaf_transforms(params0, transforms, default=None) -> tuple:
     """Each leaf's transform, in reading order: ``transforms`` has ``params0``'s structure, or a prefix of it (a
-    transform on a subtree applies to each of its leaves); a dict may leave keys out (``Free``)."""
+    transform on a subtree applies to each of its leaves); a dict may leave keys out (``default``: ``Free()``)."""
+
+    def check(where, t):
+        if isinstance(t, Bounded) and not (all(isinstance(b, numbers.Real) and not isinstance(b, bool)
+                                               and math.isfinite(b) for b in (t.low, t.high)) and t.low < t.high):
+            raise ValueError(f"{where} must have finite numbers low < high; got {t!r}")
+
+    return _per_leaf(params0, transforms, "transforms", lambda t: isinstance(t, _TRANSFORMS),
+                     "Free(), Positive() or Bounded(low, high)", check, Free() if default is None else default)
+
+
+def _per_leaf(params0, spec, argument, is_item, what, check, default) -> tuple:
+    """Each leaf's item of ``spec`` (a transform, a prior), in reading order: ``spec`` has ``params0``'s structure,
+    or a prefix of it (an item on a subtree applies to each of its leaves); a dict may leave keys out
+    (``default``). Errors name ``argument`` and the path; ``check(where, item)`` validates an item."""
     found = []
 
     def assign(node, t, path):
-        where = f"transforms{jax.tree_util.keystr(path)}"
-        if isinstance(t, _TRANSFORMS):
-            if isinstance(t, Bounded) and not (all(isinstance(b, numbers.Real) and not isinstance(b, bool)
-                                                   and math.isfinite(b) for b in (t.low, t.high)) and t.low < t.high):
-                raise ValueError(f"{where} must have finite numbers low < high; got {t!r}")
+        where = f"{argument}{jax.tree_util.keystr(path)}"
+        if is_item(t):
+            check(where, t)
             found.extend([t] * len(_walk(node)[1]))
             return
         kids = _children(node)
-        if kids is None:  # a parameter, and t is not a transform
+        if kids is None:  # a parameter, and t is not an item
             if _children(t):
                 raise ValueError(f"{where} is a {type(t).__name__} but params0{jax.tree_util.keystr(path)} is one "
-                                 "parameter (on an array, one transform applies to each element)")
-            raise ValueError(f"{where} must be Free(), Positive() or Bounded(low, high); got {t!r}")
+                                 f"parameter (on an array, one item of {argument} applies to each element)")
+            raise ValueError(f"{where} must be {what}; got {t!r}")
         if isinstance(node, Mapping) and isinstance(t, Mapping):
             unknown = [k for k in t if k not in node]
             if unknown:
@@ -344,7 +378,7 @@ def _leaf_transforms(params0, transforms) -> tuple:
                 if isinstance(key, jax.tree_util.DictKey) and key.key in t:
                     assign(child, t[key.key], (*path, key))
                 else:
-                    found.extend([Free()] * len(_walk(child)[1]))
+                    found.extend([default] * len(_walk(child)[1]))
             return
         t_kids = _children(t)
         if t_kids is None or [k for k, _ in t_kids] != [k for k, _ in kids] or type(t) is not type(node):
@@ -353,7 +387,7 @@ def _leaf_transforms(params0, transforms) -> tuple:
         for (key, child), (_, t_child) in zip(kids, t_kids):
             assign(child, t_child, (*path, key))
 
-    assign(params0, transforms, ())
+    assign(params0, spec, ())
     return tuple(found)
 
 
@@ -463,6 +497,7 @@ class _FitProgram:
     run: Callable  # (u0, x, y, w) -> (u, steps, loss history, any evaluation flagged)
     constrained: Callable  # u -> theta
     residuals_and_jacobian: Callable  # (theta, x, y, w) -> (weighted residuals, d/dtheta, flagged), forward mode
+    residuals: Callable  # (theta, x, y, w) -> (weighted residuals, flagged) of the model (any mode; not jitted)
 
 
 @functools.lru_cache(maxsize=16)
@@ -506,7 +541,8 @@ def _fit_program(model, forward_model, layout, transforms, relative, method, lea
         jac, (residual, flag) = jax.jacfwd(_with_itself_as_aux(r), has_aux=True)(theta)
         return residual, jac, flag
 
-    return _FitProgram(jax.jit(run), jax.jit(constrained), residuals_and_jacobian)
+    return _FitProgram(jax.jit(run), jax.jit(constrained), residuals_and_jacobian,
+                       functools.partial(weighted_residuals, model))
 
 
 def _with_itself_as_aux(residuals):

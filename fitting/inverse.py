@@ -367,6 +367,29 @@ def fit_conductivity(experiment: ProbeExperiment, readings, specific_heat, kappa
                          weights=weights, jacobian_model=forward_model, **options)
 
 
+def conductivity_posterior(experiment: ProbeExperiment, readings, specific_heat, kappa0, noise, prior=None,
+                           kappa_max=None, **sampler):
+    """The posterior of ``kappa`` (W/(m K)) from probe readings with ``c`` (J/(kg K)) and the noise (K) known.
+
+    The same model and bounds as :func:`fit_conductivity` (``kappa`` in ``(0, kappa_max)``), sampled by
+    :func:`fitting.posterior.sample_posterior` (NUTS on the adjoint's gradients, started from the least-squares
+    fit); ``prior`` on ``kappa`` (default uniform on the bounds). ``sampler`` goes to ``sample_posterior``.
+    Returns its :class:`fitting.posterior.PosteriorResult`.
+    """
+    from fitting.posterior import Uniform, sample_posterior
+
+    limit = experiment.max_diffusivity_ratio() * specific_heat
+    kappa_max = limit if kappa_max is None else min(float(kappa_max), limit)
+    if not 0 < kappa0 < kappa_max:
+        raise ValueError(f"kappa0 must lie in (0, {kappa_max:.6g}) W/(m K) (stability limit at c = {specific_heat})")
+    model, forward_model = _conductivity_models(experiment, float(specific_heat))
+    prior = Uniform(0.0, kappa_max) if prior is None else prior
+    sampler = {"fit_options": {"method": "levenberg_marquardt", "max_steps": 50, "loss_tol": 1e-10}, **sampler}
+    return sample_posterior(model, None, jnp.asarray(readings), {"kappa": float(kappa0)}, priors={"kappa": prior},
+                            transforms={"kappa": Bounded(0.0, kappa_max)}, sigma=noise, jacobian_model=forward_model,
+                            **sampler)
+
+
 @functools.lru_cache(maxsize=16)
 def _conductivity_models(experiment, specific_heat):
     """The readings as functions of ``{"kappa"}`` (adjoint and autodiff), one pair per experiment and ``c``,

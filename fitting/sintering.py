@@ -304,19 +304,8 @@ class SinteringFit:
         return float(np.log(self.values[key])), float(np.sqrt(gradient @ self.fit.covariance @ gradient))
 
 
-def fit_kinetics(series: NeckSeries, law="grain_boundary", *, exponent=6.0, size_exponent=0.0,
-                 dihedral_angle=150.0, reference_temperature=None, start=None, max_steps=200) -> SinteringFit:
-    """Least-squares fit of a kinetic law to a neck series (Levenberg-Marquardt, Gauss-Newton intervals).
-
-    Args:
-      series: from :func:`neck_series` (or synthetic, :meth:`NeckSeries.with_necks`).
-      law: ``"grain_boundary"`` (n = 6) or ``"power_law"``.
-      exponent: the power law's ``n`` (fixed).
-      size_exponent: the power law's ``p``: a number (fixed) or ``None`` (fitted with the rest).
-      dihedral_angle: psi of the grain-boundary law (degrees, fixed).
-      reference_temperature: ``T_ref`` (K); default the ramp's time-weighted mean.
-      start: fit-space starting values (default: Q = 100 kJ/mol and the rate that matches the last reading).
-    """
+def _setup(series, law, exponent, size_exponent, dihedral_angle, reference_temperature, start):
+    """``(T_ref, model, fit-space starting values)`` of a kinetic fit (:func:`fit_kinetics`)."""
     t_ref = ramp_temperature_mean(series) if reference_temperature is None else float(reference_temperature)
     model = _model(law, t_ref, exponent, size_exponent, dihedral_angle)
     params0 = {"log_rate_ref": 0.0, "activation_energy": 100.0}
@@ -334,6 +323,83 @@ def fit_kinetics(series: NeckSeries, law="grain_boundary", *, exponent=6.0, size
         params0["log_rate_ref"] = float(np.log(u / series.times.max() / scale))
     else:
         params0.update({k: float(v) if isinstance(v, numbers.Integral) else v for k, v in start.items()})
+    return t_ref, model, params0
+
+
+@dataclasses.dataclass(frozen=True)
+class KineticsPosterior:
+    """The posterior of a kinetic law's parameters (:func:`kinetics_posterior`).
+
+    Attributes:
+      posterior: the :class:`fitting.posterior.PosteriorResult` in fit space (``log_rate_ref``,
+        ``activation_energy`` in kJ/mol, ...).
+      reference_temperature: ``T_ref`` (K).
+      log_prefactor: ``[draws]`` ``ln A`` (grain boundary, A in m^4 K/s) or ``ln K0`` (power law) of each draw:
+        ``log_rate_ref + ln T_ref + Q / (R T_ref)`` (the module docstring's relation, per draw: no linearisation).
+    """
+
+    law: str
+    series: NeckSeries
+    posterior: object
+    reference_temperature: float
+    log_prefactor: np.ndarray
+    model: object = dataclasses.field(repr=False, default=None)
+
+    def necks_um(self, times, r_i=40.0 * UM, r_j=40.0 * UM, every=1) -> np.ndarray:
+        """Necks (um) of one couple (radii m) at ramp ``times`` (s) for every ``every``-th draw: ``[draws, times]``
+        (the posterior predictive mean curve's draws; add the noise for a predictive band of readings)."""
+        durations, temperatures, index = st.preheating_history(np.asarray(times, dtype=np.float64))
+        names = [n for n in self.posterior.names if n != "sigma"]
+        draws = self.posterior.draws[::every, :len(names)]
+
+        @jax.jit
+        @jax.vmap
+        def one(row):
+            params = self.model.params(dict(zip(names, row)))
+            return st.grow_neck(self.law, 0.0, jnp.atleast_1d(r_i), jnp.atleast_1d(r_j), temperatures[:, None],
+                                durations, params)[index, 0] / UM
+
+        return np.asarray(one(jnp.asarray(draws)))
+
+
+def kinetics_posterior(series: NeckSeries, law="grain_boundary", *, priors=None, sigma=None, sigma_prior=None,
+                       exponent=6.0, size_exponent=0.0, dihedral_angle=150.0, reference_temperature=None, start=None,
+                       **sampler) -> KineticsPosterior:
+    """The posterior of a kinetic law's parameters given a neck series (NUTS through :func:`sintercond.sintering.grow_neck`).
+
+    The model and fit space of :func:`fit_kinetics`; ``priors`` per fit-space parameter (default: ``Q`` uniform on
+    (1, 1000) kJ/mol, ``log_rate_ref`` flat); ``sigma`` the necks' noise (um), or None: sampled (the residuals of
+    phase-field data are model misfit, their size unknown). ``sampler`` goes to
+    :func:`fitting.posterior.sample_posterior`.
+    """
+    from fitting.posterior import Uniform, sample_posterior
+
+    t_ref, model, params0 = _setup(series, law, exponent, size_exponent, dihedral_angle, reference_temperature, start)
+    priors = {"activation_energy": Uniform(1.0, 1000.0)} if priors is None else priors
+    post = sample_posterior(model, series, jnp.asarray(series.necks_um), params0, priors=priors, sigma=sigma,
+                            sigma_prior=sigma_prior, **sampler)
+    draws = post.draws
+    names = post.names
+    log_prefactor = (draws[:, names.index("log_rate_ref")] + math.log(t_ref)
+                     + 1e3 * draws[:, names.index("activation_energy")] / (st.GAS_CONSTANT * t_ref))
+    return KineticsPosterior(law, series, post, t_ref, log_prefactor, model)
+
+
+def fit_kinetics(series: NeckSeries, law="grain_boundary", *, exponent=6.0, size_exponent=0.0,
+                 dihedral_angle=150.0, reference_temperature=None, start=None, max_steps=200) -> SinteringFit:
+    """Least-squares fit of a kinetic law to a neck series (Levenberg-Marquardt, Gauss-Newton intervals).
+
+    Args:
+      series: from :func:`neck_series` (or synthetic, :meth:`NeckSeries.with_necks`).
+      law: ``"grain_boundary"`` (n = 6) or ``"power_law"``.
+      exponent: the power law's ``n`` (fixed).
+      size_exponent: the power law's ``p``: a number (fixed) or ``None`` (fitted with the rest).
+      dihedral_angle: psi of the grain-boundary law (degrees, fixed).
+      reference_temperature: ``T_ref`` (K); default the ramp's time-weighted mean.
+      start: fit-space starting values (default: Q = 100 kJ/mol and the rate that matches the last reading).
+    """
+    t_ref, model, params0 = _setup(series, law, exponent, size_exponent, dihedral_angle, reference_temperature,
+                                   start)
     fit = least_squares(model, series, jnp.asarray(series.necks_um), params0, method="levenberg_marquardt",
                         max_steps=max_steps)
     values = {k: float(v) for k, v in model.params(fit.params).items()}
@@ -526,8 +592,8 @@ def bed_conductivity_along_ramp(fit: SinteringFit, times=(0.5, 3.5, 6.5, 9.5)) -
 
 
 __all__ = [
-    "IdentifiabilityWarning", "NeckSeries", "SERIES", "SinteringFit", "bed_conductivity_along_ramp",
+    "IdentifiabilityWarning", "KineticsPosterior", "NeckSeries", "SERIES", "SinteringFit", "bed_conductivity_along_ramp",
     "conductivity_along_ramp", "exponent_valley",
-    "fit_kinetics", "grown_necks", "lattice_conductivity", "neck_series", "ramp_temperature_mean",
+    "fit_kinetics", "grown_necks", "kinetics_posterior", "lattice_conductivity", "neck_series", "ramp_temperature_mean",
     "synthetic_series",
 ]

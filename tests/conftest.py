@@ -30,7 +30,8 @@ LONGEST_FIRST = (
     "test_doc_scenes.py",  # (460 on a loaded machine) every scene of the docs, reduced
     "test_mechanics.py",  # (190)
     "test_sintering_mechanics.py",  # (180)
-    "test_notebooks.py",  # (220) the other six notebooks
+    "test_notebooks.py",  # (220) the other six notebooks (calibrate_posterior: about 90 s of CPU more)
+    "test_posterior_kinetics.py",  # (150 on a loaded 2-core machine) NUTS through grow_neck, compiled twice
     "test_moving.py",  # (90)
     "test_inverse.py",  # (110)
     "test_dryden_zok.py",  # (105)
@@ -41,6 +42,7 @@ LONGEST_FIRST = (
     "test_simulate.py",  # (80)
     "test_first_day.py",  # (70)
     "test_fitting.py",  # (65)
+    "test_posterior.py",  # (30; 65 on a loaded 2-core machine)
     "test_teeth_thermal.py",  # (60)
     "test_readme.py",  # (60)
     "test_stiffen.py",  # (45)
