@@ -128,7 +128,7 @@ def observe(scene, model, state, probe) -> Observation:
     needs_power = (any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics is not None
                    or "vtp" in scene["run"]["formats"])
     power, after = probe(state, model.params) if needs_power else (None, None)
-    planes = scene_walls(scene, np.asarray(model.state.particles.positions), radii)
+    planes = list(model.planes) or scene_walls(scene, np.asarray(model.state.particles.positions), radii)
     if model.physics.mechanics is not None:
         planes = list(model.physics.mechanics.walls)
     t = state_time(state)

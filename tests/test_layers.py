@@ -25,7 +25,8 @@ LAYERS = {
     "drive": ["sim", "sim.physics", "sim.state", "sim.contacts", "sim.terms", "sim.terms.sources", "sim.terms.walls",
               "sim.terms.conduction", "sim.terms.mechanics", "sim.terms.sintering", "sim.step", "sim.stability",
               "sim.validation", "sim.rollout", "simulate", "steady", "rollout", "guards"],
-    "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.build", "observe",
+    "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.typed", "scene.build",
+            "observe",
             "settle", "rolling", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
 }
 RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}

@@ -21,7 +21,8 @@ refused beyond the documented limits, all before a packing is built.
 
 The package: :mod:`~sintercond.scene.schema` (the keys), :mod:`~sintercond.scene.validate` (checks and defaults,
 :func:`load_scene`), :mod:`~sintercond.scene.estimate` (the run's cost from the scene),
-:mod:`~sintercond.scene.reference` (``docs/scenes.md``) and :mod:`~sintercond.scene.build` (a validated scene
+:mod:`~sintercond.scene.reference` (``docs/scenes.md``), :mod:`~sintercond.scene.typed` (the validated scene as
+frozen dataclasses made from the schema, what the build reads) and :mod:`~sintercond.scene.build` (a validated scene
 to the model a run steps: simulator, parameters, initial state; imported on first use, it pulls in the simulator).
 """
 

@@ -17,6 +17,7 @@ import numpy as np
 from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
 from sintercond.scene.schema import output_interval
 from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
+from sintercond.scene.typed import Wall, typed_scene
 from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, file_temperatures, restitution_damping_ratio)
@@ -43,6 +44,7 @@ class Model:
     lattice: bool = False  # a simple cubic packing (k* between its end layers)
     output_every: int = 1  # steps between outputs: run.output_every, or about DEFAULT_OUTPUTS over the run
     checkpoint_every: int = 1  # steps between checkpoints (run.checkpoint_every or DEFAULT_CHECKPOINT_OUTPUTS outputs)
+    planes: tuple = ()  # the scene's walls as sintercond.walls.PlaneWall at the packing built (scene_walls), once
 
     @property
     def physics(self) -> simulate.Physics:
@@ -105,9 +107,10 @@ class SettlingProgress:
 def initial_temperatures(scene):
     """The particles' start temperatures (K): ``initial.temperature``, or with ``initial.from_file`` the packing
     file's temperature column (:func:`sintercond.packing_files.read_temperatures`)."""
-    if scene["initial"]["from_file"]:
-        return np.array(file_temperatures(scene["packing"]))
-    return scene["initial"]["temperature"]
+    scene = typed_scene(scene)
+    if scene.initial.from_file:
+        return np.array(file_temperatures(scene.packing))
+    return scene.initial.temperature
 
 
 def build_packing(scene, log=None):
@@ -117,62 +120,59 @@ def build_packing(scene, log=None):
 
     ``bed``: the bed's figures for the summary (empty for listed spheres).
     """
-    p = scene["packing"]
-    if p["kind"] == "spheres":
-        return np.asarray(p["centres"], np.float64), np.asarray(p["radii"], np.float64), {}
-    if p["kind"] == "file":
+    scene = typed_scene(scene)
+    p = scene.packing
+    if p.kind == "spheres":
+        return np.asarray(p.centres, np.float64), np.asarray(p.radii, np.float64), {}
+    if p.kind == "file":
         centres, radii = file_packing(p)
         return np.array(centres), np.array(radii), {}
-    if p["kind"] == "poured":
-        rng = np.random.default_rng(p["seed"])
-        radii = packing.truncated_normal_radii(p["particles"], p["radius_mean"], p["radius_std"],
-                                               p["truncation"], rng)
-        packed = packing.pour(radii, p["lateral_size"], dem_material(scene), seed=rng, start=p["start"],
-                              temperature=scene["initial"]["temperature"],
-                              progress=SettlingProgress(log, len(radii)) if log else None,
-                              soft_modulus=p.get("soft_modulus"))
+    if p.kind == "poured":
+        rng = np.random.default_rng(p.seed)
+        radii = packing.truncated_normal_radii(p.particles, p.radius_mean, p.radius_std, p.truncation, rng)
+        packed = packing.pour(radii, p.lateral_size, dem_material(scene), seed=rng, start=p.start,
+                              temperature=scene.initial.temperature,
+                              progress=SettlingProgress(log, len(radii)) if log else None, soft_modulus=p.soft_modulus)
     else:
-        count = (packing.bed_particle_count(p["lateral_size"], p["height"], p["diameter_range"])
-                 if p["kind"] == "powder_bed" else 0)
+        count = packing.bed_particle_count(p.lateral_size, p.height, p.diameter_range) if p.kind == "powder_bed" else 0
         progress = SettlingProgress(log, count) if log and count else None
         if p.get("method") == "dem":
-            packed = packing.powder_bed(p["lateral_size"], p["height"], tuple(p["diameter_range"]), seed=p["seed"],
-                                        method="dem", material=dem_material(scene), progress=progress,
-                                        soft_modulus=p.get("soft_modulus"), start=p["start"])
-            packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p["sinter_swelling"]))
+            packed = packing.powder_bed(p.lateral_size, p.height, tuple(p.diameter_range), seed=p.seed, method="dem",
+                                        material=dem_material(scene), progress=progress, soft_modulus=p.soft_modulus,
+                                        start=p.start)
+            packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p.sinter_swelling))
         else:
             packed = packing.from_scene(p, progress=progress)
     return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}
 
 
 def _nusselt(convection):
-    if "reynolds" in convection:
-        return float(heat_sources.whitaker_nusselt(convection["reynolds"], convection["prandtl"]))
-    return convection["nusselt"]
+    if convection.reynolds is not None:
+        return float(heat_sources.whitaker_nusselt(convection.reynolds, convection.prandtl))
+    return convection.nusselt
 
 
 def scene_physics(scene, walls=0) -> simulate.Physics:
     """The static physics spec of a validated scene."""
-    c, s, ramp = scene["conduction"], scene.get("sintering"), scene.get("preheating")
-    beam = scene.get("beam")
-    held = any(w["mode"] == "held" for w in _walls(scene)) or (ramp is not None and ramp["hold"] == "all")
+    scene = typed_scene(scene)
+    c, s, ramp, m = scene.conduction, scene.sintering, scene.preheating, scene.material
+    held = any(w.mode == "held" for w in _walls(scene)) or (ramp is not None and ramp.hold == "all")
     # a contact resistance makes the law nonlinear in the conductivity, growing necks and kappa(T) change it: lift it
-    table = "conductivity_table" in scene["material"]
-    lifted = c.get("params", {}).get("contact_resistance", 0.0) or s is not None or table
+    table = m.conductivity_table is not None
+    lifted = (c.params or {}).get("contact_resistance", 0.0) or s is not None or table
     return simulate.Physics(
         conduction=simulate.Conduction(
-            law=c["law"], neck_model=c.get("neck_model"), conductance="lifted" if lifted else "table",
+            law=c.law, neck_model=c.neck_model, conductance="lifted" if lifted else "table",
             held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table,
-            specific_heat_table="specific_heat_table" in scene["material"]),
-        sources=simulate.Sources(beam=None if beam is None else beam["kind"], convection="convection" in scene,
-                                 radiation="radiation" in scene),
-        sintering=None if s is None else neck_growth.Sintering(law=s["law"], every=s["every"],
-                                                               shrinkage=s["shrinkage"]))
+            specific_heat_table=m.specific_heat_table is not None),
+        sources=simulate.Sources(beam=None if scene.beam is None else scene.beam.kind,
+                                 convection=scene.convection is not None, radiation=scene.radiation is not None),
+        sintering=None if s is None else neck_growth.Sintering(law=s.law, every=s.every, shrinkage=s.shrinkage))
 
 
 def mechanics_on(scene) -> bool:
     """Whether a validated scene runs the coupled thermo-mechanical step."""
-    return scene["physics"]["mechanics"]
+    return bool(typed_scene(scene).physics.mechanics)
 
 
 def contact_material(scene) -> dict:
@@ -182,29 +182,31 @@ def contact_material(scene) -> dict:
     (:func:`sintercond.scene.restitution_damping_ratio`); wall coefficients
     default to the particles'.
     """
-    m = scene["mechanics"]
-    xi_con = restitution_damping_ratio(m["restitution"]) if "restitution" in m else m["damping"]
-    return dict(E0=m["young_modulus"], nu=m["poisson_ratio"], xi_con=xi_con, xi_fric=m["tangential_damping"],
-                xi_rol=m["rolling_damping"], mu=m["friction"], mu_r=m["rolling_friction"], mu_wall=m["wall_friction"],
-                mu_r_wall=m["wall_rolling_friction"])
+    m = typed_scene(scene).mechanics
+    xi_con = restitution_damping_ratio(m.restitution) if m.restitution is not None else m.damping
+    return dict(E0=m.young_modulus, nu=m.poisson_ratio, xi_con=xi_con, xi_fric=m.tangential_damping,
+                xi_rol=m.rolling_damping, mu=m.friction, mu_r=m.rolling_friction, mu_wall=m.wall_friction,
+                mu_r_wall=m.wall_rolling_friction)
 
 
 def mechanical_params(scene) -> mechanics.MechanicalParams | None:
     """The contact material of a validated scene (:func:`contact_material`, ``[softening]``), or None without mechanics."""
+    scene = typed_scene(scene)
     if not mechanics_on(scene):
         return None
-    soft = scene.get("softening")
+    soft = scene.softening
     f = lambda x: jnp.asarray(float(x))  # noqa: E731
     return mechanics.MechanicalParams(
-        **{k: f(v) for k, v in contact_material(scene).items()}, theta_star=f(soft["onset_temperature"] if soft else 400.0),
-        rate=f(soft["rate"] if soft else 1.0), E_min=f(soft["min_modulus"] if soft else 0.0))
+        **{k: f(v) for k, v in contact_material(scene).items()}, theta_star=f(soft.onset_temperature if soft else 400.0),
+        rate=f(soft.rate if soft else 1.0), E_min=f(soft.min_modulus if soft else 0.0))
 
 
 def dem_material(scene) -> settle.DemMaterial:
     """The contact material a poured packing settles with: :func:`contact_material` and ``material.density``."""
+    scene = typed_scene(scene)
     c = contact_material(scene)
-    return settle.DemMaterial(density=scene["material"]["density"], **{("E" if k == "E0" else k): float(v)
-                                                                       for k, v in c.items()})
+    return settle.DemMaterial(density=scene.material.density, **{("E" if k == "E0" else k): float(v)
+                                                                 for k, v in c.items()})
 
 
 def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
@@ -214,12 +216,13 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     ``Mechanics.walls``; a held wall pushes as an insulated one (its
     particles are held by ``Conduction.held``, :func:`_apply_walls`).
     """
-    p, c = scene["physics"], contact_material(scene)
+    scene = typed_scene(scene)
+    p, c = scene.physics, contact_material(scene)
     walls_ = tuple(dataclasses.replace(w, mode="insulated", temperature=None) if w.mode == "held" else w
                    for w in planes) + container_walls(scene)
     spec = mechanics.Mechanics.create(
-        walls_, gravity=p["gravity"], shear=p["shear"], slip_direction=p["slip_direction"],
-        rolling_projection=p["rolling_projection"], damping_clamp=p["damping_clamp"], softening="softening" in scene,
+        walls_, gravity=p.gravity, shear=p.shear, slip_direction=p.slip_direction,
+        rolling_projection=p.rolling_projection, damping_clamp=p.damping_clamp, softening=scene.softening is not None,
         friction=c["mu"] > 0 or c["mu_wall"] > 0, rolling=c["mu_r"] > 0 or c["mu_r_wall"] > 0,
         wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
     conduction = dataclasses.replace(thermal_physics.conduction, conductance="lifted", conducting_walls=0)
@@ -233,20 +236,21 @@ _BOX_FACES = ((2, "min"), (0, "min"), (0, "max"), (1, "min"), (1, "max"))
 def packing_box(scene):
     """``(lo [3], hi [3])`` (m) of the box a validated scene's packing fills, ``hi[2]`` infinite (an open top), or
     None for a packing without one (a powder bed's container ``[0, lateral_size]^2`` over ``z = 0``)."""
-    p = scene["packing"]
-    if p["kind"] != "powder_bed":
+    p = typed_scene(scene).packing
+    if p.kind != "powder_bed":
         return None
-    return np.zeros(3), np.array([p["lateral_size"], p["lateral_size"], np.inf])
+    return np.zeros(3), np.array([p.lateral_size, p.lateral_size, np.inf])
 
 
 def container_walls(scene) -> tuple:
     """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.settle.box_walls`) on each face
     the scene gives no wall of its own (``physics.container``, true by default): without them the moving bed
     spreads over the floor, or falls."""
-    if not scene["physics"]["container"] or packing_box(scene) is None:  # filled with the mechanics
+    scene = typed_scene(scene)
+    if not scene.physics.container or packing_box(scene) is None:  # filled with the mechanics
         return ()
-    given = {(w["axis"], w["side"]) for w in _walls(scene)}
-    box = settle.box_walls(scene["packing"]["lateral_size"])
+    given = {(w.axis, w.side) for w in _walls(scene)}
+    box = settle.box_walls(scene.packing.lateral_size)
     return tuple(wall for face, wall in zip(_BOX_FACES, box) if face not in given)
 
 
@@ -268,30 +272,28 @@ class PackingBoxWarning(UserWarning):
 
 def scene_params(scene) -> simulate.Params:
     """The differentiable parameters of a validated scene."""
-    m, beam, conv, rad = scene["material"], scene.get("beam"), scene.get("convection"), scene.get("radiation")
+    scene = typed_scene(scene)
+    m, beam, conv, rad, ramp = scene.material, scene.beam, scene.convection, scene.radiation, scene.preheating
     f = jnp.asarray
     return simulate.Params(
         mechanics=mechanical_params(scene),
-        conductivity=f([m["conductivity"]]) if "conductivity_table" not in m else materials.tabulated(
-            *np.asarray(m["conductivity_table"], np.float64).T),
-        specific_heat=f([m["specific_heat"]]) if "specific_heat_table" not in m else materials.tabulated(
-            *np.asarray(m["specific_heat_table"], np.float64).T),
-        law={k: f(v) for k, v in scene["conduction"].get("params", {}).items()},
-        sintering=None if "sintering" not in scene else {k: f(v) for k, v in
-                                                         scene["sintering"].get("params", {}).items()},
-        held_ramp=None if "preheating" not in scene else simulate.HeldRampParams(
-            f(scene["preheating"]["end_temperature"]), f(scene["preheating"]["duration"]),
-            f(float(scene["preheating"]["steps"]))),
+        conductivity=f([m.conductivity]) if m.conductivity_table is None else materials.tabulated(
+            *np.asarray(m.conductivity_table, np.float64).T),
+        specific_heat=f([m.specific_heat]) if m.specific_heat_table is None else materials.tabulated(
+            *np.asarray(m.specific_heat_table, np.float64).T),
+        law={k: f(v) for k, v in (scene.conduction.params or {}).items()},
+        sintering=None if scene.sintering is None else {k: f(v) for k, v in (scene.sintering.params or {}).items()},
+        held_ramp=None if ramp is None else simulate.HeldRampParams(f(ramp.end_temperature), f(ramp.duration),
+                                                                   f(float(ramp.steps))),
         beam=None if beam is None else simulate.BeamParams(
-            intensity=f(beam["intensity"]), reach=f(beam["attenuation"] if beam["kind"] == "laser" else beam["max_depth"]),
-            spot_radius=f(beam["spot_radius"]), absorptance=f(beam["absorptance"]), speed=f(beam["speed"]),
-            path=f(beam["path"], dtype=float),
-            segments_on=None if "segments_on" not in beam else f(beam["segments_on"], dtype=float),
-            after_path=f(1.0 if beam["after_path"] == "stay" else 0.0)),
+            intensity=f(beam.intensity), reach=f(beam.attenuation if beam.kind == "laser" else beam.max_depth),
+            spot_radius=f(beam.spot_radius), absorptance=f(beam.absorptance), speed=f(beam.speed),
+            path=f(beam.path, dtype=float),
+            segments_on=None if beam.segments_on is None else f(beam.segments_on, dtype=float),
+            after_path=f(1.0 if beam.after_path == "stay" else 0.0)),
         convection=None if conv is None else simulate.ConvectionParams(
-            f(conv["environment_temperature"]), f(conv["environment_conductivity"]), f(_nusselt(conv))),
-        radiation=None if rad is None else simulate.RadiationParams(f(rad["environment_temperature"]),
-                                                                    f(rad["emissivity"])))
+            f(conv.environment_temperature), f(conv.environment_conductivity), f(_nusselt(conv))),
+        radiation=None if rad is None else simulate.RadiationParams(f(rad.environment_temperature), f(rad.emissivity)))
 
 
 def build_model(scene, centres=None, radii=None, log=None) -> Model:
@@ -312,6 +314,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     the key that sets it. Then the step is shortened to ``duration / n_steps`` so that
     the run ends exactly at ``run.duration``. ``log(message)`` reports each phase.
     """
+    scene = typed_scene(scene)
     log = log or (lambda message: None)
     bed = {}
     if centres is None:
@@ -320,31 +323,31 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         centres, radii, bed = build_packing(scene, log)
         log(f"packing: {len(radii):,} particles in {time.perf_counter() - start:.1f} s")
     check_distinct_centres(None, centres)  # a pour, a bed, or a run folder's packing.npz as well
-    m, c = scene["material"], scene["conduction"]
+    m, c = scene.material, scene.conduction
     physics = scene_physics(scene)
     log(f"network: contacts and conductances of {len(radii):,} particles")
     start = time.perf_counter()
     try:
         unit = physics.conduction.conductance == "table"
-        table = network.contact_table(centres, radii, 1.0 if unit else m["conductivity"],
-                                      c["law"], c.get("params"), c.get("neck_model"))
+        table = network.contact_table(centres, radii, 1.0 if unit else m.conductivity, c.law, c.params, c.neck_model)
     except ValueError as err:
         raise SceneError(f"the packing does not fit the conduction model: {err}") from None
     contact_count = len(table.pairs())
     log(f"network: {contact_count:,} contacts in "
         f"{time.perf_counter() - start:.1f} s")
-    fixed_mask, fixed_temperature, conducting = _apply_walls(scene, centres, radii)
-    if "preheating" in scene and scene["preheating"]["hold"] == "all":  # an isothermal cell on the ramp
+    planes = scene_walls(scene, centres, radii)  # built once: the run and its observations take them from the model
+    fixed_mask, fixed_temperature, conducting = _apply_walls(planes, centres, radii)
+    if scene.preheating is not None and scene.preheating.hold == "all":  # an isothermal cell on the ramp
         fixed_mask = np.ones(len(radii), bool)
-        fixed_temperature = np.full(len(radii), scene["initial"]["temperature"])
-    touching_walls = wall_contacts(scene, centres, radii, log)
+        fixed_temperature = np.full(len(radii), scene.initial.temperature)
+    touching_walls = wall_contacts(scene, centres, radii, log, planes=planes)
     lifted = physics.conduction.conductance == "lifted"
     physics = dataclasses.replace(physics, conduction=dataclasses.replace(
         physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
-    particles = particle_state(centres, radii, initial_temperatures(scene), m["density"], m["specific_heat"],
+    particles = particle_state(centres, radii, initial_temperatures(scene), m.density, m.specific_heat,
                                fixed=fixed_mask, fixed_temperature=fixed_temperature)
     if not lifted:
-        k_wall, t_wall = _merged_wall_conductance(scene, centres, radii, conducting)
+        k_wall, t_wall = _merged_wall_conductance(scene, radii, conducting)
         contacts = simulate.table_contacts(table, k_wall, t_wall)
     else:
         contacts = simulate.lifted_contacts(physics, centres, radii,
@@ -355,13 +358,12 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     if physics.sintering is not None:
         many_body = physics.sintering.shrinkage == "many_body"
         necks = neck_growth.neck_state(contacts, particles.temperature,
-                                       supports=wall_supports(scene, centres, radii) if many_body else None,
+                                       supports=wall_supports(scene, centres, radii, planes) if many_body else None,
                                        positions=particles.positions if many_body else None)
     # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
     limiting = contacts if necks is None else neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts,
                                                                       particles.radii)
     state = simulate.init_state(particles, limiting, 1.0, sintering=necks)
-    run = scene["run"]
     sources = jax.jit(thermal.source_conductance, static_argnums=0)(physics.sources, particles.radii, params,
                                                                      _highest_temperature(scene))
     # every particle held (an isothermal cell on a ramp): no conduction to keep stable
@@ -370,27 +372,27 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
                                          f"{thermal_limit:.6g} s{at_cap} (G_i: linearised convection and "
                                          "radiation)")}
-    if "preheating" in scene:
-        every = scene["sintering"]["every"] if "sintering" in scene else 1  # a growth interval spans every steps
+    if scene.preheating is not None:
+        every = scene.sintering.every if scene.sintering is not None else 1  # a growth interval spans every steps
         step = ramp_step(scene)
         bounds["preheating"] = (step, f"{step:.6g} s, in which {every} step(s) (sintering.every) span "
                                       f"{RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
                                       "(preheating.duration / preheating.steps)")
-    coupled = _coupled_model(scene, physics, centres, radii, particles, params, necks, log) if mechanics_on(scene) else None
+    coupled = _coupled_model(scene, physics, planes, particles, params, necks, log) if mechanics_on(scene) else None
     if coupled is not None:
         physics, sim, contacts, necks = coupled.physics, coupled.sim, coupled.contacts, coupled.necks
         bounds.update(coupled.bounds)
     motion = None if coupled is None else coupled.motion
     bounds.update(_beam_bound(scene))
-    dt, n_steps, limit = _time_step(scene["run"], bounds, coupled is None)
+    dt, n_steps, limit = _time_step(scene.run, bounds, coupled is None)
     check_sintering_every(scene, n_steps)
     state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
     return Model(sim, params, state, n_steps, contact_count, limit, bed, None if coupled is None else coupled.reallocate,
-                 _wall_heat_specs(scene, centres, radii),
+                 _wall_heat_specs(planes, centres, radii),
                  {kind: bound for kind, (bound, _) in bounds.items()}, None if coupled is None else coupled.v_rel,
-                 scene["sintering"].get("k_star_axis") if "sintering" in scene else None,
-                 scene["packing"]["kind"] == "simple_cubic", *output_interval(run, n_steps))
+                 None if scene.sintering is None else scene.sintering.k_star_axis,
+                 scene.packing.kind == "simple_cubic", *output_interval(scene.run, n_steps), tuple(planes))
 
 
 class _Coupled(NamedTuple):
@@ -408,17 +410,17 @@ class _Coupled(NamedTuple):
     bounds: dict
 
 
-def _coupled_model(scene, physics, centres, radii, particles, params, necks, log) -> _Coupled:
+def _coupled_model(scene, physics, planes, particles, params, necks, log) -> _Coupled:
     """The coupled thermo-mechanical part of :func:`build_model` (``physics.mechanics = true``)."""
     log("mechanics: contact list and the mechanical time step")
     bounds = {}
-    planes = scene_walls(scene, centres, radii)
+    centres, radii = np.asarray(particles.positions, np.float64), np.asarray(particles.radii, np.float64)
     physics = mechanical_physics(scene, physics, planes)
-    skin = scene["physics"]["skin"] * float(np.max(radii))
+    skin = scene.physics.skin * float(np.max(radii))
     contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
     sim = simulate.simulator(physics, fns)
     reallocate = simulate.reallocate_neighbors(fns)
-    impact = scene["physics"]["impact_velocity"]
+    impact = scene.physics.impact_velocity
     wall_speed, fastest = _fastest_wall(scene)
     v_rel = impact + wall_speed
     mechanical_limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors,
@@ -435,7 +437,7 @@ def _coupled_model(scene, physics, centres, radii, particles, params, necks, log
     motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
     if physics.sintering is not None:  # the necks on the half pair list, carried as the springs are
         motion = neck_growth.with_pair_necks(motion, contacts, centres, radii,
-                                             scene["sintering"].get("start_necks", "point"))
+                                             scene.sintering.start_necks or "point")
         necks = neck_growth.neck_state(contacts, particles.temperature, supports=necks.supports,
                                        positions=particles.positions)
     return _Coupled(physics, sim, contacts, reallocate, motion, necks, v_rel, bounds)
@@ -444,11 +446,11 @@ def _coupled_model(scene, physics, centres, radii, particles, params, necks, log
 def _beam_bound(scene) -> dict:
     """``{"beam": (step, why)}``: the step in which the beam's spot moves :data:`BEAM_STEP_FRACTION` of its radius,
     or nothing without a moving beam."""
-    beam = scene.get("beam")
+    beam = typed_scene(scene).beam
     if beam is not None and beam_step(beam) is not None:
         step = beam_step(beam)
-        return {"beam": (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam['speed']:g} m/s) moves "
-                               f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam['spot_radius']:g} m")}
+        return {"beam": (step, f"{step:.6g} s, in which the beam's spot (beam.speed = {beam.speed:g} m/s) moves "
+                               f"{BEAM_STEP_FRACTION:g} of beam.spot_radius = {beam.spot_radius:g} m")}
     return {}
 
 
@@ -456,16 +458,16 @@ def _time_step(run, bounds, thermal_only) -> tuple[float, int, float]:
     """``(dt, n_steps, limit)``: ``run.dt`` checked against every bound (``{kind: (step, why)}``, s) or 0.9 of the
     smallest, shortened to ``duration / n_steps`` so that the run ends exactly at ``run.duration``."""
     limit = min(bound for bound, _ in bounds.values())
-    if run["dt"] == "auto":
-        dt = 0.9 * limit if np.isfinite(limit) else run["duration"]
+    if run.dt == "auto":
+        dt = 0.9 * limit if np.isfinite(limit) else run.duration
     else:
-        dt = run["dt"]
+        dt = run.dt
         for kind, (bound, name) in bounds.items():
             if dt > bound:
                 raise SceneError(f"run.dt: dt = {dt:.6g} s exceeds {name}; use dt <= {limit:.6g} s"
                                  + (" or the implicit integrator" if kind == "thermal" and thermal_only else ""))
-    n_steps = max(1, int(np.ceil(run["duration"] / dt * (1 - 1e-12))))
-    return run["duration"] / n_steps, n_steps, limit  # equal steps that end at the duration, none above the stable one
+    n_steps = max(1, int(np.ceil(run.duration / dt * (1 - 1e-12))))
+    return run.duration / n_steps, n_steps, limit  # equal steps that end at the duration, none above the stable one
 
 
 def _fastest_wall(scene) -> tuple[float, int | None]:
@@ -479,19 +481,23 @@ def _fastest_wall(scene) -> tuple[float, int | None]:
 
 def _highest_temperature(scene) -> float:
     """The highest temperature a scene names (initial, walls, environment): where radiation is stiffest."""
-    temperatures = [scene["initial"]["temperature"]] + [w["temperature"] for w in _walls(scene) if "temperature" in w]
-    temperatures += [scene[k]["environment_temperature"] for k in ("convection", "radiation") if k in scene]
-    temperatures += [scene["preheating"]["end_temperature"]] if "preheating" in scene else []
-    temperatures += [float(np.max(file_temperatures(scene["packing"])))] if scene["initial"]["from_file"] else []
+    scene = typed_scene(scene)
+    temperatures = [scene.initial.temperature] + [w.temperature for w in _walls(scene) if w.temperature is not None]
+    temperatures += [env.environment_temperature for env in (scene.convection, scene.radiation) if env is not None]
+    temperatures += [scene.preheating.end_temperature] if scene.preheating is not None else []
+    temperatures += [float(np.max(file_temperatures(scene.packing)))] if scene.initial.from_file else []
     return float(max(temperatures))
 
 
-def _walls(scene):
-    walls = list(scene["walls"])
-    if "floor_temperature" in scene.get("boundary", {}):
-        walls.append({"axis": 2, "side": "min", "mode": "held", "temperature": scene["boundary"]["floor_temperature"],
-                      "penetration": default_penetration(scene), "velocity": [0.0, 0.0, 0.0]})
-    return walls
+def _walls(scene) -> list:
+    """The scene's ``[[walls]]`` (:data:`sintercond.scene.typed.Wall`) and the held floor of
+    ``boundary.floor_temperature``."""
+    scene = typed_scene(scene)
+    walls_ = list(scene.walls)
+    if scene.boundary is not None and scene.boundary.floor_temperature is not None:
+        walls_.append(Wall(axis=2, side="min", mode="held", temperature=scene.boundary.floor_temperature,
+                           penetration=default_penetration(scene), velocity=[0.0, 0.0, 0.0]))
+    return walls_
 
 
 def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
@@ -502,9 +508,9 @@ def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
     """
     planes = []
     for wall in _walls(scene):
-        axis, depth = wall["axis"], wall["penetration"] * float(np.mean(radii))
+        axis, depth = wall.axis, wall.penetration * float(np.mean(radii))
         normal = np.zeros(3)
-        if wall["side"] == "min":
+        if wall.side == "min":
             normal[axis] = 1.0
             position = float(np.min(centres[:, axis] - radii)) + depth
         else:
@@ -512,12 +518,12 @@ def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
             position = float(np.max(centres[:, axis] + radii)) - depth
         point = np.zeros(3)
         point[axis] = position
-        planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall["mode"], wall.get("temperature"),
-                                      tuple(float(v) for v in wall["velocity"])))
+        planes.append(walls.PlaneWall(tuple(point), tuple(normal), wall.mode, wall.temperature,
+                                      tuple(float(v) for v in wall.velocity)))
     return planes
 
 
-def _wall_heat_specs(scene, centres, radii):
+def _wall_heat_specs(planes, centres, radii):
     """``(column, index of the scene wall, mode, held mask or None)`` of each held or conducting wall of a scene.
 
     A particle held by several walls counts for the first (as in
@@ -525,7 +531,7 @@ def _wall_heat_specs(scene, centres, radii):
     only ever equal on an edge of two held faces).
     """
     specs, claimed = [], np.zeros(len(radii), bool)
-    for k, wall in enumerate(scene_walls(scene, centres, radii)):
+    for k, wall in enumerate(planes):
         if wall.mode == "held":
             mask = (np.asarray(wall.penetration(centres, radii)) >= 0) & ~claimed
             claimed |= mask
@@ -539,18 +545,19 @@ FEW_WALL_CONTACTS = 0.5
 """A held or conducting wall touching fewer than this fraction of the particles facing it is reported as a handful."""
 
 
-def wall_supports(scene, centres, radii) -> np.ndarray:
+def wall_supports(scene, centres, radii, planes=None) -> np.ndarray:
     """``[n, 3]`` bool: the displacement components held in a many-body sintering run: the vertical one of the
     particles resting on a floor (a wall on axis 2, side min); the packing shrinks away from other walls
     (:func:`sintercond.neck_growth.neck_state`)."""
     supports = np.zeros((len(radii), 3), bool)
-    for wall, plane in zip(_walls(scene), scene_walls(scene, centres, radii)):
-        if wall["axis"] == 2 and wall["side"] == "min":
+    planes = scene_walls(scene, centres, radii) if planes is None else planes
+    for wall, plane in zip(_walls(scene), planes):
+        if wall.axis == 2 and wall.side == "min":
             supports[:, 2] |= np.asarray(plane.penetration(centres, radii)) >= 0
     return supports
 
 
-def wall_contacts(scene, centres, radii, log=None) -> dict:
+def wall_contacts(scene, centres, radii, log=None, *, planes=None) -> dict:
     """``{k: particles touching scene wall k}`` for each held or conducting wall, logged; warns on a handful.
 
     The particles facing a wall are its face layer, those whose surface comes within half a mean radius of the
@@ -559,21 +566,23 @@ def wall_contacts(scene, centres, radii, log=None) -> dict:
     With mechanics the count is the start's (the particles then settle onto the walls: ``history.csv``'s
     ``wall_contacts``) and no warning is given.
     """
+    scene = typed_scene(scene)
+    planes = scene_walls(scene, centres, radii) if planes is None else planes
     counts = {}
-    for k, (wall, plane) in enumerate(zip(_walls(scene), scene_walls(scene, centres, radii))):
+    for k, (wall, plane) in enumerate(zip(_walls(scene), planes)):
         if plane.mode not in ("held", "conducting"):
             continue
         penetration = np.asarray(plane.penetration(centres, radii))
         touching = int(np.count_nonzero(penetration >= 0 if plane.mode == "held" else penetration > 0))
         facing = int(np.count_nonzero(penetration > float(np.max(penetration)) - 0.5 * float(np.mean(radii))))
         counts[k] = touching
-        name = f"walls[{k}]" if k < len(scene["walls"]) else "boundary.floor_temperature"
-        message = (f"{name} ({plane.mode}, axis {wall['axis']} {wall['side']}) touches {touching} of the {facing} "
+        name = f"walls[{k}]" if k < len(scene.walls) else "boundary.floor_temperature"
+        message = (f"{name} ({plane.mode}, axis {wall.axis} {wall.side}) touches {touching} of the {facing} "
                    "particles facing it")
         if touching < FEW_WALL_CONTACTS * facing and not mechanics_on(scene):  # moving particles settle onto it
-            depth = f"{wall['penetration']:g} mean radii"
+            depth = f"{wall.penetration:g} mean radii"
             message += (f"; only a handful: raise walls[{k}].penetration (now {depth}) so that its plane reaches "
-                        "into the rough face" if k < len(scene["walls"]) else
+                        "into the rough face" if k < len(scene.walls) else
                         f"; only a handful: replace boundary.floor_temperature by a held [[walls]] floor (axis = 2, "
                         f"side = \"min\") with a penetration above its {depth}, so that its plane reaches into the "
                         "rough face")
@@ -587,12 +596,13 @@ class WallContactWarning(UserWarning):
     """A held or conducting wall touches only a handful of the particles facing it."""
 
 
-def _apply_walls(scene, centres, radii):
-    """Held walls become fixed particles; returns them and the conducting walls as ``(index, wall, penetration)``."""
+def _apply_walls(planes, centres, radii):
+    """Held walls (of the scene's ``planes``) become fixed particles; returns them and the conducting walls as
+    ``(index, wall, penetration)``."""
     held = np.zeros(len(radii), bool)
     held_t = np.zeros(len(radii))
     conducting = []
-    for index, wall in enumerate(scene_walls(scene, centres, radii)):
+    for index, wall in enumerate(planes):
         penetration = np.asarray(wall.penetration(centres, radii))
         if wall.mode == "held":
             touching = penetration >= 0
@@ -603,17 +613,17 @@ def _apply_walls(scene, centres, radii):
     return held, held_t, conducting
 
 
-def _merged_wall_conductance(scene, centres, radii, conducting):
+def _merged_wall_conductance(scene, radii, conducting):
     """Per-particle wall conductance at unit conductivity and the conductance-weighted wall temperature."""
     if not conducting:
         return None, None
-    c = scene["conduction"]
+    c = scene.conduction
     k_wall = np.zeros(len(radii))
     t_wall = np.zeros(len(radii))
     for index, wall, penetration in conducting:
         try:
-            k_w = np.asarray(walls.wall_conductance(c["law"], radii, penetration, 1.0, params=c.get("params"),
-                                                    neck_model=c.get("neck_model")))
+            k_w = np.asarray(walls.wall_conductance(c.law, radii, penetration, 1.0, params=c.params,
+                                                    neck_model=c.neck_model))
         except ValueError as err:
             raise SceneError(f"walls[{index}]: {err}") from None
         if not np.all(np.isfinite(k_w)):
