@@ -1,0 +1,111 @@
+"""Classes of bugs that independently written mutants slipped past (issue 43, item 14): each test checks a class
+against an independent reference, not the planted line.
+
+- packing files: scaled dump coordinates in a box away from the origin, diameter columns in both table readers;
+- the mechanical step estimate's reduced radius and mass, against the closed-form Hertz limit of a pair of unequal
+  spheres;
+- which steps a rollout saves, and over which particles the mean temperature averages, against a constant-power
+  closed form for every combination of save interval, segment length and checkpointing.
+"""
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from sintercond import mechanics, packing_files, simulate
+from sintercond.state import ParticleState
+
+
+def _dump(rows, box, columns="id type xs ys zs radius"):
+    lines = ["ITEM: TIMESTEP", "0", "ITEM: NUMBER OF ATOMS", str(len(rows)), "ITEM: BOX BOUNDS ff ff ff"]
+    lines += [f"{lo!r} {hi!r}" for lo, hi in box]
+    lines += [f"ITEM: ATOMS {columns}"] + [" ".join(repr(float(v)) if k > 1 else str(int(v)) for k, v in enumerate(row))
+                                           for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def test_scaled_dump_coordinates_are_read_in_a_box_away_from_the_origin(tmp_path):
+    """x = lo + s (hi - lo) on each axis: a box [10, 14] x [-3, -1] x [100, 108] shifts and scales differently per
+    axis, so reading s as x, using one axis's box for all, or leaving out lo all fail."""
+    box = [(10.0, 14.0), (-3.0, -1.0), (100.0, 108.0)]
+    scaled = np.array([[0.25, 0.5, 0.125], [0.75, 0.25, 0.875], [0.5, 1.0, 0.0]])
+    rows = [[k + 1, 1, *s, 0.1 + 0.05 * k] for k, s in enumerate(scaled)]
+    path = tmp_path / "scaled.dump"
+    path.write_text(_dump(rows, box))
+    centres, radii = packing_files.read_packing(path, "lammps_dump")
+    lo, hi = np.array(box).T
+    np.testing.assert_allclose(centres, lo + scaled * (hi - lo), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(radii, [0.1, 0.15, 0.2], rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("separator", [",", " "])
+@pytest.mark.parametrize("name", ["d", "diameter"])
+@pytest.mark.parametrize("uniform", [True, False], ids=["fast path", "row by row"])
+def test_a_diameter_column_gives_radii_of_half_of_it(tmp_path, separator, name, uniform):
+    """Both readers of a table (NumPy's over uniform rows, the row-by-row one where a row differs: here a trailing
+    comment) halve a diameter column wherever it stands, and leave the other columns alone."""
+    diameters = [2e-5, 5e-5, 8e-5]
+    header = separator.join(["z", name, "x", "y"])
+    body = [separator.join(repr(v) for v in (3e-4 * k, d, 1e-4 * k, -2e-4 * k)) for k, d in enumerate(diameters)]
+    if not uniform:
+        body[1] += "  # a comment: not a uniform table"
+    path = tmp_path / "bed.csv"
+    path.write_text("\n".join([header, *body]) + "\n")
+    centres, radii = packing_files.read_packing(path, "table")
+    np.testing.assert_array_equal(radii, np.array(diameters) / 2)
+    k = np.arange(3)
+    np.testing.assert_array_equal(centres, np.stack([1e-4 * k, -2e-4 * k, 3e-4 * k], axis=1))
+
+
+def test_the_mechanical_step_of_unequal_spheres_uses_their_reduced_radius_and_mass():
+    """Undamped, frictionless: the stable step at overlap delta is 2 / omega with omega^2 = 2 E* sqrt(r* delta) / m*
+    (Quintana-Ruiz & Campello 2020, Eq. 2 differentiated; symplectic Euler's limit), r* = r_i r_j / (r_i + r_j),
+    m* = m_i m_j / (m_i + m_j), E* = E / (2 (1 - nu^2)) for one material."""
+    r = np.array([1e-3, 3e-3])
+    rho, e0, nu, delta = np.array([2000.0, 7000.0]), 1e7, 0.25, 2e-6
+    mass = 4 / 3 * np.pi * r**3 * rho
+    x = np.array([[0.0, 0.0, 0.0], [r.sum() - delta, 0.0, 0.0]])
+    particles = ParticleState(jnp.asarray(x), jnp.asarray(r), jnp.full(2, 300.0), jnp.asarray(mass),
+                              jnp.zeros(2, jnp.int32), jnp.zeros(2, bool), jnp.full(2, 300.0))
+    spec = mechanics.Mechanics.create(gravity=(0.0, 0.0, 0.0))
+    params = mechanics.MechanicalParams(E0=jnp.asarray(e0), nu=jnp.asarray(nu), xi_con=jnp.asarray(0.0))
+    contacts, _ = simulate.dynamic_contacts(x, r, 0.1 * r.min())
+    limit = float(mechanics.mechanical_time_step(spec, particles, contacts.neighbors, params, 1e-9, delta=delta,
+                                                 fraction=1e9, safety=1.0))
+    r_star, m_star = r.prod() / r.sum(), mass.prod() / mass.sum()
+    omega = math.sqrt(2 * e0 / (2 * (1 - nu**2)) * math.sqrt(r_star * delta) / m_star)
+    assert limit == pytest.approx(2 / omega, rel=1e-12)
+
+
+def _heated_pair(held):
+    """Two unconnected particles of capacities 2 and 6 J/K, 1 W into the first, 3 W into the second (until 1e9 s):
+    each warms at 0.5 K/s exactly under explicit Euler. The second is held at 400 K when ``held``."""
+    t0 = np.array([300.0, 400.0])
+    mass = np.array([2.0, 6.0])
+    particles = ParticleState(jnp.zeros((2, 3)), jnp.ones(2), jnp.asarray(t0), jnp.asarray(mass),
+                              jnp.zeros(2, jnp.int32), jnp.asarray([False, held]), jnp.asarray(t0))
+    table = np.array([[0], [1]], np.int32)  # each its own padding: no contact
+    contacts = simulate.TableContacts(neighbors=jnp.asarray(table), conductance=jnp.zeros((2, 1)))
+    physics = simulate.Physics.create(held=held, pulse=True)
+    params = simulate.Params(conductivity=jnp.ones(1), specific_heat=jnp.ones(1),
+                             pulse=simulate.PulseParams(jnp.asarray([1.0, 3.0]), jnp.asarray(1e9)))
+    return simulate.simulator(physics), simulate.init_state(particles, contacts, 0.1), params
+
+
+@pytest.mark.parametrize("n_steps, every", [(12, 1), (12, 3), (12, 4), (35, 7), (36, 12), (17, 17)])
+@pytest.mark.parametrize("checkpoint", [True, False])
+def test_each_save_is_the_state_after_its_interval_and_the_mean_weighs_the_free_particles(n_steps, every, checkpoint):
+    """Save k (from 0) is the state after (k + 1) * every steps: T = T0 + 0.5 K/s (k + 1) every dt. The mean
+    temperature is mass-weighted over the free particles; with none held, over all."""
+    for held in (False, True):
+        sim, state, params = _heated_pair(held)
+        probes = simulate.rollout(sim, state, params, n_steps, simulate.SaveAt(every, None), checkpoint)[1]
+        means = simulate.rollout(sim, state, params, n_steps, simulate.SaveAt(every, simulate.mean_temperature),
+                                 checkpoint)[1]
+        t = 0.1 * every * np.arange(1, n_steps // every + 1)
+        first, second = 300.0 + 0.5 * t, (np.full_like(t, 400.0) if held else 400.0 + 0.5 * t)
+        np.testing.assert_allclose(np.asarray(probes), np.stack([first, second], axis=1), rtol=1e-13)
+        expected = first if held else (2.0 * first + 6.0 * second) / 8.0
+        np.testing.assert_allclose(np.asarray(means), expected, rtol=1e-13)
