@@ -109,3 +109,53 @@ def test_each_save_is_the_state_after_its_interval_and_the_mean_weighs_the_free_
         np.testing.assert_allclose(np.asarray(probes), np.stack([first, second], axis=1), rtol=1e-13)
         expected = first if held else (2.0 * first + 6.0 * second) / 8.0
         np.testing.assert_allclose(np.asarray(means), expected, rtol=1e-13)
+
+
+def _hot_pair(temperature, softening=True):
+    """Two spheres (1 mm, 2 mm) overlapping 5 um at rest at ``temperature``, E0 = 1e8 Pa, E_min = 2e6 Pa,
+    theta* = 400 K."""
+    r, delta = np.array([1e-3, 2e-3]), 5e-6
+    x = np.array([[0.0, 0.0, 0.0], [r.sum() - delta, 0.0, 0.0]])
+    particles = ParticleState(jnp.asarray(x), jnp.asarray(r), jnp.full(2, float(temperature)),
+                              jnp.asarray(4 / 3 * np.pi * r**3 * 3000.0), jnp.zeros(2, jnp.int32),
+                              jnp.zeros(2, bool), jnp.full(2, float(temperature)))
+    physics = simulate.Physics.create(law="conductivity", neck_model="hertz", conductance="lifted", contacts="dynamic",
+                                      mechanics=True, gravity=(0.0, 0.0, 0.0), softening=softening)
+    contacts, _ = simulate.dynamic_contacts(x, r, 0.1 * r.min())
+    state = simulate.init_state(particles, contacts, 1e-7, mechanics=mechanics.mechanical_state(physics.mechanics, x,
+                                                                                                contacts))
+    f = lambda v: jnp.asarray(float(v))  # noqa: E731
+    params = simulate.Params(conductivity=jnp.ones(1), specific_heat=jnp.ones(1), mechanics=mechanics.MechanicalParams(
+        E0=f(1e8), nu=f(0.3), xi_con=f(0.5), theta_star=f(400.0), rate=f(1.0), E_min=f(2e6)))
+    return physics, state, params, r.prod() / r.sum(), delta
+
+
+@pytest.mark.parametrize("temperature", [300.0, 600.0, 5000.0])
+def test_the_coupled_step_pushes_with_the_softened_modulus_and_its_floor(temperature):
+    """Hertz at rest: |F| = 4/3 E* sqrt(r*) delta^(3/2), E* = E / (2 (1 - nu^2)), E = max(E_min, E0 exp(min(0,
+    1 - T/theta*))) (Quintana-Ruiz & Campello 2020, Eqs. 2 and 42): E0 below theta*, the exponential above it, the
+    floor far above it."""
+    physics, state, params, r_star, delta = _hot_pair(temperature)
+    _, force = simulate.contact_forces(physics, state, params)
+    modulus = max(2e6, 1e8 * math.exp(min(0.0, 1.0 - temperature / 400.0)))
+    expected = 4 / 3 * modulus / (2 * (1 - 0.3**2)) * math.sqrt(r_star) * delta**1.5
+    assert float(jnp.linalg.norm(force[0])) == pytest.approx(expected, rel=1e-12)
+
+
+def test_wall_friction_without_friction_between_the_particles_reaches_the_walls_only():
+    """A scene with mechanics.friction = 0 and wall_friction = 0.3: the step's friction is on (walls rub), the pairs'
+    coefficient 0, the walls' 0.3; rolling stays off."""
+    from sintercond.scene import build, validate_scene
+
+    scene = validate_scene({
+        "packing": {"kind": "spheres", "centres": [[0.0, 0.0, 1e-3], [2e-3, 0.0, 1e-3]], "radii": 1e-3},
+        "material": {"density": 3000.0, "specific_heat": 100.0, "conductivity": 60.0},
+        "conduction": {"law": "conductivity", "neck_model": "hertz"}, "initial": {"temperature": 300.0},
+        "walls": [{"axis": 2, "side": "min", "mode": "insulated", "penetration": 0.0}],
+        "physics": {"mechanics": True},
+        "mechanics": {"young_modulus": 1e6, "poisson_ratio": 0.3, "friction": 0.0, "wall_friction": 0.3},
+        "run": {"duration": 1e-4, "output_every": 1, "checkpoint_every": 1}})
+    model = build.build_model(scene)
+    spec, mp = model.physics.mechanics, model.params.mechanics
+    assert spec.friction and spec.wall_friction and not spec.rolling
+    assert float(mp.mu) == 0.0 and float(mp.mu_wall) == 0.3
