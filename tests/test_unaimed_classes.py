@@ -159,3 +159,31 @@ def test_wall_friction_without_friction_between_the_particles_reaches_the_walls_
     spec, mp = model.physics.mechanics, model.params.mechanics
     assert spec.friction and spec.wall_friction and not spec.rolling
     assert float(mp.mu) == 0.0 and float(mp.mu_wall) == 0.3
+
+
+@pytest.mark.parametrize("every", [1, 3, 4])
+def test_the_necks_grow_at_the_end_of_each_interval_by_the_whole_interval(every):
+    """Two touching 40 um spheres at a uniform 1150 K (nothing conducts): after n steps of dt the neck is the law
+    tier's (:func:`sintercond.sintering.grow_neck`, from a point contact) after ``floor(n / every) * every * dt``:
+    it grows at the end of each interval, by all of it, and not between."""
+    import jax
+
+    from sintercond import sintering
+    from sintercond.scene import build, validate_scene
+
+    kinetics = {"A": 1.2e-18, "activation_energy": 37.0}
+    scene = validate_scene({
+        "packing": {"kind": "spheres", "centres": [[0.0, 0.0, 0.0], [80e-6, 0.0, 0.0]], "radii": 40e-6},
+        "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 7.0},
+        "conduction": {"law": "rojek", "neck_model": "volume_conserving"}, "initial": {"temperature": 1150.0},
+        "sintering": {"every": every, "params": kinetics},
+        "run": {"duration": 1e-3, "dt": 1e-4, "output_every": 1, "checkpoint_every": 1}})
+    model = build.build_model(scene)
+    step, state, dt = jax.jit(model.sim.step_fn), model.state, float(model.state.dt)
+    for n in range(1, 9):
+        state = step(state, model.params)
+        grown = n // every * every * dt
+        expected = 0.0 if grown == 0 else float(sintering.grow_neck("grain_boundary", 0.0, 40e-6, 40e-6, [1150.0],
+                                                                     [grown], kinetics)[0])
+        # 6e-10 apart here (the law tier's Newton inversion); a step more or less of growth moves it by over 2 %
+        assert float(jnp.max(state.contacts.neck[0])) == pytest.approx(expected, rel=1e-8, abs=1e-18), n
