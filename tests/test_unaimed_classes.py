@@ -187,3 +187,30 @@ def test_the_necks_grow_at_the_end_of_each_interval_by_the_whole_interval(every)
                                                                      [grown], kinetics)[0])
         # 6e-10 apart here (the law tier's Newton inversion); a step more or less of growth moves it by over 2 %
         assert float(jnp.max(state.contacts.neck[0])) == pytest.approx(expected, rel=1e-8, abs=1e-18), n
+
+
+def test_the_wall_columns_of_the_history_count_each_walls_heat_in_closed_form(tmp_path):
+    """A 2 x 2 x 3 simple cubic block at 300 K, its floor held at 900 K (a held wall) and its top facing a
+    conducting wall at 500 K. At the start (the history's first row) the held floor layer is at 900 K and the rest
+    at 300 K: the floor's column reads 4 K_pair (900 - 300) (the four columns' first contacts, Rojek's K of the
+    overlap) and the top wall's sum K_w (500 - 300) over its four particles (the wall law at their penetration,
+    :func:`sintercond.walls.wall_conductance`)."""
+    from sintercond import run as runner, walls
+    from sintercond.conductance import rojek_pair_conductance
+    from sintercond.scene import validate_scene
+
+    r, a, kappa = 40e-6, 78e-6, 7.0
+    scene = validate_scene({
+        "packing": {"kind": "simple_cubic", "counts": [2, 2, 3], "spacing": a, "radius": r},
+        "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": kappa},
+        "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
+        "walls": [{"axis": 2, "side": "min", "mode": "held", "temperature": 900.0},
+                  {"axis": 2, "side": "max", "mode": "conducting", "temperature": 500.0, "penetration": 0.05}],
+        "run": {"duration": 1e-4, "dt": 1e-4, "output_every": 1, "checkpoint_every": 1}})
+    runner.run_scene(scene, tmp_path / "out", progress=False, pictures=False)
+    history = runner.read_history(tmp_path / "out")
+    k_pair = float(rojek_pair_conductance(r, r, 2 * r - a, kappa))
+    k_wall = float(walls.wall_conductance("rojek", r, 0.05 * r, kappa))
+    assert history["heat_wall0_W"][0] == pytest.approx(4 * k_pair * 600.0, rel=1e-12)
+    assert history["heat_wall1_W"][0] == pytest.approx(4 * k_wall * 200.0, rel=1e-12)
+    assert 0 < history["heat_wall0_W"][-1] < history["heat_wall0_W"][0]  # the next layer has warmed
