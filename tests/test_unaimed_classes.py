@@ -214,3 +214,24 @@ def test_the_wall_columns_of_the_history_count_each_walls_heat_in_closed_form(tm
     assert history["heat_wall0_W"][0] == pytest.approx(4 * k_pair * 600.0, rel=1e-12)
     assert history["heat_wall1_W"][0] == pytest.approx(4 * k_wall * 200.0, rel=1e-12)
     assert 0 < history["heat_wall0_W"][-1] < history["heat_wall0_W"][0]  # the next layer has warmed
+
+
+@pytest.mark.parametrize("kill_after, checkpoint_every", [(3, 2), (4, 4), (5, 3)])
+def test_a_resumed_run_writes_the_history_of_an_uninterrupted_one(tmp_path, kill_after, checkpoint_every):
+    """Killed after some output chunks and resumed from its last checkpoint, a run's history.csv is the
+    uninterrupted run's, row for row (no row of the checkpoint's step lost or written twice, none after it kept)."""
+    from sintercond import run as runner
+    from sintercond.scene import validate_scene
+
+    scene = validate_scene({
+        "packing": {"kind": "simple_cubic", "counts": [2, 2, 3], "spacing": 78e-6, "radius": 40e-6},
+        "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 7.0},
+        "conduction": {"law": "rojek"}, "initial": {"temperature": 300.0},
+        "walls": [{"axis": 2, "side": "min", "mode": "held", "temperature": 900.0}],
+        "run": {"duration": 1e-3, "dt": 1e-4, "output_every": 1, "checkpoint_every": checkpoint_every}})
+    runner.run_scene(scene, tmp_path / "whole", progress=False, pictures=False)
+    runner.run_scene(scene, tmp_path / "cut", progress=False, pictures=False, stop_after_chunks=kill_after)
+    runner.resume(tmp_path / "cut", progress=False, pictures=False)
+    whole = (tmp_path / "whole" / "history.csv").read_text().splitlines()
+    assert (tmp_path / "cut" / "history.csv").read_text().splitlines() == whole
+    assert len(whole) == 1 + 11  # the header, step 0 and each of the 10 steps
