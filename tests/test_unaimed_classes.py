@@ -235,3 +235,28 @@ def test_a_resumed_run_writes_the_history_of_an_uninterrupted_one(tmp_path, kill
     whole = (tmp_path / "whole" / "history.csv").read_text().splitlines()
     assert (tmp_path / "cut" / "history.csv").read_text().splitlines() == whole
     assert len(whole) == 1 + 11  # the header, step 0 and each of the 10 steps
+
+
+@pytest.mark.parametrize("dihedral", [120.0, 150.0])
+def test_a_hot_neck_on_the_table_stops_at_its_cap_and_stays(dihedral):
+    """Fast kinetics at 1400 K: the grain-boundary neck of two 40 um spheres reaches the equilibrium neck
+    r sin(psi/2) (Coble's dihedral-angle limit) within a few steps and never passes it."""
+    import jax
+
+    from sintercond.scene import build, validate_scene
+
+    scene = validate_scene({
+        "packing": {"kind": "spheres", "centres": [[0.0, 0.0, 0.0], [80e-6, 0.0, 0.0]], "radii": 40e-6},
+        "material": {"density": 4430.0, "specific_heat": 560.0, "conductivity": 7.0},
+        "conduction": {"law": "rojek", "neck_model": "volume_conserving"}, "initial": {"temperature": 1400.0},
+        "sintering": {"every": 1, "params": {"A": 1e-6, "activation_energy": 1.0, "dihedral_angle": dihedral}},
+        "run": {"duration": 1e-3, "dt": 1e-4, "output_every": 1, "checkpoint_every": 1}})
+    model = build.build_model(scene)
+    step, state = jax.jit(model.sim.step_fn), model.state
+    cap = 40e-6 * math.sin(math.radians(dihedral) / 2)
+    necks = []
+    for _ in range(6):
+        state = step(state, model.params)
+        necks.append(float(jnp.max(state.contacts.neck[0])))
+    assert max(necks) <= cap * (1 + 1e-12)
+    assert necks[-1] == pytest.approx(cap, rel=1e-12)
