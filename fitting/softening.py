@@ -119,7 +119,7 @@ class SofteningExperiment:
                                                      compiler_options=mechanics.compiler_options(self.sim.physics)))
 
     def _readings_and_overflow(self, values: Mapping):
-        state, saved = self._forward_run(values)
+        state, saved = self.rollout(values)
         return saved, state.overflow
 
     def readings(self, values: Mapping) -> np.ndarray:
@@ -173,14 +173,6 @@ class SofteningExperiment:
         return simulate.rollout(self.sim, self.state, params, self.n_steps, saveat, checkpoint=checkpoint,
                                 step_checkpoint=self.step_checkpoint)
 
-    def _forward_run(self, values: Mapping):
-        """:meth:`rollout` for runs that are never differentiated in reverse mode (the readings, forward-mode
-        Jacobians): one plain scan, no checkpoints. The checkpointed segments matter to reverse mode only;
-        elsewhere they split the run into scans of different lengths, each a copy of the coupled step for XLA
-        to compile, for the same numbers."""
-        return simulate.rollout(self.sim, self.state, self.params_with(values), self.n_steps,
-                                simulate.SaveAt(self.save_every, self.observe), checkpoint=False)
-
     def predict(self, values: Mapping):
         """Readings ``[n_saves, n_channels]`` for ``values`` (natural units; traceable, differentiable)."""
         return self.rollout(values)[1]
@@ -193,13 +185,6 @@ class SofteningExperiment:
         """:meth:`log_model` and whether the run's lists overflowed (``least_squares(..., invalid=True)``)."""
         values = {name[4:]: jnp.exp(v) for name, v in logs.items()}
         state, saved = self.rollout(values)
-        return jnp.ravel(saved[:, columns]), state.overflow
-
-    def forward_log_model_and_overflow(self, logs: Mapping, columns):
-        """:meth:`log_model_and_overflow` for forward mode (Levenberg-Marquardt's Jacobians): one plain scan
-        (:meth:`_forward_run`)."""
-        values = {name[4:]: jnp.exp(v) for name, v in logs.items()}
-        state, saved = self._forward_run(values)
         return jnp.ravel(saved[:, columns]), state.overflow
 
 
@@ -405,7 +390,6 @@ def fit_softening(experiment: SofteningExperiment, data, sigma, fit=("E0", "thet
     # have used a run that dropped pairs raises instead
     result = least_squares(experiment.log_model_and_overflow, jnp.asarray(columns), data[:, columns].ravel(), logs0,
                            {k: Free() for k in logs0}, weights=weights, method=method, invalid=True,
-                           jacobian_model=experiment.forward_log_model_and_overflow,
                            invalid_message="the contact lists overflowed (pairs were dropped); rebuild the experiment "
                                            "with more room (bed_experiment's capacity_multiplier)", **options)
     values = {k: math.exp(result.params[f"log_{k}"]) for k in fit}

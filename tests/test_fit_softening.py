@@ -99,7 +99,7 @@ def test_recovery_with_noise_and_interval_coverage(hot_5_1):
 
 def test_temperatures_identify_conductivity_and_e0_only_through_k_e0_power(hot_5_1):
     logs = {f"log_{k}": math.log(v) for k, v in hot_5_1.nominal().items() if k in ("E0", "conductivity")}
-    jac = jax.jit(jax.jacfwd(lambda p: hot_5_1.forward_log_model_and_overflow(p, jnp.asarray([0]))[0]))(logs)
+    jac = jax.jit(jax.jacfwd(lambda p: hot_5_1.log_model(p, jnp.asarray([0]))))(logs)
     d_e0, d_k = np.asarray(jac["log_E0"]), np.asarray(jac["log_conductivity"])
     # K ~ k E^(-2/3) (1 + delta/r): the two columns are parallel, ratio -2/3 to ~delta/r
     assert np.max(np.abs(d_e0)) > 1.0  # K per unit log
@@ -132,7 +132,7 @@ def test_readings_below_theta_star_say_nothing_about_it():
     assert clean[:, 0].max() < 400.0
     # started above the readings: theta* and the rate have exactly zero Jacobian columns
     logs = {"log_E0": math.log(1e6), "log_theta_star": math.log(450.0), "log_rate": 0.0}
-    jac = jax.jit(jax.jacfwd(lambda p: ex.forward_log_model_and_overflow(p, jnp.asarray([0, 1]))[0]))(logs)
+    jac = jax.jit(jax.jacfwd(lambda p: ex.log_model(p, jnp.asarray([0, 1]))))(logs)
     assert np.all(np.asarray(jac["log_theta_star"]) == 0) and np.all(np.asarray(jac["log_rate"]) == 0)
     with pytest.warns(sf.UnidentifiedWarning, match="never exceed theta"):
         fit = sf.fit_softening(ex, clean, SIGMA_5_1, start={"E0": 1.1e6, "theta_star": 450.0})
@@ -220,18 +220,15 @@ def _check_gradient(ex, readings_weights, names=("E0", "theta_star", "rate")):
     logs0 = jnp.log(jnp.asarray([nominal[k] for k in names]))
     weights = jnp.asarray(readings_weights)
 
-    def loss_and_events(logs, checkpoint=True):
+    def loss_and_events(logs):
         params = ex.params_with(dict(zip(names, jnp.exp(logs))))
-        saved = ex.run(params, simulate.SaveAt(1, lambda s: (ex.observe(s), _event_pattern(ex.sim, params, s))),
-                       checkpoint=checkpoint)[1]
+        saved = ex.run(params, simulate.SaveAt(1, lambda s: (ex.observe(s), _event_pattern(ex.sim, params, s))))[1]
         readings = saved[0][ex.save_every - 1::ex.save_every]  # what ex.predict reads
         return jnp.sum(readings * weights), saved[1]
 
     (_, reference), grad = jax.jit(jax.value_and_grad(loss_and_events, has_aux=True))(logs0)
     grad, reference = np.asarray(grad), np.asarray(reference)
-    # the differences need no reverse mode: one plain scan (the checkpoints would only add copies of the step to
-    # compile); the same step, so the same numbers
-    value = jax.jit(lambda logs: loss_and_events(logs, checkpoint=False))
+    value = jax.jit(loss_and_events)
     def central(k, h):
         """The central difference at step h, or None where a step straddles an event."""
         step = jnp.zeros(len(names)).at[k].set(h)
