@@ -26,8 +26,8 @@ hypothesis.settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default")
 # keep pytest's order. A worker is given its next file as soon as 2 of its tests are left, before they run:
 # hence the short-listed notebook file is followed by test_sintering_mechanics.py, not by the other notebooks.
 LONGEST_FIRST = (
-    "test_notebooks_alone.py",  # (350) calibrate_softening
-    "test_fit_softening.py",  # (470; 260-300* at load 5-14)
+    "test_notebooks_alone.py",  # (350; 225*) calibrate_softening
+    "test_fit_softening.py",  # (470; 200-300* at load 3-14)
     "test_sintering_mechanics.py",  # (190*)
     "test_mechanics.py",  # (130*)
     "test_notebooks.py",  # (220) the other six notebooks
