@@ -19,17 +19,18 @@ hypothesis.settings.register_profile(
 hypothesis.settings.register_profile("thorough", parent=hypothesis.settings.get_profile("default"), max_examples=2000)
 hypothesis.settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
-# The longest files first (CPU seconds of a full run on the project's 2-core machine, contended, in brackets):
+# The longest files first (CPU seconds of a full run on the project's 2-core machine, contended, in brackets; those
+# marked * measured again in December 2026 with `python -m pytest -n0 tests/FILE`, CONTRIBUTING.md):
 # xdist hands out whole files in collection order (--dist loadfile with --no-loadscope-reorder, pyproject.toml),
 # so a long file collected late would run alone at the end while the other worker idles. Those behind these
 # keep pytest's order. A worker is given its next file as soon as 2 of its tests are left, before they run:
-# hence the short-listed notebook file is followed by test_mechanics.py, not by the other notebooks.
+# hence the short-listed notebook file is followed by test_sintering_mechanics.py, not by the other notebooks.
 LONGEST_FIRST = (
-    "test_notebooks_alone.py",  # (350) calibrate_softening
-    "test_fit_softening.py",  # (470)
+    "test_notebooks_alone.py",  # (350; 225*) calibrate_softening
+    "test_fit_softening.py",  # (470; 200-300* at load 3-14)
     "test_doc_scenes.py",  # (460 on a loaded machine) every scene of the docs, reduced
-    "test_mechanics.py",  # (190)
-    "test_sintering_mechanics.py",  # (180)
+    "test_sintering_mechanics.py",  # (190*)
+    "test_mechanics.py",  # (130*)
     "test_notebooks.py",  # (220) the other six notebooks (calibrate_posterior: about 90 s of CPU more)
     "test_posterior_kinetics.py",  # (150 on a loaded 2-core machine) NUTS through grow_neck, compiled twice
     "test_moving.py",  # (90)

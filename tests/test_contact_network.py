@@ -14,8 +14,9 @@ from sintercond import io
 from sintercond import run as runner
 from sintercond.conductance import pair_conductance
 from sintercond.scene import validate_scene
+from _helpers import reader
 
-vtk = pytest.importorskip("vtk")
+vtk = reader("vtk")
 
 LATTICE = {
     "packing": {"kind": "simple_cubic", "counts": [3, 2, 2], "spacing": 1e-4, "radius": 0.52e-4},
@@ -69,25 +70,6 @@ def test_the_networks_lines_carry_the_heat_the_particles_receive(tmp_path, sinte
         np.testing.assert_allclose(lines["conductance"], np.asarray(expected), rtol=1e-12)
     time = float(data.GetFieldData().GetArray("TimeValue").GetValue(0))
     assert f'timestep="{time!r}" group="" part="0" file="vtp/{network[-1].name}"' in (tmp_path / "network.pvd").read_text()
-
-
-def check_network_of_a_moving_packing(out):
-    """The last contact-network frame of a run with mechanics in ``out`` lists exactly the pairs that touch in the
-    particle frame of the same step (brute force on its positions), each with a neck and a conductance.
-    Called by tests/test_scene_mechanics.py's resume test, which runs such a scene (and resumes its network
-    frames bitwise)."""
-    last = sorted((out / "vtp").glob("network_*.vtp"))[-1]
-    frame, lines = io.read_vtp(out / "vtp" / last.name.replace("network", "step")), io.read_vtp(last)
-    x, r = frame["position"], frame["radius"]
-    n = len(r)
-    touching = {(i, j) for i in range(n) for j in range(i + 1, n) if r[i] + r[j] > np.linalg.norm(x[i] - x[j])}
-    reader = vtk.vtkXMLPolyDataReader()
-    reader.SetFileName(str(last))
-    reader.Update()
-    cells = reader.GetOutput().GetLines().GetConnectivityArray()
-    pairs = {tuple(int(cells.GetValue(k + m)) for m in (0, 1)) for k in range(0, cells.GetNumberOfValues(), 2)}
-    assert pairs == touching and touching
-    assert np.all(lines["conductance"] > 0) and np.all(lines["neck_radius"] > 0)
 
 
 def test_no_network_unless_asked(tmp_path):

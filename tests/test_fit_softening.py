@@ -322,8 +322,9 @@ def test_bed_heating_lists_sized_on_the_settled_bed_and_overflow_is_an_error(sma
         state.mechanics, spring=state.mechanics.spring[:need // 2])))
     with pytest.raises(ValueError, match="overflowed"):
         starved.readings(starved.nominal())
-    # inside a fit every evaluation reports its overflow: the fit refuses instead of using the starved runs
-    data = small_bed.readings(small_bed.nominal())
+    # inside a fit every evaluation reports its overflow: the fit refuses instead of using the starved runs (the
+    # readings of the bed at rest as data: any data of the right shape, the refusal comes from the runs)
+    data = np.tile(np.asarray(small_bed.observe(small_bed.state)), (small_bed.n_steps // small_bed.save_every, 1))
     with pytest.raises(InvalidEvaluation, match="overflowed.*capacity_multiplier"):
         sf.fit_softening(starved, data, [1e-2] * (data.shape[1] - 1) + [1e-6], fit=("E0",), max_steps=1,
                          polish_steps=0)

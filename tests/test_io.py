@@ -12,9 +12,10 @@ import pytest
 from sintercond import io
 from sintercond import run as runner
 from sintercond.scene import validate_scene
+from _helpers import reader
 
-vtk = pytest.importorskip("vtk", reason="install the 'readers' extra: pip install -e '.[readers]'")
-ovito_io = pytest.importorskip("ovito.io", reason="install the 'readers' extra: pip install -e '.[readers]'")
+vtk = reader("vtk")
+ovito_io = reader("ovito.io")
 from vtk.util.numpy_support import vtk_to_numpy  # noqa: E402
 
 

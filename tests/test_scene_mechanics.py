@@ -15,6 +15,7 @@ from sintercond import cli, examples, io
 from sintercond import run as runner
 from sintercond.scene import build
 from sintercond.scene import SceneError, builtin_scenes, load_scene, restitution_damping_ratio, validate_scene
+from _helpers import check_network_of_a_moving_packing
 
 G = 9.81
 
@@ -102,7 +103,6 @@ def test_mechanics_run_resumes_bitwise_springs_included(tmp_path):
     built = runner.build_model(validate_scene(copy.deepcopy(PILE))).state.contacts.neighbors.shape[1]
     full, summary = runner.run_scene(validate_scene(copy.deepcopy(PILE)), tmp_path / "full", progress=False)
     assert summary["steps"] > 900 and summary["final_contacts"] == 4
-    from tests.test_contact_network import check_network_of_a_moving_packing
     check_network_of_a_moving_packing(tmp_path / "full")
     saved = np.load(tmp_path / "full" / "checkpoint.npz")
     springs = [k for k in saved.files if "spring" in k or "rolling" in k]

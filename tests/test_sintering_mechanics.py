@@ -23,6 +23,8 @@ DENSITY, HEAT, KAPPA = 4430.0, 560.0, 7.0  # Ti6Al4V
 KINETICS = {"A": 1e-13, "activation_energy": 100.0}  # necks of some um in a few ms at 1000-1200 K
 E0, NU, G = 1e8, 0.3, 9.81  # a soft modulus: a step of 1e-7 s resolves the contacts
 R = 40e-6
+# runs that are never differentiated in reverse mode use rollout(checkpoint=False): one plain scan. The checkpointed
+# segments (for reverse mode) split a run into scans of two lengths, two copies of the coupled step to compile.
 
 
 def mechanical_params(**kw):
@@ -71,7 +73,7 @@ def test_one_contact_grows_as_the_law_tier_does_along_its_own_temperature_histor
     sim, state, params, _ = free_pair(shrinkage, every)
     simulate.validate_inputs(sim, state, params)
     n_steps = 2000
-    end, temperature = jax.jit(lambda s, p: simulate.rollout(sim, s, p, n_steps))(state, params)
+    end, temperature = jax.jit(lambda s, p: simulate.rollout(sim, s, p, n_steps, checkpoint=False))(state, params)
     temperature = np.concatenate([np.asarray(state.particles.temperature)[None], np.asarray(temperature)])
     pair = 0.5 * (temperature[:, 0] + temperature[:, 1])
     history = 0.5 * (pair[0:-every:every] + pair[every::every])  # each growth interval's trapezoid
@@ -120,7 +122,7 @@ def stack(shrinkage="many_body"):
 def test_a_stack_under_its_weight_shrinks_onto_its_support_and_keeps_hertz_s_overlaps():
     (sim, state, params, _), overlaps = stack()
     n_steps = 4000
-    end = jax.jit(lambda s, p: simulate.rollout(sim, s, p, n_steps)[0])(state, params)
+    end = jax.jit(lambda s, p: simulate.rollout(sim, s, p, n_steps, checkpoint=False)[0])(state, params)
     spec = sim.physics.sintering
     expected = float(sintering.grow_neck("grain_boundary", 0.0, R, R, [1200.0] * (n_steps // 10),
                                          [10 * float(state.dt)] * (n_steps // 10), KINETICS,
@@ -149,7 +151,7 @@ def test_an_insulated_coupled_sintering_cluster_conserves_heat_and_its_necks_gro
     x = corners * (2 * R - 0.01 * R)
     temperature = 1000.0 + 100.0 * np.arange(8) % 400
     sim, state, params, _ = coupled(x, np.full(8, R), temperature, every=5, dt=1e-6)
-    run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 400)[0])
+    run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 400, checkpoint=False)[0])
     capacity = np.asarray(state.particles.mass) * HEAT
     states = [state]
     for _ in range(5):
@@ -174,7 +176,7 @@ def test_a_hot_contact_grows_to_the_law_s_cap_and_stays_there():
     radii = np.array([40e-6, 30e-6])
     x = np.array([[0.0, 0.0, 0.0], [70e-6 - 1e-8, 0.0, 0.0]])
     sim, state, params, _ = coupled(x, radii, 1300.0, "independent", every=10, kinetics=fast)
-    run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 500)[0])
+    run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 500, checkpoint=False)[0])
     first = run(state, params)
     second = run(first, params)
     cap = float(sintering.kinetic_law("grain_boundary").cap(40e-6, 30e-6,
@@ -187,7 +189,7 @@ def test_a_hot_contact_grows_to_the_law_s_cap_and_stays_there():
 @pytest.mark.slow
 def test_necks_follow_their_pairs_through_a_rebuild_bit_for_bit():
     (sim, state, params, _), _ = stack()
-    run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 500)[0])
+    run = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 500, checkpoint=False)[0])
     grown = run(state, params)
     assert min(by_pair(grown, grown.mechanics.neck).values()) > 1e-6
     through, kept = run(forced_rebuild(grown), params), run(grown, params)
@@ -243,7 +245,7 @@ def test_gradients_of_a_neck_and_a_probe_temperature_by_the_kinetic_parameters_e
 
     def observe(log_a, q):
         p = dataclasses.replace(params, sintering={"A": jnp.exp(log_a), "activation_energy": q})
-        end, _ = simulate.rollout(sim, state, p, 200)
+        end, _ = simulate.rollout(sim, state, p, 200, checkpoint=False)  # forward mode only: one plain scan
         return jnp.stack([end.mechanics.neck[0] / 1e-6, end.particles.temperature[0]])
 
     log_a, q = jnp.log(KINETICS["A"]), KINETICS["activation_energy"]
@@ -366,7 +368,7 @@ def test_a_contact_the_shrinkage_closes_in_one_update_takes_its_overlap_as_a_nec
     sim, state, params, _ = coupled(rhombus(), np.full(4, R), 1200.0, every=10, dt=1e-6, skin=0.05 * R,
                                     kinetics={"A": 1e-10, "activation_energy": 100.0})
     assert (1, 3) not in {p for p, a in by_pair(state, state.mechanics.neck).items() if a > 0}
-    end = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 20)[0])(state, params)
+    end = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 20, checkpoint=False)[0])(state, params)
     x = np.asarray(end.particles.positions)
     assert np.linalg.norm(x[1] - x[3]) < 2 * R - 0.2e-6  # closed deep
     necks, approaches = by_pair(end, end.mechanics.neck), by_pair(end, end.mechanics.neck_overlap)
