@@ -192,26 +192,8 @@ def solve_box(centres, radii, lo, hi, shape, axis=0, sub=2, tol=1e-10, use_amg=T
         rows.append(idx[keep])
         cols.append(idx[keep])
         vals.append(gb0 * f[keep])
-    a = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)).tocsr()
-    # keep only the solid joined to a held face (floating bits make the system singular)
-    _, label = connected_components(a, directed=False)
-    anchored = np.zeros(label.max() + 1, bool)
-    anchored[label[held[0][0]]] = True
-    anchored[label[held[1][0]]] = True
-    live = anchored[label]
-    renum = -np.ones(n, np.int64)
-    renum[live] = np.arange(int(live.sum()))
-    a = a[live][:, live].tocsr()
-    b = np.zeros(a.shape[0])
-    hot_idx, hot_g = renum[held[0][0]], held[0][1]
-    cold_idx, cold_g = renum[held[1][0]], held[1][1]
-    np.add.at(b, hot_idx, hot_g)
-    t = _solve_spd(a, b, tol, use_amg)
-    q_in = float(np.sum(hot_g * (1.0 - t[hot_idx])))
-    q_out = float(np.sum(cold_g * t[cold_idx]))
-    length = hi[axis] - lo[axis]
-    cross = float(np.prod(np.delete(hi - lo, axis)))
-    return FieldResult(q_in, q_in * length / cross, tuple(h), shape, int(a.shape[0]), abs(q_in - q_out) / max(abs(q_in), 1e-300))
+    return _held_solve(sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                     shape=(n, n)).tocsr(), held, lo, hi, axis, (tuple(h), shape), tol, use_amg)
 
 
 def solve_box_split(centres, radii, lo, hi, shape, axis=0, sub=2, tol=1e-10, use_amg=True,
@@ -292,25 +274,8 @@ def solve_box_split(centres, radii, lo, hi, shape, axis=0, sub=2, tol=1e-10, use
         cols.append(uniq)
         vals.append(gb * counts)
     del key
-    a = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)).tocsr()
-    _, label = connected_components(a, directed=False)
-    anchored = np.zeros(label.max() + 1, bool)
-    anchored[label[held[0][0]]] = True
-    anchored[label[held[1][0]]] = True
-    live = anchored[label]
-    renum = -np.ones(n, np.int64)
-    renum[live] = np.arange(int(live.sum()))
-    a = a[live][:, live].tocsr()
-    b = np.zeros(a.shape[0])
-    hot_idx, hot_g = renum[held[0][0]], held[0][1]
-    cold_idx, cold_g = renum[held[1][0]], held[1][1]
-    np.add.at(b, hot_idx, hot_g)
-    t = _solve_spd(a, b, tol, use_amg)
-    q_in = float(np.sum(hot_g * (1.0 - t[hot_idx])))
-    q_out = float(np.sum(cold_g * t[cold_idx]))
-    length = hi[axis] - lo[axis]
-    cross = float(np.prod(np.delete(hi - lo, axis)))
-    return FieldResult(q_in, q_in * length / cross, tuple(h), shape, int(a.shape[0]), abs(q_in - q_out) / max(abs(q_in), 1e-300))
+    return _held_solve(sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                     shape=(n, n)).tocsr(), held, lo, hi, axis, (tuple(h), shape), tol, use_amg)
 
 
 # --- cubic lattices ---------------------------------------------------------------------------------------
@@ -523,3 +488,28 @@ def richardson(values, ratio):
             ext = f3 + d2 / (ratio ** p - 1.0)
             return float(ext), float(max(abs(ext - f3), 0.5 * abs(d2))), p
     return float(f3), float(max(abs(d2), 0.5 * abs(d1))), float("nan")
+
+
+def _held_solve(a, held, lo, hi, axis, grid, tol, use_amg) -> FieldResult:
+    """Solve the assembled conductance matrix ``a`` with the hot (T = 1) and cold (T = 0) faces' conductances
+    ``held = [(hot cells, g), (cold cells, g)]``, on the solid joined to a held face only (floating bits make the
+    system singular): ``FieldResult`` with the heat in, k* = q L / A across ``axis``, and the balance's mismatch.
+    ``grid``: ``(spacings, shape)`` of the voxels."""
+    _, label = connected_components(a, directed=False)
+    anchored = np.zeros(label.max() + 1, bool)
+    anchored[label[held[0][0]]] = True
+    anchored[label[held[1][0]]] = True
+    live = anchored[label]
+    renum = -np.ones(a.shape[0], np.int64)
+    renum[live] = np.arange(int(live.sum()))
+    a = a[live][:, live].tocsr()
+    b = np.zeros(a.shape[0])
+    hot_idx, hot_g = renum[held[0][0]], held[0][1]
+    cold_idx, cold_g = renum[held[1][0]], held[1][1]
+    np.add.at(b, hot_idx, hot_g)
+    t = _solve_spd(a, b, tol, use_amg)
+    q_in = float(np.sum(hot_g * (1.0 - t[hot_idx])))
+    q_out = float(np.sum(cold_g * t[cold_idx]))
+    length = hi[axis] - lo[axis]
+    cross = float(np.prod(np.delete(hi - lo, axis)))
+    return FieldResult(q_in, q_in * length / cross, *grid, int(a.shape[0]), abs(q_in - q_out) / max(abs(q_in), 1e-300))
