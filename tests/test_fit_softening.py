@@ -124,6 +124,11 @@ def test_temperatures_alone_with_conductivity_known(hot_5_1):
         low, high = fit.interval(k, z=3.0)
         assert low < truth[k] < high, k
         assert fit.stderr[k] < 0.2 * truth[k], k
+        # the delta method on the logarithms: sd(x) = x sd(log x), the interval exp(log x -+ z sd(log x))
+        s = math.sqrt(fit.log_covariance[fit.names.index(k)][fit.names.index(k)])
+        assert fit.stderr[k] == pytest.approx(fit.values[k] * s, rel=1e-12), k
+        assert (low, high) == pytest.approx((fit.values[k] * math.exp(-3.0 * s), fit.values[k] * math.exp(3.0 * s)),
+                                            rel=1e-12), k
 
 
 def test_readings_below_theta_star_say_nothing_about_it():
