@@ -296,3 +296,29 @@ def test_the_coupled_step_rolls_on_the_tangential_spin_only_with_the_projection(
     assert float(end[False, "twist"][0, 0]) < 5.0 and float(end[False, "twist"][1, 0]) > 0.0
     np.testing.assert_allclose(np.asarray(end[True, "roll"]), np.asarray(end[False, "roll"]), rtol=1e-12, atol=0)
     assert float(end[True, "roll"][0, 2]) < 5.0
+
+
+def test_a_settled_sphere_rests_on_hertz_s_overlap_and_the_report_says_so():
+    """One sphere (r = 3 mm, Example 5.3's material) dropped 0.2 mm onto the floor settles to Hertz's overlap of its
+    weight, delta = (3 m g / (4 E* sqrt(r)))^(2/3), E* = E / (1 - nu^2); the report's figures are that state's: the
+    largest overlap over the radius, the kinetic and force ratios below the thresholds they met, the time steps * dt."""
+    from sintercond import settle
+
+    r, material = 3e-3, settle.DemMaterial()
+    centres = np.array([[0.01, 0.01, r + 2e-4]])
+    floor = [w for w in settle.box_walls(0.02) if w.normal[2] == 1.0]
+    settled = settle.dem_settle(centres, np.array([r]), floor, material, check_every=500)
+    report = settled.report
+    mass = material.density * 4 / 3 * math.pi * r**3
+    delta = (3 * mass * 9.81 / (4 * material.E / (1 - material.nu**2) * math.sqrt(r))) ** (2 / 3)
+    assert r - float(settled.centres[0, 2]) == pytest.approx(delta, rel=1e-3)
+    assert report.max_overlap == pytest.approx(delta / r, rel=1e-3)
+    assert report.kinetic_ratio < report.kinetic_tol and report.force_ratio < report.force_tol
+    assert report.time == pytest.approx(report.steps * report.dt, rel=1e-12)
+    # the reported net force of the settled state: Hertz (Eq. 2) less its dashpot 2 xi sqrt(k m) v (Eq. 6, k the
+    # tangent stiffness 2 E* sqrt(r delta)) at the state's overlap and speed, less the weight, over the weight
+    z, v = float(settled.state.particles.positions[0, 2]), float(settled.state.mechanics.velocity[0, 2])
+    e_star, overlap = material.E / (1 - material.nu**2), r - z
+    hertz = 4 / 3 * e_star * math.sqrt(r) * overlap**1.5
+    dashpot = 2 * material.xi_con * math.sqrt(2 * e_star * math.sqrt(r * overlap) * mass) * v
+    assert report.force_ratio == pytest.approx(abs(hertz - dashpot - mass * 9.81) / (mass * 9.81), rel=1e-9)
