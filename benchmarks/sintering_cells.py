@@ -40,7 +40,7 @@ def main():
     assert np.isclose(np.linalg.norm(centres[0] - centres[1]), 80 * UM)  # corners 0 and 1 share an edge
     nbrs = np.asarray(contacts.neighbors)
     slot_cc, slot_cm = int(np.argmax(nbrs[0] == 1)), int(np.argmax(nbrs[0] == centre))
-    observe = lambda s: (s.contacts.neck[0, slot_cc], s.contacts.neck[0, slot_cm], s.particles.temperature[0])  # noqa: E731
+    observe = lambda s: (s.contacts.table_neck[0, slot_cc], s.contacts.table_neck[0, slot_cm], s.particles.temperature[0])  # noqa: E731
     _, (x1, x2, temperature) = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 9500, simulate.SaveAt(500, observe))
                                        )(state, params)
     times = 0.5 * np.arange(1, 20)

@@ -138,7 +138,7 @@ def chain_necks(spec):
     params = simulate.Params(conductivity=[7.0], specific_heat=[560.0], sintering=dict(FAST), pulse=pulse)
     sim = simulate.simulator(physics)
     end, _ = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 240))(state, params)
-    return np.asarray(end.contacts.neck[[0, 1], [0, 1]])
+    return np.asarray(end.contacts.table_neck[[0, 1], [0, 1]])
 
 
 def every_error():

@@ -76,7 +76,7 @@ contact). The elastic laws act on what the neck does not account for, ``delta - 
 is positive; :func:`sintercond.simulate.sintered_geometry`), as a plastic overlap does in MercuryDPM's sinter
 species; the conductance laws on ``max(delta, H(a))``, the volume-conserving neck of which is ``max(a,
 neck(delta))``. Spheres whose surfaces are within :data:`POINT_CONTACT_GAP` of ``r_i + r_j`` are in contact (the
-point contacts of a touching lattice). Every ``Sintering.every`` steps the necks grow (:func:`grow_pair_necks`):
+point contacts of a touching lattice). Every ``Sintering.every`` steps the necks grow (:func:`grow_necks`):
 independently, when the particles move only under their loads (the grown neck takes its approach out of the
 elastic overlap, and gravity or the walls close it), or by the many-body balance, whose displacements are added to
 the positions and leave each contact's elastic overlap as it was: the packing shrinks without being loaded, and the
@@ -188,20 +188,17 @@ class Sintering:
 
 @pytree_dataclass
 class NeckState:
-    """What the sintering step carries besides the necks (which live in the contacts' table, both rows of a pair).
-
-    Each contact is grown once, on its pair ``(i, j)``, ``i < j``, and its neck gathered back to the two slots of
-    the table that hold it.
+    """What the sintering step carries besides the necks (which live on the contacts' pairs: the static table's
+    :class:`sintercond.state.LiftedContacts`, or with the mechanics the half pair list's
+    :class:`sintercond.mechanics.MechanicalState`).
 
     Attributes:
-      start_overlap: ``[n, m]`` the approach of each contact at the start of the run (m), for the shrinkage.
+      start_overlap: ``[c]`` the approach of each contact at the start of the run (m), for the shrinkage (None
+        with the mechanics: measured from ``start_positions``).
       interval_temperature: ``[n]`` particle temperatures at the last neck update (K): the start of the
         current growth interval.
       unstable: bool scalar, set when grown necks made the time step exceed the explicit limit.
       interval_start: int scalar, the step the current growth interval started at.
-      pairs: ``[c, 2]`` int32 the contacts ``(i, j)``, ``i < j``.
-      pair_slot: ``[c]`` int32 the flat index of each pair's slot in row ``i`` of the table.
-      slot_pair: ``[n, m]`` int32 the pair each slot of the table holds; ``c`` in padding.
       supports: ``[n, 3]`` bool, the displacement components held at zero by the many-body balance
         (``Sintering(shrinkage="many_body")``), or None (independent contacts).
       unbalanced: bool scalar, set when a many-body balance did not converge (None without one).
@@ -213,9 +210,6 @@ class NeckState:
     interval_temperature: Any
     unstable: Any
     interval_start: Any
-    pairs: Any
-    pair_slot: Any
-    slot_pair: Any
     supports: Any = None
     unbalanced: Any = None
     start_positions: Any = None
@@ -231,44 +225,42 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, pos
     False lets the packing shrink about its centre. None for independent contacts. ``positions``: ``[n, 3]`` the
     particles' positions (m), given with ``supports``: the reference of the many-body shrinkage."""
     step_type = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32  # as SimState.step
+    n = jnp.asarray(temperature).shape[0]
     if isinstance(contacts, DynamicContacts):  # with the mechanics: the necks live on the half pair list
         if positions is None:
             raise ValueError("neck_state on dynamic contacts (sintering with the mechanics) needs the positions: "
                              "the shrinkage is measured from them")
-        n = jnp.asarray(temperature).shape[0]
-        return NeckState(start_overlap=None, interval_temperature=jnp.asarray(temperature),
-                         unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type), pairs=None,
-                         pair_slot=None, slot_pair=None,
-                         supports=None if supports is None else _supports(supports, n),
-                         unbalanced=None if supports is None else jnp.zeros((), bool),
-                         start_positions=_start_positions(positions, n))
-    if (supports is None) != (positions is None):
-        raise ValueError("neck_state takes supports and positions together (many-body shrinkage) or neither")
-    neighbors = np.asarray(contacts.neighbors)
-    n, m = neighbors.shape
-    rows = np.broadcast_to(np.arange(n)[:, None], (n, m))
-    valid = (neighbors != rows) & (neighbors < n)
-    lower = valid & (rows < neighbors)
-    pairs = np.stack([rows[lower], neighbors[lower]], axis=1)  # row-major: sorted by (i, j)
-    slot_pair = np.full((n, m), len(pairs), np.int64)
-    slot_pair[lower] = np.arange(len(pairs))
-    # the upper slots: pair (j, i) seen from row i > j, found by its rank among the sorted pairs
-    upper = valid & (rows > neighbors)
-    keys = pairs[:, 0].astype(np.int64) * n + pairs[:, 1]
-    wanted = neighbors[upper].astype(np.int64) * n + rows[upper]
-    found = np.minimum(np.searchsorted(keys, wanted), max(len(keys) - 1, 0))
-    if len(wanted) != len(keys) or (len(wanted) and np.any(keys[found] != wanted)):
-        raise ValueError("the contact table lists a contact in one of its rows only; each contact (i, j) must be in "
-                         "row i and row j (simulate.lifted_contacts builds such tables)")
-    slot_pair[upper] = found
-    return NeckState(start_overlap=jnp.asarray(contacts.overlap), interval_temperature=jnp.asarray(temperature),
+        start_overlap = None
+    else:
+        if (supports is None) != (positions is None):
+            raise ValueError("neck_state takes supports and positions together (many-body shrinkage) or neither")
+        check_table(contacts)
+        start_overlap = jnp.asarray(contacts.overlap)
+    return NeckState(start_overlap=start_overlap, interval_temperature=jnp.asarray(temperature),
                      unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type),
-                     pairs=jnp.asarray(pairs, jnp.int32),
-                     pair_slot=jnp.asarray(np.flatnonzero(lower), jnp.int32),
-                     slot_pair=jnp.asarray(slot_pair, jnp.int32),
                      supports=None if supports is None else _supports(supports, n),
                      unbalanced=None if supports is None else jnp.zeros((), bool),
                      start_positions=None if positions is None else _start_positions(positions, n))
+
+
+def check_table(contacts: LiftedContacts) -> None:
+    """Raise ``ValueError`` unless the table of ``contacts`` lays each pair ``(i, j)`` into one slot of row ``i``
+    and one of row ``j`` (concrete arrays; :func:`sintercond.simulate.lifted_contacts` builds such tables): the
+    network is then exactly symmetric and every neck grown on its pair is seen from both particles."""
+    if not all_concrete(contacts.neighbors, contacts.pairs, contacts.slot_pair):
+        return
+    neighbors, pairs, slot_pair = (np.asarray(x) for x in (contacts.neighbors, contacts.pairs, contacts.slot_pair))
+    n, c = neighbors.shape[0], pairs.shape[0]
+    rows = np.broadcast_to(np.arange(n)[:, None], neighbors.shape)
+    valid = (neighbors != rows) & (neighbors < n)
+    held = slot_pair[valid]
+    ends = pairs[np.minimum(held, max(c - 1, 0))] if c else np.zeros((held.size, 2), np.int64)
+    lo, hi = np.minimum(rows[valid], neighbors[valid]), np.maximum(rows[valid], neighbors[valid])
+    consistent = (held < c) & (ends[:, 0] == lo) & (ends[:, 1] == hi)
+    twice = held.size == 2 * c and np.all(np.bincount(held[held < c], minlength=c) == 2)
+    if not (consistent.all() and twice and np.all(slot_pair[~valid] == c)):
+        raise ValueError("the contact table lists a contact in one of its rows only; each contact (i, j) must be in "
+                         "row i and row j (simulate.lifted_contacts builds such tables)")
 
 
 def _start_positions(positions, n):
@@ -317,9 +309,10 @@ def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii,
         if not many_body and carried.supports is not None:
             raise ValueError(f"NeckState.supports is for Sintering(shrinkage='many_body'); the shrinkage is "
                              f"{spec.shrinkage!r}: build the state without supports")
-        if many_body and carried.pairs is not None and all_concrete(carried.start_positions, radii, carried.pairs):
+        static = isinstance(contacts, LiftedContacts)
+        if many_body and static and all_concrete(carried.start_positions, radii, contacts.pairs):
             x, r = np.asarray(carried.start_positions, np.float64), np.asarray(radii, np.float64)
-            pairs = np.asarray(carried.pairs)
+            pairs = np.asarray(contacts.pairs)
             gap = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
             far = gap > 1e-6 * np.minimum(r[pairs[:, 0]], r[pairs[:, 1]])
             if far.any():
@@ -334,16 +327,13 @@ def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii,
     if not all_concrete(merged, contacts.neck, radii):
         return
     _validate_law(spec, merged)
-    neighbors, neck, r = np.asarray(contacts.neighbors), np.asarray(contacts.neck, np.float64), np.asarray(radii)
-    n = r.shape[0]
-    rows = np.arange(n)[:, None]
-    valid = (neighbors != rows) & (neighbors < n)
-    limit = np.minimum(r[:, None], r[np.minimum(neighbors, n - 1)])
-    bad = valid & ~((neck >= 0) & (neck <= limit * (1 + 1e-12)))
+    pairs, neck, r = np.asarray(contacts.pairs), np.asarray(contacts.neck, np.float64), np.asarray(radii)
+    limit = np.minimum(r[pairs[:, 0]], r[pairs[:, 1]])
+    bad = ~((neck >= 0) & (neck <= limit * (1 + 1e-12)))
     if bad.any():
-        i, k = map(int, np.argwhere(bad)[0])
-        raise ValueError(f"contact necks must lie in [0, min(r_i, r_j)]; the neck of particles {i} and "
-                         f"{int(neighbors[i, k])} is {shown(neck[i, k])} m")
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"contact necks must lie in [0, min(r_i, r_j)]; the neck of particles {int(pairs[k, 0])} and "
+                         f"{int(pairs[k, 1])} is {shown(neck[k])} m")
 
 
 def _validate_law(spec: Sintering, merged: dict) -> None:
@@ -381,14 +371,6 @@ def validate_pair_necks(motion: MechanicalState, radii, pairs) -> None:
                          f"{tuple(int(v) for v in pairs[k])} has neck {shown(neck[k])} m, neck_overlap {shown(h[k])} m")
 
 
-def _pairs(neighbors, n):
-    """``(lo, hi, valid)`` of every slot of a padded table: the pair in index order, and whether it is a contact."""
-    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
-    valid = (neighbors != rows) & (neighbors < n)
-    j = jnp.where(valid, neighbors, rows)
-    return jnp.minimum(rows, j), jnp.maximum(rows, j), valid
-
-
 def _interval_temperature(carried: NeckState, end_temperature, i, j):
     """``[c]`` the pair temperature of the growth interval (K): the mean of its start and end values (module
     docstring), of the pairs ``(i, j)``."""
@@ -404,32 +386,6 @@ def _grown(spec: Sintering, params: dict, start_neck, r_i, r_j, temperature, dur
     return sintering._grow_neck(sintering.kinetic_law(spec.law), start_neck, r_i, r_j, temperature[None],
                                 jnp.reshape(jnp.asarray(duration, dtype), (1,)), params,
                                 quadrature_nodes=spec.quadrature_nodes, newton_iterations=spec.newton_iterations)[0]
-
-
-def _free_growth(spec: Sintering, params: dict, carried: NeckState, start_neck, radii, end_temperature, duration):
-    """``[c]`` neck of each pair after growing freely over the interval, from ``start_neck`` ``[c]`` (m)."""
-    i, j = carried.pairs[:, 0], carried.pairs[:, 1]
-    return _grown(spec, params, start_neck, radii[i], radii[j], _interval_temperature(carried, end_temperature, i, j),
-                  duration)
-
-
-def _on_table(carried: NeckState, per_pair):
-    """A ``[c]`` per-pair value in both slots of the padded table ``[n, m]``, 0 in padding."""
-    return jnp.concatenate([per_pair, jnp.zeros((1,), per_pair.dtype)])[carried.slot_pair]
-
-
-def grow_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, radii, end_temperature, duration):
-    """Necks and approaches ``[n, m]`` (m) of a padded table after one growth interval of ``duration`` (s),
-    each contact on its own (``shrinkage="independent"``).
-
-    The pair temperature is the mean of its value at the start (``carried.interval_temperature``, K) and at the
-    end (``end_temperature`` ``[n]``) of the interval (module docstring). Each contact grows once, on its pair,
-    and both slots of the table take its neck: the conductances stay exactly symmetric, heat is conserved.
-    Padding slots stay 0.
-    """
-    i, j = carried.pairs[:, 0], carried.pairs[:, 1]
-    a = _free_growth(spec, params, carried, neck.reshape(-1)[carried.pair_slot], radii, end_temperature, duration)
-    return _on_table(carried, a), _on_table(carried, sintering.neck_overlap(a, radii[i], radii[j]))
 
 
 def _pair_normals(pairs, positions):
@@ -516,54 +472,48 @@ def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_star
     return a, u, unbalanced
 
 
-def balance_table_necks(spec: Sintering, params: dict, carried: NeckState, neck, positions, radii, end_temperature,
-                        duration):
-    """The many-body update (``shrinkage="many_body"``, module docstring): ``(neck, overlap, displacement,
-    unbalanced)``, the necks and approaches ``[n, m]`` (m) after the interval, the particles' displacements
-    ``[n, 3]`` (m) over it and whether the balance fell short of its tolerance."""
-    pairs = carried.pairs
+def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, active, *, positions, radii,
+               end_temperature, duration, normal=None):
+    """One growth interval of the necks of the contacts ``pairs`` ``[c, 2]``: ``(neck, neck_overlap, displacement,
+    unbalanced)``.
+
+    The one growth path of both contact sets (a static packing's pairs, :class:`sintercond.state.LiftedContacts`;
+    the half pair list that follows the motion with the mechanics). ``neck`` ``[c]`` (m) at the start of the
+    interval of ``duration`` (s); only the ``active`` pairs (bool ``[c]``, or True) sinter, the others get no neck.
+    The pair temperature of the interval is the mean of its value at the start (``carried.interval_temperature``)
+    and at the end (``end_temperature`` ``[n]``, K; module docstring). Each contact grows on its own
+    (``shrinkage="independent"``) or in the many-body balance that moves the particles, with the unit normals
+    ``normal`` ``[c, 3]`` if given, else from ``positions`` ``[n, 3]`` (m). Returns the necks and their
+    approaches ``H(a)`` ``[c]`` (m), and with many-body shrinkage the displacements ``[n, 3]`` (m) and whether the
+    balance fell short (else None, None).
+    """
     i, j = pairs[:, 0], pairs[:, 1]
     r_i, r_j = radii[i], radii[j]
-    a, u, unbalanced = _balanced_necks(spec, params, pairs, _pair_normals(pairs, positions),
-                                       jnp.ones(i.shape, bool), neck.reshape(-1)[carried.pair_slot], r_i, r_j,
-                                       _interval_temperature(carried, end_temperature, i, j), duration, positions,
-                                       carried.supports)
-    return _on_table(carried, a), _on_table(carried, sintering.neck_overlap(a, r_i, r_j)), u, unbalanced
-
-
-def grow_pair_necks(spec: Sintering, params: dict, carried: NeckState, neck, geometry, positions, radii,
-                    end_temperature, duration):
-    """One growth interval of the necks on a half pair list (sintering with the mechanics):
-    ``(neck, neck_overlap, displacement, unbalanced)``.
-
-    ``neck``: ``[c]`` the pairs' necks (m, :attr:`sintercond.mechanics.MechanicalState.neck`); ``geometry``: the
-    :class:`sintercond.mechanics.PairGeometry` of the list at ``positions`` ``[n, 3]`` with the gap
-    :data:`POINT_CONTACT_GAP`. The pairs whose spheres touch sinter, each on its own (``shrinkage="independent"``)
-    or in the many-body balance; a pair whose spheres have come apart has no neck (0). A pair that the balance's
-    displacements bring into contact met at the sintering's creeping pace, not by an impact: its overlap is taken
-    as a neck (``a = H^-1(delta)``), so the elastic laws do not see it. Returns the necks and their approaches
-    ``[c]`` (m), and with many-body shrinkage the displacements ``[n, 3]`` (m) and whether the balance fell short
-    (else None, None).
-    """
-    i, j, touching = geometry.i, geometry.j, geometry.touching
-    r_i, r_j = radii[i], radii[j]
-    a_start = jnp.where(touching, neck, 0.0)
     temperature = _interval_temperature(carried, end_temperature, i, j)
+    active = jnp.broadcast_to(jnp.asarray(active), i.shape)
+    a_start = jnp.where(active, neck, 0.0)
     u = unbalanced = None
     if spec.shrinkage == "many_body":
-        a, u, unbalanced = _balanced_necks(spec, params, jnp.stack([i, j], axis=1), geometry.normal, touching,
-                                           a_start, r_i, r_j, temperature, duration, positions, carried.supports)
+        normal = _pair_normals(pairs, positions) if normal is None else normal
+        a, u, unbalanced = _balanced_necks(spec, params, pairs, normal, active, a_start, r_i, r_j, temperature,
+                                           duration, positions, carried.supports)
     else:
         a = _grown(spec, params, a_start, r_i, r_j, temperature, duration)
-    a = jnp.where(touching, a, 0.0)
-    h = jnp.where(touching, sintering.neck_overlap(a, r_i, r_j), 0.0)
-    if u is not None:
-        after = pair_geometry(positions + u, radii, geometry.pairs, POINT_CONTACT_GAP)
-        closed = after.touching & ~touching
-        met = jnp.maximum(after.overlap, 0.0)
-        a = jnp.where(closed, neck_radius(r_i, r_j, met), a)
-        h = jnp.where(closed, met, h)
-    return a, h, u, unbalanced
+    a = jnp.where(active, a, 0.0)
+    return a, jnp.where(active, sintering.neck_overlap(a, r_i, r_j), 0.0), u, unbalanced
+
+
+def met_necks(geometry, neck, neck_overlap, moved, radii):
+    """``(neck, neck_overlap)`` ``[c]`` (m) of a half pair list after a many-body balance moved its particles to
+    ``moved`` ``[n, 3]`` (m): a pair that the displacements brought into contact met at the sintering's creeping
+    pace, not by an impact, so its overlap is taken as a neck (``a = H^-1(delta)``) and the elastic laws do not
+    see it. ``geometry``: the :class:`sintercond.mechanics.PairGeometry` before the move, with the gap
+    :data:`POINT_CONTACT_GAP`."""
+    after = pair_geometry(moved, radii, geometry.pairs, POINT_CONTACT_GAP)
+    closed = after.touching & ~geometry.touching
+    met = jnp.maximum(after.overlap, 0.0)
+    return (jnp.where(closed, neck_radius(radii[geometry.i], radii[geometry.j], met), neck),
+            jnp.where(closed, met, neck_overlap))
 
 
 def pair_necks(contacts: DynamicContacts, positions, radii, start: str = "point"):
@@ -613,17 +563,16 @@ def neck_statistics(state) -> dict:
         return {"mean_neck_ratio": per(ratio), "max_neck_ratio": jnp.max(jnp.where(g.touching, ratio, 0.0), initial=0.0),
                 "shrinkage": per((distance(x0) - distance(x)) / (radii[g.i] + radii[g.j]))}
     contacts, radii = state.contacts, state.particles.radii
-    lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
+    lo, hi = contacts.pairs[:, 0], contacts.pairs[:, 1]
     r_lo, r_hi = radii[lo], radii[hi]
-    count = jnp.sum(valid.astype(radii.dtype))
-    per = lambda x: jnp.sum(jnp.where(valid, x, 0.0)) / jnp.maximum(count, 1.0)  # noqa: E731
+    per = lambda x: jnp.sum(x) / jnp.maximum(x.shape[0], 1)  # noqa: E731
     ratio = contacts.neck / jnp.minimum(r_lo, r_hi)
     if state.sintering.start_positions is None:
         approach = contacts.overlap - state.sintering.start_overlap
     else:
-        distance = lambda x: jnp.linalg.norm(jnp.where(valid[..., None], x[hi] - x[lo], 1.0), axis=-1)  # noqa: E731
+        distance = lambda x: jnp.linalg.norm(x[hi] - x[lo], axis=-1)  # noqa: E731
         approach = distance(state.sintering.start_positions) - distance(state.particles.positions)
-    return {"mean_neck_ratio": per(ratio), "max_neck_ratio": jnp.max(jnp.where(valid, ratio, 0.0), initial=0.0),
+    return {"mean_neck_ratio": per(ratio), "max_neck_ratio": jnp.max(ratio, initial=0.0),
             "shrinkage": per(approach / (r_lo + r_hi))}
 
 
@@ -636,10 +585,10 @@ def particle_neck_ratio(state):
         count = pair_sum(*(2 * [g.touching.astype(ratio.dtype)]), pairs, n)
         return pair_sum(ratio, ratio, pairs, n) / jnp.maximum(count, 1.0)
     contacts, radii = state.contacts, state.particles.radii
-    lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
-    ratio = jnp.where(valid, contacts.neck / jnp.minimum(radii[lo], radii[hi]), 0.0)
-    count = jnp.sum(valid.astype(radii.dtype), axis=1)
-    return jnp.sum(ratio, axis=1) / jnp.maximum(count, 1.0)
+    pairs, n = contacts.pairs, radii.shape[0]
+    ratio = contacts.neck / jnp.minimum(radii[pairs[:, 0]], radii[pairs[:, 1]])
+    count = pair_sum(*(2 * [jnp.ones(ratio.shape, ratio.dtype)]), pairs, n)
+    return pair_sum(ratio, ratio, pairs, n) / jnp.maximum(count, 1.0)
 
 
 def _on_pairs(state) -> bool:
@@ -659,12 +608,24 @@ def necks_at_cap(spec: Sintering, params, contacts: LiftedContacts, radii) -> Li
     the run can reach, for its time step."""
     merged = law_params(spec, params)
     radii = jnp.asarray(radii)
-    lo, hi, valid = _pairs(contacts.neighbors, radii.shape[0])
-    r_lo, r_hi = radii[lo], radii[hi]
+    r_lo, r_hi = radii[contacts.pairs[:, 0]], radii[contacts.pairs[:, 1]]
     cap = jnp.minimum(sintering.kinetic_law(spec.law).cap(r_lo, r_hi, merged), jnp.minimum(r_lo, r_hi))
-    neck = jnp.where(valid, jnp.maximum(cap, contacts.neck), 0.0)
-    return dataclasses.replace(contacts, neck=neck, overlap=jnp.where(valid, sintering.neck_overlap(neck, r_lo, r_hi),
-                                                                      0.0))
+    neck = jnp.maximum(cap, contacts.neck)
+    return dataclasses.replace(contacts, neck=neck, overlap=sintering.neck_overlap(neck, r_lo, r_hi))
+
+
+def pair_necks_at_cap(spec: Sintering, params, motion: MechanicalState, contacts: DynamicContacts, positions, radii
+                      ) -> MechanicalState:
+    """``motion`` with the neck of every touching pair of the half pair list (:data:`POINT_CONTACT_GAP`) at the
+    kinetic law's cap (and its approach ``H``): :func:`necks_at_cap` for sintering with the mechanics."""
+    merged = law_params(spec, params)
+    radii = jnp.asarray(radii)
+    g = pair_geometry(jnp.asarray(positions, radii.dtype), radii, contacts.pairs.pairs, POINT_CONTACT_GAP)
+    r_i, r_j = radii[g.i], radii[g.j]
+    cap = jnp.minimum(sintering.kinetic_law(spec.law).cap(r_i, r_j, merged), jnp.minimum(r_i, r_j))
+    neck = jnp.where(g.touching, jnp.maximum(cap, motion.neck), 0.0)
+    return dataclasses.replace(motion, neck=neck,
+                               neck_overlap=jnp.where(g.touching, sintering.neck_overlap(neck, r_i, r_j), 0.0))
 
 
 def check_stable(state) -> None:
@@ -690,6 +651,6 @@ def update_interval(spec: Sintering, step) -> jax.Array:
 
 
 __all__ = ["NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering",
-           "balance_displacements", "balance_table_necks", "check_stable", "grow_pair_necks", "grow_table_necks",
-           "law_params", "neck_state", "neck_statistics", "necks_at_cap", "pair_necks", "particle_neck_ratio",
+           "balance_displacements", "check_stable", "check_table", "grow_necks", "law_params", "met_necks",
+           "neck_state", "neck_statistics", "necks_at_cap", "pair_necks", "pair_necks_at_cap", "particle_neck_ratio",
            "validate_pair_necks", "validate_sintering", "with_pair_necks"]

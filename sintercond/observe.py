@@ -44,7 +44,7 @@ def sintered_conductivity(model, state) -> float:
     """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
     (:func:`sintercond.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
     layers are held hot and cold; any other packing's face layers (:func:`sintercond.steady.face_layer_box`)."""
-    carried, radii = state.sintering, model.radii
+    radii = model.radii
     axis = model.k_star_axis
     if state.mechanics is not None:  # the necks on the half pair list, the packing where it has moved to
         geometry, pair_k = jax.jit(simulate.sintered_pair_conductance, static_argnums=0)(model.physics, state,
@@ -58,13 +58,11 @@ def sintered_conductivity(model, state) -> float:
         box = steady.face_layer_box(centres, radii, axis)
         return float(steady.steady_state_network_conductivity(centres, radii, pairs, np.asarray(pair_k)[keep],
                                                               axis=axis, box=box))
-    slot = np.asarray(carried.pair_slot)
-    pair_k = np.asarray(simulate.neck_conductance(model.physics, state, model.params)).reshape(-1)[slot]
+    pair_k = np.asarray(simulate.pair_neck_conductance(model.physics, state, model.params))
     if not np.any(pair_k > 0):
         return 0.0
-    i, j = np.asarray(carried.pairs, np.int64).T
-    pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap).reshape(-1)[slot], radii[i], radii[j],
-                                 len(radii))
+    i, j = np.asarray(state.contacts.pairs, np.int64).T
+    pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap), radii[i], radii[j], len(radii))
     box = None if model.lattice else steady.face_layer_box(model.centres, radii, axis)
     return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=axis, box=box))
 
@@ -225,19 +223,20 @@ def contact_network(model, state) -> tuple:
         overlap = np.asarray(geometry.overlap)[keep]
         neck = np.asarray(NECK_MODELS[physics.neck](radii[pairs[:, 0]], radii[pairs[:, 1]], overlap))
     else:
-        neighbors = np.asarray(state.contacts.neighbors)
-        rows = np.broadcast_to(np.arange(len(radii))[:, None], neighbors.shape)
-        lower = (rows < neighbors) & (neighbors < len(radii))
-        pairs = np.stack([rows[lower], neighbors[lower]], axis=1)
         if physics.conduction.conductance == "table":
+            neighbors = np.asarray(state.contacts.neighbors)
+            rows = np.broadcast_to(np.arange(len(radii))[:, None], neighbors.shape)
+            lower = (rows < neighbors) & (neighbors < len(radii))
+            pairs = np.stack([rows[lower], neighbors[lower]], axis=1)
             k = np.asarray(state.contacts.conductance)[lower] * float(np.asarray(kappa)[0])
             centres = np.asarray(p.positions)
             overlap = np.maximum(radii[pairs[:, 0]] + radii[pairs[:, 1]]
                                  - np.linalg.norm(centres[pairs[:, 0]] - centres[pairs[:, 1]], axis=1), 0.0)
             neck = np.asarray(NECK_MODELS[physics.neck](radii[pairs[:, 0]], radii[pairs[:, 1]], overlap))
         else:
-            k = np.asarray(simulate.neck_conductance(physics, state, model.params))[lower]
-            neck = np.asarray(state.contacts.neck)[lower]
+            pairs = np.asarray(state.contacts.pairs, np.int64)
+            k = np.asarray(simulate.pair_neck_conductance(physics, state, model.params))
+            neck = np.asarray(state.contacts.neck)
     flow = k * (temperature[pairs[:, 0]] - temperature[pairs[:, 1]])
     return pairs, {"neck_radius": neck, "conductance": k, "heat_flow": flow, **forces}
 

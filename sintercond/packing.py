@@ -93,6 +93,8 @@ class Packing:
         rolled bed: each sphere came to rest on its supports when it was placed; nothing is integrated).
       settle: the :class:`sintercond.settle.SettleReport` of a DEM settle (``method="dem"``), else None.
       roll: the :class:`sintercond.rolling.RollReport` of a rolled bed (``method="roll"``), else None.
+      settled: the :class:`sintercond.settle.DemSettled` state a DEM settle ended in (velocities, spins and the
+        springs of its contacts and walls: what a run with the mechanics continues), else None.
     """
 
     centres: np.ndarray
@@ -106,6 +108,7 @@ class Packing:
     residual_force: float = math.nan
     settle: _settle.SettleReport | None = None
     roll: _rolling.RollReport | None = None
+    settled: _settle.DemSettled | None = dataclasses.field(default=None, compare=False, repr=False)
 
     def summary(self) -> dict:
         """The bed's figures as a flat dict (for a run summary); a DEM bed adds its :class:`sintercond.settle.SettleReport`'s."""
@@ -322,7 +325,8 @@ def _pour(radii, lateral_size, material, seed, start, temperature, walls, progre
         settle = {**settle, "v_rel": math.sqrt(2.0 * _settle.GRAVITY * 2.0 * float(np.mean(radii)))}
     settled = _settle.dem_settle(centres, radii, walls, material, temperature, progress=progress, **settle)
     bed = _bed(settled.centres, radii, lateral_size)
-    return dataclasses.replace(bed, residual_force=settled.report.force_ratio, settle=settled.report), settled
+    return dataclasses.replace(bed, residual_force=settled.report.force_ratio, settle=settled.report,
+                               settled=settled), settled
 
 
 def _bed(centres, radii, lateral_size) -> Packing:

@@ -81,8 +81,9 @@ from sintercond.neck_growth import NeckState, Sintering  # noqa: F401
 from sintercond.network import ContactTable
 from sintercond.sim.contacts import (affine_shrinkage, conducting_geometry, conductance_lift,  # noqa: F401
                                      conductivity_lookup, dynamic_contacts, follow_contacts, lifted_contacts,
-                                     list_region, merged_law_params, neck_conductance, pair_conductance,
-                                     pair_heat_flow, pair_heat_power, reallocate_neighbors, sintered_geometry,
+                                     lifted_pair_conductance, list_region, merged_law_params, neck_conductance,
+                                     pair_conductance, pair_heat_flow, pair_heat_power, pair_neck_conductance,
+                                     reallocate_neighbors, sintered_geometry,
                                      sintered_pair_conductance, table_contacts)
 from sintercond.sim.physics import Conduction, Physics, Sources
 from sintercond.sim.rollout import (Observable, SaveAt, mean_temperature, probe_temperatures, rollout,  # noqa: F401

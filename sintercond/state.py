@@ -126,24 +126,48 @@ class TableContacts:
 
 @pytree_dataclass
 class LiftedContacts:
-    """The contacts of a static packing with ``Conduction(conductance="lifted")``: the necks, the law applied to
-    the parameters at each rollout.
+    """The contacts of a static packing with ``Conduction(conductance="lifted")``: a half pair list that never
+    rebuilds, its necks, and the padded table the conduction update runs on (the law applied to the parameters
+    at each rollout).
+
+    The pairs hold the state (each contact once, ``i < j``: its neck and approach); the table is derived from
+    them once, when the contacts are built (:func:`sintercond.simulate.lifted_contacts`), and only lays each
+    pair's conductance into its two slots (:meth:`on_table`) for the network mat-vec.
 
     Attributes:
       neighbors: ``[n, m]`` int32 neighbour indices, padding the row's own index.
-      neck: ``[n, m]`` neck radii (m), 0 in padding.
-      overlap: ``[n, m]`` overlaps ``h = r_i + r_j - d`` (m), 0 in padding.
+      pairs: ``[c, 2]`` int32 the contacts ``(i, j)``, ``i < j``, sorted by ``(i, j)``.
+      slot_pair: ``[n, m]`` int32 the pair each slot of the table holds; ``c`` in padding.
+      neck: ``[c]`` neck radius of each pair (m).
+      overlap: ``[c]`` overlap ``h = r_i + r_j - d`` of each pair (m).
       wall_neck, wall_overlap: ``[n_walls, n]`` neck radius and penetration (m) of each particle on each
         conducting wall, or None.
       wall_temperature: ``[n_walls]`` conducting wall temperatures (K), or None.
     """
 
     neighbors: jax.Array
+    pairs: jax.Array
+    slot_pair: jax.Array
     neck: jax.Array
     overlap: jax.Array
     wall_neck: jax.Array | None = None
     wall_overlap: jax.Array | None = None
     wall_temperature: jax.Array | None = None
+
+    def on_table(self, per_pair) -> jax.Array:
+        """A ``[c]`` per-pair value in both slots of the padded table ``[n, m]``, 0 in padding."""
+        per_pair = jnp.asarray(per_pair)
+        return jnp.concatenate([per_pair, jnp.zeros((1,), per_pair.dtype)])[self.slot_pair]
+
+    @property
+    def table_neck(self) -> jax.Array:
+        """``[n, m]`` the necks (m) in the table's slots, 0 in padding."""
+        return self.on_table(self.neck)
+
+    @property
+    def table_overlap(self) -> jax.Array:
+        """``[n, m]`` the overlaps (m) in the table's slots, 0 in padding."""
+        return self.on_table(self.overlap)
 
 
 @pytree_dataclass

@@ -81,8 +81,8 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     n = len(setup.radii)
     kappa = jnp.broadcast_to(jnp.asarray(kappa, float), (n,))
     conductance = sim_module.conductance_lift(
-        physics, jnp.asarray(setup.radii), jnp.arange(n, dtype=jnp.int32), setup.contacts.neighbors,
-        setup.contacts.neck, setup.contacts.overlap, kappa, sim_module.merged_law_params(
+        physics, jnp.asarray(setup.radii), jnp.arange(n, dtype=jnp.int32), setup.contacts, kappa,
+        sim_module.merged_law_params(
             physics, sim_module.Params(kappa, kappa, law={} if params is None else dict(params))))
     table = ContactTable(setup.contacts.neighbors, conductance)
     hot = jnp.asarray(setup.hot)

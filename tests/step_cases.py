@@ -222,7 +222,7 @@ def outputs(name) -> dict[str, np.ndarray]:
     if state.sintering is not None:
         out["unstable"] = state.sintering.unstable
     if sim.physics.sintering is not None and sim.physics.mechanics is None:
-        out["neck"] = state.contacts.neck
+        out["neck"] = state.contacts.table_neck
     if state.mechanics is not None:
         out |= {"velocity": state.mechanics.velocity, "spin": state.mechanics.spin}
         if sim.physics.sintering is not None:

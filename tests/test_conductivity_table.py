@@ -36,7 +36,7 @@ def test_each_particle_conducts_at_its_own_temperature():
     sim, state, params = pair()
     prep = sim.prepare_fn(state, params)
     power = sim.heat_power_fn(state, prep)
-    a, h = float(state.contacts.neck[0, 0]), float(state.contacts.overlap[0, 0])
+    a, h = float(state.contacts.table_neck[0, 0]), float(state.contacts.table_overlap[0, 0])
     k = conductance_from_neck("rojek", a, 40e-6, 30e-6, h, float(TI64(900.0)), float(TI64(1200.0)))
     np.testing.assert_allclose(np.asarray(power), [float(k) * 300.0, -float(k) * 300.0], rtol=1e-14)
     assert float(TI64(900.0)) != float(TI64(1200.0))

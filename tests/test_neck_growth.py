@@ -37,12 +37,12 @@ def pulsed_chain(every=1):
 
 
 def saved_states(sim, state, params, n_steps):
-    """Temperatures ``[n_steps + 1, n]`` and necks ``[n_steps + 1, n, m]`` after every step, the start included."""
-    observe = lambda s: (s.particles.temperature, s.contacts.neck)  # noqa: E731
+    """Temperatures ``[n_steps + 1, n]`` and the table's necks ``[n_steps + 1, n, m]`` after every step, the start included."""
+    observe = lambda s: (s.particles.temperature, s.contacts.table_neck)  # noqa: E731
     end, (temperature, neck) = jax.jit(lambda s, p: simulate.rollout(sim, s, p, n_steps, simulate.SaveAt(1, observe))
                                        )(state, params)
     return end, (jnp.concatenate([state.particles.temperature[None], temperature]),
-                 jnp.concatenate([state.contacts.neck[None], neck]))
+                 jnp.concatenate([state.contacts.table_neck[None], neck]))
 
 
 @pytest.mark.parametrize("every", [1, 4])
@@ -61,10 +61,10 @@ def test_each_contact_grows_as_the_law_tier_does_along_its_own_temperature_histo
         expected = sintering.grow_neck("grain_boundary", 0.0, radii[i], radii[j], history, durations, KINETICS,
                                        quadrature_nodes=spec.quadrature_nodes,
                                        newton_iterations=spec.newton_iterations)[-1]
-        got = float(end.contacts.neck[i, slot])
+        got = float(end.contacts.table_neck[i, slot])
         assert float(expected) > 0.1 * min(radii[i], radii[j])  # the necks did grow
         np.testing.assert_allclose(got, float(expected), rtol=1e-12)
-        np.testing.assert_allclose(float(end.contacts.overlap[i, slot]),
+        np.testing.assert_allclose(float(end.contacts.table_overlap[i, slot]),
                                    float(sintering.neck_overlap(expected, radii[i], radii[j])), rtol=1e-12)
     assert np.ptp(np.asarray(temperature[:, 0])) > 50.0  # the history is not isothermal
 
@@ -107,7 +107,7 @@ def test_the_conductance_follows_the_necks():
     end_k = simulate.neck_conductance(sim.physics, end, params)
     assert float(jnp.max(start_k)) < 1e-9  # point contacts
     from sintercond.conductance import conductance_from_neck
-    a, h = end.contacts.neck[0, 0], end.contacts.overlap[0, 0]
+    a, h = end.contacts.table_neck[0, 0], end.contacts.table_overlap[0, 0]
     expected = conductance_from_neck("rojek", a, 40e-6, 30e-6, h, KAPPA, KAPPA)
     np.testing.assert_allclose(float(end_k[0, 0]), float(expected), rtol=1e-14)
 
@@ -122,7 +122,7 @@ def test_gradients_of_a_neck_and_a_probe_temperature_by_the_kinetic_parameters_e
                                                                                    "activation_energy": q},
                             pulse=params.pulse)
         end, _ = simulate.rollout(sim, state, p, n_steps)
-        return jnp.stack([end.contacts.neck[0, 0] / 1e-6, end.particles.temperature[2]])
+        return jnp.stack([end.contacts.table_neck[0, 0] / 1e-6, end.particles.temperature[2]])
 
     log_a, q = jnp.log(KINETICS["A"]), KINETICS["activation_energy"]
     jac = jax.jit(jax.jacrev(observe, argnums=(0, 1)))(log_a, q)
@@ -229,14 +229,14 @@ def test_the_gradient_of_k_star_at_the_end_by_the_kinetic_parameters_equals_cent
     state = simulate.init_state(particles, contacts, 1e-2, sintering=necks)
     sim = simulate.simulator(physics)
     pairs = contact_pairs(x, np.full(8, r))
-    np.testing.assert_array_equal(np.stack([pairs.i, pairs.j], 1), np.asarray(necks.pairs))
+    np.testing.assert_array_equal(np.stack([pairs.i, pairs.j], 1), np.asarray(contacts.pairs))
 
     def k_star(log_a, q):
         params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],
                                  sintering={"A": jnp.exp(log_a), "activation_energy": q},
                                  held_ramp=simulate.HeldRampParams(1273.0, 9.5, 25.0))
         end, _ = simulate.rollout(sim, state, params, 100)
-        k = simulate.neck_conductance(physics, end, params).reshape(-1)[necks.pair_slot]
+        k = simulate.pair_neck_conductance(physics, end, params)
         return steady_state_network_conductivity(x, np.full(8, r), pairs, k, axis=2)
 
     log_a, q = jnp.log(1.2e-20), 37.0
@@ -281,7 +281,7 @@ def test_held_particles_do_not_count_in_the_stability_of_growing_necks():
     state = simulate.init_state(particles, contacts, dt, sintering=neck_growth.neck_state(contacts,
                                                                                           particles.temperature))
     end, _ = simulate.rollout(sim, state, params, 200)
-    assert float(end.contacts.neck[0, 0]) == pytest.approx(float(capped.neck[0, 0]), rel=1e-9)  # at the cap
+    assert float(end.contacts.table_neck[0, 0]) == pytest.approx(float(capped.table_neck[0, 0]), rel=1e-9)  # at the cap
     assert not bool(end.sintering.unstable)
 
 
@@ -295,10 +295,10 @@ def test_a_state_started_between_updates_grows_its_first_interval_from_its_own_s
     r = np.asarray(state.particles.radii)
     pair = 0.5 * (np.asarray(state.particles.temperature)[:2].mean() + np.asarray(end.particles.temperature)[:2].mean())
     spec = sim.physics.sintering
-    expected = sintering.grow_neck("grain_boundary", float(state.contacts.neck[0, 0]), r[0], r[1], [pair],
+    expected = sintering.grow_neck("grain_boundary", float(state.contacts.table_neck[0, 0]), r[0], r[1], [pair],
                                    [float(state.dt)], KINETICS, quadrature_nodes=spec.quadrature_nodes,
                                    newton_iterations=spec.newton_iterations)[-1]
-    np.testing.assert_allclose(float(end.contacts.neck[0, 0]), float(expected), rtol=1e-12)
+    np.testing.assert_allclose(float(end.contacts.table_neck[0, 0]), float(expected), rtol=1e-12)
 
 
 def test_a_one_sided_table_and_an_extrapolating_conductivity_table_are_refused():

@@ -209,3 +209,47 @@ def test_the_5_3_scene_pours_with_its_mechanics_section():
     assert bed["settle_kinetic_ratio"] <= bed["settle_kinetic_tol"] and bed["settle_force_ratio"] <= bed["settle_force_tol"]
     assert np.all(centres[:, :2] - radii[:, None] >= -0.05 * radii[:, None])  # inside the box, up to Hertz overlap
     assert np.all(centres[:, :2] + radii[:, None] <= 0.02 + 0.05 * radii[:, None])
+
+
+@pytest.mark.slow
+def test_a_poured_bed_starts_its_run_with_the_springs_it_settled_with():
+    """The run continues the pour (issue 39, part 3): a DEM powder bed (the Ti6Al4V scene's pour, shrunk) run with
+    its mechanics in the pour's box starts from the settled state's velocities and the springs of every contact,
+    carried pair by pair, so its first net forces are those the DEM settle ended with (the settle's own figure,
+    below its threshold); the same bed from unloaded springs starts out of balance (its friction and rolling
+    resistance rebuilt from zero)."""
+    import dataclasses
+    import jax
+
+    raw = copy.deepcopy(load_scene("ti6al4v_preheating_bed"))
+    raw["packing"].update(lateral_size=200e-6, height=120e-6)
+    for section in ("sintering", "preheating"):
+        raw.pop(section)
+    raw.update(walls=[], physics={"mechanics": True}, run={"duration": 1e-6, "output_every": 10})
+    scene = validate_scene(raw)
+    _, _, bed, settled = build._scene_packing(scene)
+    model = build.build_model(scene)
+    motion, poured = model.state.mechanics, settled.state.mechanics
+    np.testing.assert_array_equal(np.asarray(motion.velocity), np.asarray(poured.velocity))
+    run_pairs = {tuple(p): k for k, p in enumerate(np.asarray(model.state.contacts.pairs.pairs)) if p[0] < p[1]}
+    loaded = 0
+    for k, pair in enumerate(np.asarray(settled.state.contacts.pairs.pairs)):
+        if pair[0] < pair[1] and np.any(np.asarray(poured.spring[k])):
+            np.testing.assert_array_equal(np.asarray(motion.spring[run_pairs[tuple(pair)]]),
+                                          np.asarray(poured.spring[k]))
+            loaded += 1
+    assert loaded > 0
+
+    def force_ratio(state):
+        probe = jax.jit(model.sim.step_fn)(state, model.params)
+        p = state.particles
+        force = np.asarray(p.mass)[:, None] * np.asarray(probe.mechanics.velocity - state.mechanics.velocity) / float(
+            state.dt)
+        return float(np.max(np.linalg.norm(force, axis=1) / (np.asarray(p.mass) * G)))
+
+    carried = force_ratio(model.state)
+    assert carried == pytest.approx(bed["settle_force_ratio"], rel=1e-3) and carried <= bed["settle_force_tol"]
+    unloaded = dataclasses.replace(model.state, mechanics=dataclasses.replace(
+        motion, **{f: None if getattr(motion, f) is None else 0 * getattr(motion, f)
+                   for f in ("velocity", "spin", "spring", "rolling", "wall_spring", "wall_rolling")}))
+    assert force_ratio(unloaded) > 10 * bed["settle_force_tol"]

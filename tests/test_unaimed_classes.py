@@ -186,7 +186,7 @@ def test_the_necks_grow_at_the_end_of_each_interval_by_the_whole_interval(every)
         expected = 0.0 if grown == 0 else float(sintering.grow_neck("grain_boundary", 0.0, 40e-6, 40e-6, [1150.0],
                                                                      [grown], kinetics)[0])
         # 6e-10 apart here (the law tier's Newton inversion); a step more or less of growth moves it by over 2 %
-        assert float(jnp.max(state.contacts.neck[0])) == pytest.approx(expected, rel=1e-8, abs=1e-18), n
+        assert float(jnp.max(state.contacts.table_neck[0])) == pytest.approx(expected, rel=1e-8, abs=1e-18), n
 
 
 def test_the_wall_columns_of_the_history_count_each_walls_heat_in_closed_form(tmp_path):
@@ -257,7 +257,7 @@ def test_a_hot_neck_on_the_table_stops_at_its_cap_and_stays(dihedral):
     necks = []
     for _ in range(6):
         state = step(state, model.params)
-        necks.append(float(jnp.max(state.contacts.neck[0])))
+        necks.append(float(jnp.max(state.contacts.table_neck[0])))
     assert max(necks) <= cap * (1 + 1e-12)
     assert necks[-1] == pytest.approx(cap, rel=1e-12)
 

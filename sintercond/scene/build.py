@@ -21,6 +21,7 @@ from sintercond.scene.typed import Wall, typed_scene
 from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, file_temperatures, restitution_damping_ratio)
+from sintercond.conductance import validate_pair_conductance_inputs
 from sintercond.state import particle_state
 
 
@@ -120,13 +121,19 @@ def build_packing(scene, log=None):
 
     ``bed``: the bed's figures for the summary (empty for listed spheres).
     """
+    return _scene_packing(scene, log)[:3]
+
+
+def _scene_packing(scene, log=None):
+    """:func:`build_packing` and the :class:`sintercond.settle.DemSettled` state of a DEM pour (None for any other
+    packing, or one whose radii were changed after it settled)."""
     scene = typed_scene(scene)
     p = scene.packing
     if p.kind == "spheres":
-        return np.asarray(p.centres, np.float64), np.asarray(p.radii, np.float64), {}
+        return np.asarray(p.centres, np.float64), np.asarray(p.radii, np.float64), {}, None
     if p.kind == "file":
         centres, radii = file_packing(p)
-        return np.array(centres), np.array(radii), {}
+        return np.array(centres), np.array(radii), {}, None
     if p.kind == "poured":
         rng = np.random.default_rng(p.seed)
         radii = packing.truncated_normal_radii(p.particles, p.radius_mean, p.radius_std, p.truncation, rng)
@@ -140,10 +147,11 @@ def build_packing(scene, log=None):
             packed = packing.powder_bed(p.lateral_size, p.height, tuple(p.diameter_range), seed=p.seed, method="dem",
                                         material=dem_material(scene), progress=progress, soft_modulus=p.soft_modulus,
                                         start=p.start)
-            packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p.sinter_swelling))
+            if p.sinter_swelling:  # swollen spheres overlap more than the settled springs saw: start unloaded
+                packed = dataclasses.replace(packed, radii=packed.radii * (1.0 + p.sinter_swelling), settled=None)
         else:
             packed = packing.from_scene(p, progress=progress)
-    return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}
+    return packed.centres, packed.radii, {k: v for k, v in packed.summary().items() if k != "particles"}, packed.settled
 
 
 def _nusselt(convection):
@@ -316,59 +324,34 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     """
     scene = typed_scene(scene)
     log = log or (lambda message: None)
-    bed = {}
+    bed, settled = {}, None
     if centres is None:
         log("packing: building the scene's packing")
         start = time.perf_counter()
-        centres, radii, bed = build_packing(scene, log)
+        centres, radii, bed, settled = _scene_packing(scene, log)
         log(f"packing: {len(radii):,} particles in {time.perf_counter() - start:.1f} s")
     check_distinct_centres(None, centres)  # a pour, a bed, or a run folder's packing.npz as well
-    m, c = scene.material, scene.conduction
     physics = scene_physics(scene)
-    log(f"network: contacts and conductances of {len(radii):,} particles")
-    start = time.perf_counter()
-    try:
-        unit = physics.conduction.conductance == "table"
-        table = network.contact_table(centres, radii, 1.0 if unit else m.conductivity, c.law, c.params, c.neck_model)
-    except ValueError as err:
-        raise SceneError(f"the packing does not fit the conduction model: {err}") from None
-    contact_count = len(table.pairs())
-    log(f"network: {contact_count:,} contacts in "
-        f"{time.perf_counter() - start:.1f} s")
     planes = scene_walls(scene, centres, radii)  # built once: the run and its observations take them from the model
     fixed_mask, fixed_temperature, conducting = _apply_walls(planes, centres, radii)
     if scene.preheating is not None and scene.preheating.hold == "all":  # an isothermal cell on the ramp
         fixed_mask = np.ones(len(radii), bool)
         fixed_temperature = np.full(len(radii), scene.initial.temperature)
     touching_walls = wall_contacts(scene, centres, radii, log, planes=planes)
-    lifted = physics.conduction.conductance == "lifted"
-    physics = dataclasses.replace(physics, conduction=dataclasses.replace(
-        physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
-    particles = particle_state(centres, radii, initial_temperatures(scene), m.density, m.specific_heat,
-                               fixed=fixed_mask, fixed_temperature=fixed_temperature)
-    if not lifted:
-        k_wall, t_wall = _merged_wall_conductance(scene, radii, conducting)
-        contacts = simulate.table_contacts(table, k_wall, t_wall)
-    else:
-        contacts = simulate.lifted_contacts(physics, centres, radii,
-                                            [(penetration, wall.temperature) for _, wall, penetration in conducting])
+    particles = particle_state(centres, radii, initial_temperatures(scene), scene.material.density,
+                               scene.material.specific_heat, fixed=fixed_mask, fixed_temperature=fixed_temperature)
     params = scene_params(scene)
-    sim = simulate.simulator(physics)
-    necks = None
-    if physics.sintering is not None:
-        many_body = physics.sintering.shrinkage == "many_body"
-        necks = neck_growth.neck_state(contacts, particles.temperature,
-                                       supports=wall_supports(scene, centres, radii, planes) if many_body else None,
-                                       positions=particles.positions if many_body else None)
-    # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
-    limiting = contacts if necks is None else neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts,
-                                                                      particles.radii)
-    state = simulate.init_state(particles, limiting, 1.0, sintering=necks)
+    if mechanics_on(scene):
+        built = _coupled_model(scene, physics, planes, particles, params, settled, log)
+    else:
+        built = _static_model(scene, physics, planes, particles, params, conducting, log)
+    physics, sim = built.physics, built.sim
     sources = jax.jit(thermal.source_conductance, static_argnums=0)(physics.sources, particles.radii, params,
                                                                      _highest_temperature(scene))
     # every particle held (an isothermal cell on a ramp): no conduction to keep stable
-    thermal_limit = np.inf if fixed_mask.all() else float(simulate.thermal_time_step(sim, state, params, sources))
-    at_cap = " on the necks at the kinetic law's cap" if necks is not None else ""
+    thermal_limit = np.inf if fixed_mask.all() else float(simulate.thermal_time_step(sim, built.limiting, params,
+                                                                                      sources))
+    at_cap = " on the necks at the kinetic law's cap" if built.necks is not None else ""
     bounds = {"thermal": (thermal_limit, f"the explicit stability limit min(C_i / (sum_j K_ij + G_i)) = "
                                          f"{thermal_limit:.6g} s{at_cap} (G_i: linearised convection and "
                                          "radiation)")}
@@ -378,48 +361,95 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         bounds["preheating"] = (step, f"{step:.6g} s, in which {every} step(s) (sintering.every) span "
                                       f"{RAMP_STEP_FRACTION:g} of a step of the preheating ramp "
                                       "(preheating.duration / preheating.steps)")
-    coupled = _coupled_model(scene, physics, planes, particles, params, necks, log) if mechanics_on(scene) else None
-    if coupled is not None:
-        physics, sim, contacts, necks = coupled.physics, coupled.sim, coupled.contacts, coupled.necks
-        bounds.update(coupled.bounds)
-    motion = None if coupled is None else coupled.motion
+    bounds.update(built.bounds)
     bounds.update(_beam_bound(scene))
-    dt, n_steps, limit = _time_step(scene.run, bounds, coupled is None)
+    dt, n_steps, limit = _time_step(scene.run, bounds, physics.mechanics is None)
     check_sintering_every(scene, n_steps)
-    state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
+    state = simulate.init_state(particles, built.contacts, dt, mechanics=built.motion, sintering=built.necks)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
-    return Model(sim, params, state, n_steps, contact_count, limit, bed, None if coupled is None else coupled.reallocate,
+    return Model(sim, params, state, n_steps, built.contact_count, limit, bed, built.reallocate,
                  _wall_heat_specs(planes, centres, radii),
-                 {kind: bound for kind, (bound, _) in bounds.items()}, None if coupled is None else coupled.v_rel,
+                 {kind: bound for kind, (bound, _) in bounds.items()}, built.v_rel,
                  None if scene.sintering is None else scene.sintering.k_star_axis,
                  scene.packing.kind == "simple_cubic", *output_interval(scene.run, n_steps), tuple(planes))
 
 
-class _Coupled(NamedTuple):
-    """What the mechanics add to a scene's model: the coupled spec and its simulator on dynamic contacts, their
-    reallocation, the mechanical state (with the necks on the pair list when sintering), the approach speed the
-    step is sized for (m/s) and the step bounds it sets."""
+class _Built(NamedTuple):
+    """The part of :func:`build_model` that depends on the contacts: the one spec and simulator of the run, its
+    contacts and start state pieces, the state its explicit limit is taken on (necks at the kinetic law's cap when
+    sintering), and the step bounds the contacts set; with the mechanics, the reallocation and the approach speed
+    the step is sized for (m/s)."""
 
     physics: simulate.Physics
     sim: simulate.Simulator
     contacts: object
-    reallocate: object
     motion: object
     necks: object
-    v_rel: float
+    limiting: object
+    contact_count: int
     bounds: dict
+    reallocate: object = None
+    v_rel: float | None = None
 
 
-def _coupled_model(scene, physics, planes, particles, params, necks, log) -> _Coupled:
-    """The coupled thermo-mechanical part of :func:`build_model` (``physics.mechanics = true``)."""
+def _scene_pairs(scene, centres, radii, log):
+    """The contacts of the packing (:func:`sintercond.network.contact_pairs`), the conduction law's domain checked
+    on them (a :class:`SceneError` naming the contact)."""
+    m, c = scene.material, scene.conduction
+    log(f"network: contacts and conductances of {len(radii):,} particles")
+    start = time.perf_counter()
+    try:
+        pairs = network.contact_pairs(centres, radii)
+        if len(pairs.i):
+            kappa = np.broadcast_to(np.asarray(m.conductivity, np.float64), pairs.overlap.shape)
+            validate_pair_conductance_inputs(c.law, pairs.r_i, pairs.r_j, pairs.overlap, kappa, kappa, c.params,
+                                             c.neck_model)
+    except ValueError as err:
+        raise SceneError(f"the packing does not fit the conduction model: {err}") from None
+    log(f"network: {len(pairs.i):,} contacts in {time.perf_counter() - start:.1f} s")
+    return pairs
+
+
+def _static_model(scene, physics, planes, particles, params, conducting, log) -> _Built:
+    """The contacts of a static packing (no mechanics): the contact table at unit conductivity, or the lifted
+    necks (and the necks' state when sintering)."""
+    centres, radii = np.asarray(particles.positions, np.float64), np.asarray(particles.radii, np.float64)
+    lifted = physics.conduction.conductance == "lifted"
+    physics = dataclasses.replace(physics, conduction=dataclasses.replace(
+        physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
+    pairs = _scene_pairs(scene, centres, radii, log)
+    if not lifted:
+        c = scene.conduction
+        table = network.contact_table(centres, radii, 1.0, c.law, c.params, c.neck_model)
+        k_wall, t_wall = _merged_wall_conductance(scene, radii, conducting)
+        contacts = simulate.table_contacts(table, k_wall, t_wall)
+    else:
+        contacts = simulate.lifted_contacts(physics, centres, radii,
+                                            [(penetration, wall.temperature) for _, wall, penetration in conducting],
+                                            pairs=pairs)
+    necks, limiting = None, contacts
+    if physics.sintering is not None:
+        many_body = physics.sintering.shrinkage == "many_body"
+        necks = neck_growth.neck_state(contacts, particles.temperature,
+                                       supports=wall_supports(scene, centres, radii, planes) if many_body else None,
+                                       positions=particles.positions if many_body else None)
+        # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
+        limiting = neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts, particles.radii)
+    return _Built(physics, simulate.simulator(physics), contacts, None, necks,
+                  simulate.init_state(particles, limiting, 1.0, sintering=necks), len(pairs.i), {})
+
+
+def _coupled_model(scene, physics, planes, particles, params, settled, log) -> _Built:
+    """The coupled thermo-mechanical part of :func:`build_model` (``physics.mechanics = true``): one spec, its
+    simulator on dynamic contacts, the mechanical state (continuing a DEM pour's ``settled`` state, with the necks
+    on the pair list when sintering), the mechanical and wall step bounds."""
+    centres, radii = np.asarray(particles.positions, np.float64), np.asarray(particles.radii, np.float64)
+    pairs = _scene_pairs(scene, centres, radii, log)
     log("mechanics: contact list and the mechanical time step")
     bounds = {}
-    centres, radii = np.asarray(particles.positions, np.float64), np.asarray(particles.radii, np.float64)
     physics = mechanical_physics(scene, physics, planes)
     skin = scene.physics.skin * float(np.max(radii))
     contacts, fns = simulate.dynamic_contacts(centres, radii, skin)
-    sim = simulate.simulator(physics, fns)
-    reallocate = simulate.reallocate_neighbors(fns)
     impact = scene.physics.impact_velocity
     wall_speed, fastest = _fastest_wall(scene)
     v_rel = impact + wall_speed
@@ -435,12 +465,55 @@ def _coupled_model(scene, physics, planes, particles, params, necks, log) -> _Co
         bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
                                 f"speed {wall_speed:g} m/s) moves {WALL_STEP_FRACTION:g} of the smallest radius")
     motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
+    if settled is not None:
+        motion = _settled_motion(settled, physics.mechanics, motion, contacts)
+    necks, limiting = None, motion
     if physics.sintering is not None:  # the necks on the half pair list, carried as the springs are
         motion = neck_growth.with_pair_necks(motion, contacts, centres, radii,
                                              scene.sintering.start_necks or "point")
-        necks = neck_growth.neck_state(contacts, particles.temperature, supports=necks.supports,
+        many_body = physics.sintering.shrinkage == "many_body"
+        necks = neck_growth.neck_state(contacts, particles.temperature,
+                                       supports=wall_supports(scene, centres, radii, planes) if many_body else None,
                                        positions=particles.positions)
-    return _Coupled(physics, sim, contacts, reallocate, motion, necks, v_rel, bounds)
+        # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
+        limiting = neck_growth.pair_necks_at_cap(physics.sintering, params.sintering, motion, contacts, centres,
+                                                 radii)
+    return _Built(physics, simulate.simulator(physics, fns), contacts, motion, necks,
+                  simulate.init_state(particles, contacts, 1.0, mechanics=limiting, sintering=necks), len(pairs.i),
+                  bounds, simulate.reallocate_neighbors(fns), v_rel)
+
+
+def _settled_motion(settled, spec, motion, contacts):
+    """``motion`` continuing a DEM pour's settled state (:class:`sintercond.settle.DemSettled`): its velocities and
+    spins, its pair springs carried to the run's half pair list by ``(i, j)`` (:func:`sintercond.mechanics.remap_history`),
+    and the springs against each of its walls on the run's wall in the same plane; a wall the pour did not have
+    starts unloaded. The packing then carries the tangential and rolling loads it settled with, as a resumed run
+    does, instead of slipping into the run from unloaded springs."""
+    old = settled.state.mechanics
+    carried = mechanics.remap_history(old, settled.state.contacts.pairs.pairs, contacts.pairs.pairs)
+    dtype = motion.velocity.dtype
+    fields = {"velocity": jnp.asarray(old.velocity, dtype), "spin": jnp.asarray(old.spin, dtype)}
+    for name in ("spring", "rolling"):
+        if getattr(motion, name) is not None and getattr(carried, name) is not None:
+            fields[name] = jnp.asarray(getattr(carried, name), getattr(motion, name).dtype)
+    poured_walls = settled.sim.physics.mechanics.walls
+    for name in ("wall_spring", "wall_rolling"):
+        springs, before = getattr(motion, name), getattr(old, name)
+        if springs is None or before is None:
+            continue
+        for w, wall in enumerate(spec.walls):
+            same = [k for k, poured in enumerate(poured_walls) if _same_plane(poured, wall)]
+            if same:
+                springs = springs.at[w].set(jnp.asarray(before[same[0]], springs.dtype))
+        fields[name] = springs
+    return dataclasses.replace(motion, **fields)
+
+
+def _same_plane(a: walls.PlaneWall, b: walls.PlaneWall) -> bool:
+    """Whether two walls are the same plane, at rest: equal normals and offsets ``p . n``."""
+    n_a, n_b = np.asarray(a.normal, float), np.asarray(b.normal, float)
+    return (np.allclose(n_a, n_b) and np.isclose(np.dot(a.point, n_a), np.dot(b.point, n_b))
+            and not np.any(a.velocity) and not np.any(b.velocity))
 
 
 def _beam_bound(scene) -> dict:

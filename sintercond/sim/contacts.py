@@ -40,19 +40,20 @@ def merged_law_params(physics: Physics, params: Params) -> dict:
     return {**defaults, **params.law}
 
 
-def conductance_lift(physics: Physics, radii, material, neighbors, neck, overlap, conductivity, law_params):
-    """Conductances ``[n, m]`` (W/K) of a padded table from its necks: the one law -> table lift.
+def conductance_lift(physics: Physics, radii, material, contacts: LiftedContacts, conductivity, law_params):
+    """Conductances ``[n, m]`` (W/K) of a lifted table from the necks of its pairs: the one law -> table lift.
 
-    Each slot ``(i, j)`` evaluates the law with the pair in index order
-    (``min(i, j)`` first), so both rows of a pair get bitwise the same ``K``
-    and the network stays exactly symmetric (heat conserved to round-off).
-    Padding slots (``j == i`` or ``j >= n``) have ``h = 0`` and give 0.
+    The law is evaluated once per pair (:func:`lifted_pair_conductance`) and laid into both slots of the pair
+    (:meth:`sintercond.state.LiftedContacts.on_table`), so both rows get the same ``K`` and the network stays
+    exactly symmetric (heat conserved to round-off). Padding slots give 0.
     """
-    n = radii.shape[0]
-    rows = jnp.arange(n, dtype=neighbors.dtype)[:, None]
-    valid = (neighbors != rows) & (neighbors < n)
-    j = jnp.where(valid, neighbors, rows)
-    return _law_on_pairs(physics, radii, material, (jnp.minimum(rows, j), jnp.maximum(rows, j), valid), neck, overlap,
+    return contacts.on_table(lifted_pair_conductance(physics, radii, material, contacts, conductivity, law_params))
+
+
+def lifted_pair_conductance(physics: Physics, radii, material, contacts: LiftedContacts, conductivity, law_params):
+    """Conductances ``[c]`` (W/K) of the pairs of a lifted table from their necks."""
+    i, j = contacts.pairs[:, 0], contacts.pairs[:, 1]
+    return _law_on_pairs(physics, radii, material, (i, j, jnp.ones(i.shape, bool)), contacts.neck, contacts.overlap,
                          conductivity, law_params)
 
 
@@ -79,10 +80,14 @@ def conductivity_lookup(physics: Physics, params: Params, particles: ParticleSta
 
 def neck_conductance(physics: Physics, state: SimState, params: Params):
     """Conductances ``[n, m]`` (W/K) of a static lifted state from the necks and temperatures it holds now."""
-    p, contacts = state.particles, state.contacts
+    return state.contacts.on_table(pair_neck_conductance(physics, state, params))
+
+
+def pair_neck_conductance(physics: Physics, state: SimState, params: Params):
+    """Conductances ``[c]`` (W/K) of the pairs of a static lifted state (:func:`neck_conductance` per pair)."""
+    p = state.particles
     index, kappa = conductivity_lookup(physics, params, p)
-    return conductance_lift(physics, p.radii, index, contacts.neighbors, contacts.neck, contacts.overlap, kappa,
-                            merged_law_params(physics, params))
+    return lifted_pair_conductance(physics, p.radii, index, state.contacts, kappa, merged_law_params(physics, params))
 
 
 def pair_conductance(physics: Physics, radii, material, geometry, conductivity, law_params):
@@ -188,9 +193,12 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
     radii = np.asarray(radii, np.float64)
     p = contact_pairs(centres, radii, tolerance, periodic_box) if pairs is None else pairs
     a = np.where(p.overlap > 0, np.asarray(NECK_MODELS[physics.neck](p.r_i, p.r_j, p.overlap)), 0.0)
-    neighbors, neck, overlap = ell_table(p.n_particles, p.i, p.j, a, p.overlap)
-    contacts = LiftedContacts(neighbors=jnp.asarray(neighbors, jnp.int32), neck=jnp.asarray(neck),
-                              overlap=jnp.asarray(overlap))
+    count = len(p.i)
+    neighbors, slot = ell_table(p.n_particles, p.i, p.j, np.arange(1, count + 1))
+    contacts = LiftedContacts(neighbors=jnp.asarray(neighbors, jnp.int32),
+                              pairs=jnp.asarray(np.stack([p.i, p.j], axis=1).reshape(-1, 2), jnp.int32),
+                              slot_pair=jnp.asarray(np.where(slot > 0, slot - 1, count), jnp.int32),
+                              neck=jnp.asarray(a), overlap=jnp.asarray(np.asarray(p.overlap, np.float64)))
     if walls:
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
         a = np.asarray(wall_neck_radius(physics.neck, radii, h))

@@ -8,17 +8,17 @@ import jax
 import jax.numpy as jnp
 
 from sintercond import thermal
-from sintercond.sim.contacts import neck_conductance
 from sintercond.sim.state import Params, SimState, Simulator
 from sintercond.sim.step import simulator
-from sintercond.sim.terms.conduction import conductances_change
+from sintercond.sim.terms.conduction import total_conductance
 
 
 def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_conductance=None):
     """Largest explicit-Euler step with the maximum principle, ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` (s).
 
-    Static contacts at the state's geometry; ``source_conductance`` ``G_i``
-    (W/K, optional) linearises sources that depend on the temperature
+    The contacts at the state's geometry (static, or the dynamic half pair list at its positions with the
+    conducting walls it touches: :func:`sintercond.sim.terms.conduction.total_conductance`);
+    ``source_conductance`` ``G_i`` (W/K, optional) linearises sources that depend on the temperature
     (:func:`sintercond.thermal.source_conductance`). inf for a particle with
     no conductance. At or below it every new temperature is a convex
     combination of old ones and the sources' reference temperatures.
@@ -39,18 +39,7 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
 def _stable_step(sim: Simulator, state: SimState, params: Params, source_conductance):
     """:func:`thermal_time_step`'s limit, traced."""
     prep = sim.prepare_fn(state, params)
-    conductance = prep.conductance
-    if conductances_change(sim.physics):
-        conductance = neck_conductance(sim.physics, state, params)
-    if conductance is None:
-        raise ValueError("thermal_time_step needs static contacts")
-    total = prep.scale * jnp.sum(conductance, axis=1)
-    if prep.wall_conductance is not None:
-        total = total + prep.scale * jnp.sum(prep.wall_conductance, axis=0)
+    total = total_conductance(sim.physics, state, prep)
     if source_conductance is not None:
         total = total + source_conductance
     return thermal.explicit_stability_limit(prep.capacity, total)
-
-
-# --------------------------------------------------------------------------
-# building states

@@ -20,8 +20,9 @@ import jax.numpy as jnp
 
 from sintercond import mechanics, thermal
 from sintercond.network import network_laplacian
+from sintercond.pair_list import pair_sum
 from sintercond.sim.contacts import (conductivity_lookup, follow_contacts, merged_law_params, neck_conductance,
-                                     pair_conductance, pair_heat_power)
+                                     pair_conductance, pair_heat_power, sintered_pair_conductance)
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, Prepared, SimState, held_ramp_temperature, params_in_precision
 from sintercond.sim.terms import sources, walls
@@ -114,6 +115,39 @@ def heat_power(physics: Physics, neighbor_fn, state: SimState, prep: Prepared, c
     temperature = state.particles.temperature
     power = conduction_power(physics, state, prep, temperature, conductance, neighbors)
     return power + sources.power(physics, state, prep.params)
+
+
+def total_conductance(physics: Physics, state: SimState, prep: Prepared):
+    """``[n]`` each particle's ``sum_j K_ij + sum_w K_iw`` (W/K) at the state's contacts, necks and temperatures:
+    the denominator of the explicit limit ``C_i / sum K`` (:func:`sintercond.thermal.explicit_stability_limit`).
+
+    Static contacts: the table's rows (the rollout's conductances, or the necks' now) and the conducting walls.
+    Dynamic contacts: the half pair list at the state's positions (with the mechanics' sintered necks, the
+    geometry they conduct through, :func:`sintercond.sim.contacts.sintered_pair_conductance`) and the
+    conducting walls of ``Mechanics.walls`` the particles touch now."""
+    particles = state.particles
+    if physics.contacts == "static":
+        conductance = neck_conductance(physics, state, prep.params) if conductances_change(physics) else prep.conductance
+        total = prep.scale * jnp.sum(conductance, axis=1)
+        if physics.conduction.conducting_walls:
+            total = total + prep.scale * jnp.sum(walls.thermal_wall_conductance(physics, state, prep), axis=0)
+        return total
+    index, kappa = conductivity_lookup(physics, prep.params, particles)
+    law_params = merged_law_params(physics, prep.params)
+    if state.mechanics is not None and state.mechanics.neck is not None:
+        _, k = sintered_pair_conductance(physics, state, prep.params)
+    else:
+        geometry = mechanics.pair_geometry(particles.positions, particles.radii, state.contacts.pairs.pairs)
+        k = pair_conductance(physics, particles.radii, index, geometry, kappa, law_params)
+    total = pair_sum(k, k, state.contacts.pairs.pairs, particles.radii.shape[0])
+    if physics.mechanics is not None:
+        conducting = [wall for _, wall in walls.conducting_mechanical_walls(physics)]
+        if conducting:
+            h = mechanics.wall_penetration(conducting, particles.positions, particles.radii, state.time)
+            for w in range(len(conducting)):
+                total = total + walls.mechanical_wall_conductance(physics, particles.radii, h[w], kappa[index],
+                                                                  law_params)
+    return total
 
 
 def capacity_now(physics: Physics, state: SimState, prep: Prepared):
