@@ -14,7 +14,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
+from sintercond import simulate
+from sintercond.beds import packing, settle
+from sintercond.contacts import network
+from sintercond.laws import heat_sources, materials, walls
+from sintercond.sim import mechanics, neck_growth, thermal
 from sintercond.scene.schema import output_interval
 from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
 from sintercond.scene.typed import Wall, typed_scene
@@ -44,7 +48,7 @@ class Model:
     lattice: bool = False  # a simple cubic packing (k* between its end layers)
     output_every: int = 1  # steps between outputs: run.output_every, or about DEFAULT_OUTPUTS over the run
     checkpoint_every: int = 1  # steps between checkpoints (run.checkpoint_every or DEFAULT_CHECKPOINT_OUTPUTS outputs)
-    planes: tuple = ()  # the scene's walls as sintercond.walls.PlaneWall at the packing built (scene_walls), once
+    planes: tuple = ()  # the scene's walls as sintercond.laws.walls.PlaneWall at the packing built (scene_walls), once
 
     @property
     def physics(self) -> simulate.Physics:
@@ -68,11 +72,11 @@ PROGRESS_EVERY_S = 5.0
 
 
 class SettlingProgress:
-    """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.packing`: a line through ``log``
+    """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.beds.packing`: a line through ``log``
     at most every :data:`PROGRESS_EVERY_S` seconds with the steps taken, the settling figure against its target
     and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially); a
     rolled bed (phase ``"rolling"``) gives the spheres down and the time left at their rate; ``worst``, the sphere
-    the net force is largest on (:func:`sintercond.settle.sphere_text`)."""
+    the net force is largest on (:func:`sintercond.beds.settle.sphere_text`)."""
 
     def __init__(self, log, particles):
         self.log, self.particles = log, particles
@@ -106,7 +110,7 @@ class SettlingProgress:
 
 def initial_temperatures(scene):
     """The particles' start temperatures (K): ``initial.temperature``, or with ``initial.from_file`` the packing
-    file's temperature column (:func:`sintercond.packing_files.read_temperatures`)."""
+    file's temperature column (:func:`sintercond.beds.packing_files.read_temperatures`)."""
     scene = typed_scene(scene)
     if scene.initial.from_file:
         return np.array(file_temperatures(scene.packing))
@@ -115,7 +119,7 @@ def initial_temperatures(scene):
 
 def build_packing(scene, log=None):
     """``(centres, radii, bed)`` of a validated scene: listed spheres as given, else
-    :func:`sintercond.packing.from_scene`; a bed that settles reports its progress through ``log``
+    :func:`sintercond.beds.packing.from_scene`; a bed that settles reports its progress through ``log``
     (:class:`SettlingProgress`).
 
     ``bed``: the bed's figures for the summary (empty for listed spheres).
@@ -176,7 +180,7 @@ def mechanics_on(scene) -> bool:
 
 
 def contact_material(scene) -> dict:
-    """The ``[mechanics]`` section as :class:`~sintercond.mechanics.MechanicalParams` names (floats, SI).
+    """The ``[mechanics]`` section as :class:`~sintercond.sim.mechanics.MechanicalParams` names (floats, SI).
 
     ``mechanics.restitution`` e becomes ``xi_con``
     (:func:`sintercond.scene.restitution_damping_ratio`); wall coefficients
@@ -212,7 +216,7 @@ def dem_material(scene) -> settle.DemMaterial:
 def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     """The coupled spec of a validated scene with mechanics: ``thermal_physics`` made dynamic, the walls pushing.
 
-    Every wall of the scene is a :class:`~sintercond.walls.PlaneWall` of
+    Every wall of the scene is a :class:`~sintercond.laws.walls.PlaneWall` of
     ``Mechanics.walls``; a held wall pushes as an insulated one (its
     particles are held by ``Conduction.held``, :func:`_apply_walls`).
     """
@@ -230,7 +234,7 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
 
 
 _BOX_FACES = ((2, "min"), (0, "min"), (0, "max"), (1, "min"), (1, "max"))
-"""The faces of :func:`sintercond.settle.box_walls`, in its order: floor, x = 0, x = L, y = 0, y = L."""
+"""The faces of :func:`sintercond.beds.settle.box_walls`, in its order: floor, x = 0, x = L, y = 0, y = L."""
 
 
 def packing_box(scene):
@@ -243,7 +247,7 @@ def packing_box(scene):
 
 
 def container_walls(scene) -> tuple:
-    """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.settle.box_walls`) on each face
+    """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.beds.settle.box_walls`) on each face
     the scene gives no wall of its own (``physics.container``, true by default): without them the moving bed
     spreads over the floor, or falls."""
     scene = typed_scene(scene)
@@ -301,9 +305,9 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
 
     The time step: ``run.dt`` or, for ``"auto"``, 0.9 of the stable step
     ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` where ``G_i`` linearises
-    convection and radiation (:func:`sintercond.thermal.source_conductance`);
+    convection and radiation (:func:`sintercond.sim.thermal.source_conductance`);
     with mechanics, of the smaller of that (at the initial contacts) and the
-    mechanical step (:func:`sintercond.mechanics.mechanical_time_step`: Eq. 47
+    mechanical step (:func:`sintercond.sim.mechanics.mechanical_time_step`: Eq. 47
     and the tangential and rotational bounds of MECHANICS.md erratum 8, at
     the approach speed ``physics.impact_velocity`` plus the fastest wall's
     normal speed, at the unsoftened modulus: ``E_min <= E0``, so no state
@@ -501,7 +505,7 @@ def _walls(scene) -> list:
 
 
 def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
-    """The scene's walls as :class:`~sintercond.walls.PlaneWall` (insulated ones included).
+    """The scene's walls as :class:`~sintercond.laws.walls.PlaneWall` (insulated ones included).
 
     A wall plane lies at the packing's extreme along its axis, moved
     ``penetration`` mean radii into it; its normal points into the packing.
@@ -548,7 +552,7 @@ FEW_WALL_CONTACTS = 0.5
 def wall_supports(scene, centres, radii, planes=None) -> np.ndarray:
     """``[n, 3]`` bool: the displacement components held in a many-body sintering run: the vertical one of the
     particles resting on a floor (a wall on axis 2, side min); the packing shrinks away from other walls
-    (:func:`sintercond.neck_growth.neck_state`)."""
+    (:func:`sintercond.sim.neck_growth.neck_state`)."""
     supports = np.zeros((len(radii), 3), bool)
     planes = scene_walls(scene, centres, radii) if planes is None else planes
     for wall, plane in zip(_walls(scene), planes):

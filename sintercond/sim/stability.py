@@ -7,7 +7,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from sintercond import thermal
+from sintercond.sim import thermal
 from sintercond.sim.contacts import neck_conductance
 from sintercond.sim.state import Params, SimState, Simulator
 from sintercond.sim.step import simulator
@@ -19,7 +19,7 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
 
     Static contacts at the state's geometry; ``source_conductance`` ``G_i``
     (W/K, optional) linearises sources that depend on the temperature
-    (:func:`sintercond.thermal.source_conductance`). inf for a particle with
+    (:func:`sintercond.sim.thermal.source_conductance`). inf for a particle with
     no conductance. At or below it every new temperature is a convex
     combination of old ones and the sources' reference temperatures.
     """

@@ -1,7 +1,7 @@
-"""The sintering term: necks that grow with each contact's temperature history (:mod:`sintercond.neck_growth`).
+"""The sintering term: necks that grow with each contact's temperature history (:mod:`sintercond.sim.neck_growth`).
 
 At the end of every growth interval (``Sintering.every`` steps) each neck grows over the interval at its pair's
-temperatures (Rojek et al. 2022's volume-conserving geometry; the kinetic laws of :mod:`sintercond.sintering`),
+temperatures (Rojek et al. 2022's volume-conserving geometry; the kinetic laws of :mod:`sintercond.laws.sintering`),
 independently or by the many-body balance that moves the particles, and the explicit step is checked against the
 stability limit on the grown necks (a flag in ``NeckState.unstable``, refused on the host). Without mechanics the
 necks are the static table's (``LiftedContacts.neck``); with mechanics they live on the dynamic half pair list
@@ -15,8 +15,8 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from sintercond import mechanics, neck_growth, thermal
-from sintercond.pair_list import pair_sum
+from sintercond.sim import mechanics, neck_growth, thermal
+from sintercond.contacts.pair_list import pair_sum
 from sintercond.sim.contacts import conductivity_lookup, merged_law_params, neck_conductance, sintered_pair_conductance
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Prepared, SimState
@@ -31,7 +31,7 @@ def _at_interval_end(spec, state: SimState, grow, *carried):
 
 
 def _next_interval(physics: Physics, state: SimState, prep: Prepared, carried, particles, total):
-    """``carried`` (a :class:`sintercond.neck_growth.NeckState`) starting the next interval, flagged unstable when the
+    """``carried`` (a :class:`sintercond.sim.neck_growth.NeckState`) starting the next interval, flagged unstable when the
     step exceeds the explicit limit ``C_i / sum K`` on the grown conductances ``total`` ``[n]`` (W/K)."""
     if physics.conduction.held:  # held particles are reset every step: their rows do not count
         total = jnp.where(particles.fixed, 0.0, total)
