@@ -14,7 +14,7 @@ import jax
 import numpy as np
 
 import sintercond  # noqa: F401  (float64 on)
-from sintercond.neck import max_overlap
+from sintercond.laws.neck import max_overlap
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "RESULTS.md"
 FIGURES = RESULTS.parent / "figures"

@@ -57,7 +57,7 @@ def child(name, seed, method):
     """Build one bed in this process; print its figures as one JSON line."""
     import numpy as np
 
-    from sintercond import packing, rolling, settle
+    from sintercond.beds import packing, rolling, settle
 
     lateral, height, diameters = BEDS[name]
     log = {}

@@ -7,7 +7,7 @@ lattice (~6 contacts per particle). Each (build, size) runs in a process of
 its own so that its peak RSS is its own: 'first' is the first
 ``network.contact_table`` call of the process (with whatever it compiles),
 'again' a second call on the same packing. The old build is
-``sintercond/network.py`` as it was at ``--old-rev`` (read with ``git show``),
+``sintercond/contacts/network.py`` as it was at ``--old-rev`` (read with ``git show``),
 run against today's law modules; both builds must give the same contacts and
 conductances (checked). Prints the table and rewrites its section of
 benchmarks/RESULTS.md.
@@ -31,8 +31,8 @@ OLD_REV = "43fe49a"
 
 
 def old_network(rev):
-    """``sintercond/network.py`` at ``rev`` as a module."""
-    source = subprocess.run(["git", "show", f"{rev}:sintercond/network.py"], cwd=ROOT, capture_output=True,
+    """``sintercond/contacts/network.py`` at ``rev`` as a module."""
+    source = subprocess.run(["git", "show", f"{rev}:sintercond/contacts/network.py"], cwd=ROOT, capture_output=True,
                             text=True, check=True).stdout
     module = types.ModuleType(f"network_{rev}")
     exec(compile(source, f"network@{rev}", "exec"), module.__dict__)
@@ -44,7 +44,7 @@ def child(build, n, rev):
     import numpy as np
     from thermal_step import jittered_packing
 
-    from sintercond import network
+    from sintercond.contacts import network
 
     module = old_network(rev) if build == "old" else network
     centres, radii = jittered_packing(n)
@@ -76,7 +76,7 @@ def update_costs(n, skin_fraction=0.1, repeats=20):
     from _common import best_time
     from thermal_step import jittered_packing
 
-    from sintercond import neighbors
+    from sintercond.contacts import neighbors
 
     centres, radii = jittered_packing(n)
     moved = jnp.asarray(centres + 1e-3 * radii.max())  # far below half the skin

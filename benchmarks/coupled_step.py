@@ -66,11 +66,13 @@ import numpy as np
 from _common import markdown_table, write_section
 from peers_thermal import lammps_executable, loop_time
 
-from sintercond import mechanics, network, pair_list, rollout, simulate
+from sintercond import rollout, simulate
+from sintercond.contacts import network, pair_list
+from sintercond.sim import mechanics
 from sintercond.rollout import advance
 from sintercond.scene import restitution_damping_ratio
 from sintercond.state import particle_state
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 
 RADIUS = 3e-3  # m
 SPACING = 1.99 * RADIUS  # m

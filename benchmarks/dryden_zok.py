@@ -3,7 +3,7 @@
 Usage: python benchmarks/dryden_zok.py
 
 * sintercond's graded-panel Nystrom with product integration of the log and
-  |xi| parts of the kernel (sintercond.dryden_zok), node counts 16-192: max
+  |xi| parts of the kernel (sintercond.laws.dryden_zok), node counts 16-192: max
   error over 40 alphas in (0, pi/2] against a 320-node solution (whose own
   spread is measured against 256- and 384-node solutions), and time per sigma
   (jitted, after a warm-up call: one alpha per call, and a batch of 40 by vmap;
@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from _common import best_time, command_line, markdown_table, new_figure, number, save_figure, write_section
 
-from sintercond import dryden_zok as dz
+from sintercond.laws import dryden_zok as dz
 
 ALPHAS = np.pi / 2 * np.linspace(0.025, 1.0, 40)
 

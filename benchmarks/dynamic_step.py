@@ -52,7 +52,8 @@ import numpy as np
 from _common import markdown_table, write_section
 from thermal_step import jittered_packing
 
-from sintercond import neighbors, pair_list, simulate
+from sintercond import simulate
+from sintercond.contacts import neighbors, pair_list
 from sintercond.state import ParticleState
 
 A = 1e-4  # the lattice spacing of thermal_step.jittered_packing (m)

@@ -21,9 +21,10 @@ import json, resource, sys, time
 sys.path.insert(0, "benchmarks")
 import numpy as np
 from thermal_step import jittered_packing
-from sintercond import network, thermal
-from sintercond import steady
-from sintercond.conductance import rojek_pair_conductance
+from sintercond.contacts import network
+from sintercond.sim import thermal
+from sintercond.sim import steady
+from sintercond.laws.conductance import rojek_pair_conductance
 n = int(sys.argv[1])
 t0 = time.perf_counter()
 centres, radii = jittered_packing(n)

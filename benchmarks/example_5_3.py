@@ -1,7 +1,7 @@
 """Example 5.3 of Quintana-Ruiz & Campello (2020): pour, settle, heat, k* with and without softening.
 
 Pours ``--n`` spheres (radii N(3 mm, 0.667 mm) truncated at 3 sigma) into an
-open box of side ``--lateral-size`` with the DEM (:func:`sintercond.packing.pour`),
+open box of side ``--lateral-size`` with the DEM (:func:`sintercond.beds.packing.pour`),
 heats it from the x walls (1000 K / 300 K) for 350 s and reads k* three ways
 (MECHANICS.md erratum 9), then the softened variant (theta* = 300 K) as a
 quasi-static fixed point (:func:`sintercond.examples.example_5_3`). Writes the

@@ -74,7 +74,7 @@ def run_one(path, variant, steps, max_gb, reference=None):
 
     from fitting import inverse
     from sintercond import simulate
-    from sintercond.network import ContactTable
+    from sintercond.contacts.network import ContactTable
 
     data = np.load(path)
     table = ContactTable(jnp.asarray(data["neighbors"]), jnp.asarray(data["conductance"]))

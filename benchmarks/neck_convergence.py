@@ -27,7 +27,7 @@ from _common import (
     write_section,
 )
 
-from sintercond.neck import neck_radius
+from sintercond.laws.neck import neck_radius
 
 ITERATIONS = (0, 1, 2, 3, 4, 5, 6, None)
 

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from _common import command_line, markdown_table, new_figure, number, reference_neck_radius, save_figure, write_section
 
-from sintercond.neck import max_overlap, neck_radius
+from sintercond.laws.neck import max_overlap, neck_radius
 
 N = 20_000
 

@@ -39,7 +39,7 @@ from _common import (
 )
 from scipy.optimize import brentq
 
-from sintercond.neck import neck_radius
+from sintercond.laws.neck import neck_radius
 
 
 def _value_and_gradient(r_i, r_j, h):

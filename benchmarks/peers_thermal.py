@@ -98,7 +98,7 @@ def driver(out, side, steps, peer, cache_dir):
     start = time.perf_counter()
     import jax
 
-    from sintercond import network
+    from sintercond.contacts import network
     from sintercond.simulate import simulate_table
     from sintercond._cache import enable_compilation_cache
 

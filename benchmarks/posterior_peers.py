@@ -3,7 +3,7 @@
 Usage: python benchmarks/posterior_peers.py [--repeats 5] [--glvenv /tmp/glvenv] [--gl-samples 20] [--gl-iterations 10]
 
 The problem (the same data and prior for both): six necks of Rizza & Galati's 80-80 couple along their Eq. 6
-ramp (0.5, 2.5, 4.5, 6.5, 8.5, 9.5 s), synthetic: the grain-boundary law (``sintercond.sintering.grow_neck``)
+ramp (0.5, 2.5, 4.5, 6.5, 8.5, 9.5 s), synthetic: the grain-boundary law (``sintercond.laws.sintering.grow_neck``)
 at a known truth (``log_rate_ref``, ``Q``) plus Gaussian noise of known sd 0.1 um (one fixed realisation); the
 prior uniform on the box ``log_rate_ref`` in truth -+ 3, ``Q`` in (1, 200) kJ/mol.
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from _common import command_line, markdown_table, write_section
-from sintercond import io, plots
+from sintercond.output import io, plots
 
 
 def lattice(n):

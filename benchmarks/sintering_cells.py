@@ -3,7 +3,7 @@
 Usage: python benchmarks/sintering_cells.py
 
 The BCC unit cell (8 corner spheres of 80 um touching along the edges, a 58.6 um centre sphere touching the
-corners; sintercond.geometry.bcc_cell) is held on the stepped ramp (Eq. 6 with its erratum) in the simulator, its
+corners; sintercond.laws.geometry.bcc_cell) is held on the stepped ramp (Eq. 6 with its erratum) in the simulator, its
 necks grown from point contacts by the grain-boundary law fitted to the 80-58.6 um couple (docs/laws.md), the
 solid at their Table 1's lambda_0(T). At Table 3's and Table 6's times the simulator's two necks (corner-corner,
 corner-centre) give k* along x of the infinite lattice (fitting.sintering.lattice_conductivity: a periodic block,
@@ -16,7 +16,9 @@ import numpy as np
 
 from fitting import sintering as fs
 from fitting.reference import rizza_galati_table
-from sintercond import geometry, materials, neck_growth, simulate
+from sintercond import simulate
+from sintercond.laws import geometry, materials
+from sintercond.sim import neck_growth
 from sintercond.state import particle_state
 
 KINETICS = {"A": 1.2e-20, "activation_energy": 37.0, "dihedral_angle": 150.0}

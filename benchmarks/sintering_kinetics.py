@@ -28,14 +28,14 @@ import jax.numpy as jnp
 import numpy as np
 from _common import best_time, command_line, markdown_table, write_section
 
-from sintercond import sintering as st
+from sintercond.laws import sintering as st
 
 R = st.GAS_CONSTANT
 GB = {"A": 1.2e-20, "activation_energy": 37.0, "dihedral_angle": 150.0}  # about the 80-58.6 fit
 
 
 def numpy_rate(a, r_i, r_j, temperature, params=GB):
-    """The grain-boundary ``d(a^6)/dt`` written out in NumPy (module docstring of sintercond.sintering)."""
+    """The grain-boundary ``d(a^6)/dt`` written out in NumPy (module docstring of sintercond.laws.sintering)."""
     psi = np.deg2rad(params["dihedral_angle"]) / 2
     r_star = 2 * r_i * r_j / (r_i + r_j)
     slope = 0.0

@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from _common import best_time, command_line, markdown_table, write_section
 
-from sintercond import neck_growth, simulate
+from sintercond import simulate
+from sintercond.sim import neck_growth
 from sintercond.state import particle_state
 
 KINETICS = {"A": 1.2e-20, "activation_energy": 37.0}  # docs/laws.md: about Rizza & Galati's 80-58.6 couple
@@ -59,7 +60,7 @@ def models(n):
     }
     for name, physics in specs.items():
         if physics.conduction.conductance == "table":
-            from sintercond.network import contact_table
+            from sintercond.contacts.network import contact_table
             contacts = simulate.table_contacts(contact_table(centres, radii, 1.0, "rojek"))
         else:
             contacts = simulate.lifted_contacts(physics, centres, radii)
@@ -80,7 +81,7 @@ def coupled_models(n):
     """The coupled thermo-mechanical step on the same lattice (its small overlaps taken as necks, so nothing is
     loaded and 100 steps of 10 ns move nothing): without sintering, and with necks on the half pair list grown
     every 10 steps, independently and many-body (the bottom layer held)."""
-    from sintercond import mechanics
+    from sintercond.sim import mechanics
 
     centres, radii, temperature = lattice(n)
     particles = particle_state(centres, radii, temperature, 4430.0)

@@ -83,7 +83,7 @@ def run_one(path, variant, steps, max_gb):
     import jax
     import jax.numpy as jnp
 
-    from sintercond import mechanics
+    from sintercond.sim import mechanics
 
     with open(path, "rb") as f:
         meta = pickle.load(f)

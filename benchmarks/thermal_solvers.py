@@ -23,10 +23,11 @@ import numpy as np
 from _common import best_time, markdown_table, new_figure, number, save_figure, write_section
 from thermal_step import jittered_packing
 
-from sintercond import network, thermal
+from sintercond.contacts import network
+from sintercond.sim import thermal
 from sintercond.simulate import simulate_table
-from sintercond import steady
-from sintercond.conductance import pair_conductance
+from sintercond.sim import steady
+from sintercond.laws.conductance import pair_conductance
 
 
 def plot_transient(transient_rows):

@@ -22,7 +22,8 @@ import numpy as np
 import scipy.sparse as sp
 from _common import markdown_table, new_figure, number, save_figure, write_section
 
-from sintercond import network, thermal
+from sintercond.contacts import network
+from sintercond.sim import thermal
 from sintercond.simulate import simulate_table
 
 STEPS = 200

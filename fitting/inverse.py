@@ -4,13 +4,13 @@ The experiment is a flash measurement on a sintered packing (the DEM
 counterpart of laser-flash analysis): a prescribed power heats the particles
 on one face for a while, thermometers ("probes") on chosen particles record
 the temperature every ``save_every`` steps, and the model is the explicit
-pipe-network conduction of :mod:`sintercond.thermal` (Rojek et al. 2022,
+pipe-network conduction of :mod:`sintercond.sim.thermal` (Rojek et al. 2022,
 Eqs. 1-4):
 
     T_{n+1} = T_n + dt / (c m) * (kappa H(T_n) + q_n),    H(T) = heat inflow at kappa = 1 W/(m K),
 
 on free particles; held particles stay held. Every conductance law in
-:mod:`sintercond.conductance` without a contact resistance is proportional to
+:mod:`sintercond.laws.conductance` without a contact resistance is proportional to
 ``kappa`` (and Rojek's to ``s kappa``), so one network built at ``kappa = 1``
 serves every ``kappa``; the fitted value is then ``kappa`` (or ``s kappa``:
 the two are not separable from temperatures, only their product is).
@@ -48,8 +48,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from fitting.core import Bounded, FitResult, least_squares
-from sintercond import thermal
-from sintercond.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance
+from sintercond.sim import thermal
+from sintercond.contacts.network import ContactTable, contact_table, heat_inflow, laplacian, total_conductance
 from sintercond.simulate import (Params, Physics, PulseParams, SaveAt, SimState, init_state, probe_temperatures,
                                  rollout, simulator, table_contacts)
 from sintercond.state import ParticleState
@@ -178,7 +178,7 @@ def _adjoint_readings(experiment: ProbeExperiment, kappa, specific_heat):
 
 
 def _step(experiment, kappa, specific_heat, temperature, k):
-    """The simulator's explicit update (:func:`sintercond.thermal.explicit_update`) keeping ``H``, the inflow at
+    """The simulator's explicit update (:func:`sintercond.sim.thermal.explicit_update`) keeping ``H``, the inflow at
     kappa = 1, which the adjoint needs."""
     inflow = heat_inflow(temperature, experiment.table)
     return _update(experiment, kappa, specific_heat, temperature, inflow, k), inflow
@@ -308,7 +308,7 @@ def flash_experiment(centres, radii, density, axis=0, temperature_rise=10.0, pul
 
     Args:
       centres, radii: the packing (m); contacts and necks as in
-        :func:`sintercond.network.contact_table` with ``law``.
+        :func:`sintercond.contacts.network.contact_table` with ``law``.
       density: solid density (kg/m^3); masses ``density 4/3 pi r^3``.
       axis: flash direction.
       temperature_rise: the flash's energy as the mean rise of the packing (K) at ``c = specific_heat_min``;

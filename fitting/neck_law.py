@@ -9,7 +9,7 @@ Dryden & Zok's Eq. 30) and matches the FE data of fitting/data within
 
 ``python -m fitting.neck_law`` refits and writes the coefficients, with their
 provenance, to ``sintercond/data/fitted_neck_law.json``, which
-``sintercond.conductance.fitted_pair_conductance`` reads.
+``sintercond.laws.conductance.fitted_pair_conductance`` reads.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ OUTPUT = pathlib.Path(__file__).resolve().parents[1] / "sintercond" / "data" / "
 
 
 def smooth_law(params, x):
-    from sintercond.conductance import fitted_half_conductance_ratio
+    from sintercond.laws.conductance import fitted_half_conductance_ratio
 
     return fitted_half_conductance_ratio(x, jnp.stack([params[n] for n in NAMES]))
 

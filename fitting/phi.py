@@ -21,8 +21,8 @@ import numpy as np
 
 from fitting.core import Bounded, FitResult, Positive, least_squares
 from fitting.reference import rizza_galati_table
-from sintercond import geometry
-from sintercond import tortuosity as tt
+from sintercond.laws import geometry
+from sintercond.laws import tortuosity as tt
 
 CORNER_DIAMETER_UM = 80.0
 

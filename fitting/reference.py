@@ -46,7 +46,7 @@ def rizza_galati_table(number: int) -> dict:
     """Rizza & Galati (2024) Table ``number`` (1-9) as ``column -> array`` (units in the column names).
 
     Table 1 is also the library's bulk conductivity
-    (:func:`sintercond.tortuosity.ti6al4v_conductivity_table`); the two
+    (:func:`sintercond.laws.tortuosity.ti6al4v_conductivity_table`); the two
     copies are checked equal by the tests.
     """
     if number not in RIZZA_GALATI_TABLES:
@@ -62,10 +62,10 @@ def rojek_reference() -> dict:
 def powder_bed_450():
     """``packing.powder_bed(450.0, 420.0, diameter_range=(45.0, 150.0), seed=0, method="relax")`` as settled once (lengths in um).
 
-    A :class:`sintercond.packing.Packing` read from ``powder_bed_450um.json``. Settling the pile is chaotic:
+    A :class:`sintercond.beds.packing.Packing` read from ``powder_bed_450um.json``. Settling the pile is chaotic:
     another processor's round-off settles another bed, so notebooks that show one bed load this one.
     """
-    from sintercond.packing import Packing
+    from sintercond.beds.packing import Packing
 
     d = json.loads(importlib.resources.files("fitting.data").joinpath("powder_bed_450um.json").read_text())
     return Packing(np.array(d["centres_um"]), np.array(d["radii_um"]),

@@ -1,7 +1,7 @@
 """Fits of sintering kinetics to neck-against-time data, and the conductivity that follows.
 
 Data: Rizza & Galati (2024)'s phase-field necks along their PBF-EB preheating
-ramp (Eq. 6 with its erratum: :func:`sintercond.sintering.preheating_history`):
+ramp (Eq. 6 with its erratum: :func:`sintercond.laws.sintering.preheating_history`):
 
 * ``"80-80"``: Table 2 / Table 3 couple 1 (two 80 um spheres, the SC cell's and
   the BCC corners' neck; the two tables print the same series);
@@ -13,7 +13,7 @@ ramp (Eq. 6 with its erratum: :func:`sintercond.sintering.preheating_history`):
   left out by default (15 of the 21 couples shrink between 3.5 and 6.5 s, which
   no diffusion law does).
 
-The model is :func:`sintercond.sintering.grow_neck` from point contacts along
+The model is :func:`sintercond.laws.sintering.grow_neck` from point contacts along
 the ramp. Fitted in the logarithm of the rate at a reference temperature
 ``T_ref`` (the ramp's mean by default), which decorrelates it from the
 activation energy ``Q``:
@@ -51,12 +51,12 @@ import numpy as np
 
 from fitting.core import FitResult, least_squares
 from fitting.reference import rizza_galati_table
-from sintercond import conductance as cd
-from sintercond import geometry
-from sintercond import sintering as st
-from sintercond import tortuosity as tt
-from sintercond.network import contact_pairs
-from sintercond.steady import steady_state_network_conductivity
+from sintercond.laws import conductance as cd
+from sintercond.laws import geometry
+from sintercond.laws import sintering as st
+from sintercond.laws import tortuosity as tt
+from sintercond.contacts.network import contact_pairs
+from sintercond.sim.steady import steady_state_network_conductivity
 
 UM = 1e-6
 SERIES = ("80-80", "80-58.6", "bed")
@@ -74,7 +74,7 @@ class NeckSeries:
     Attributes:
       r_i, r_j: ``[c]`` couple radii (m).
       durations, temperatures: the history (``[n]`` s, ``[n]`` K) of
-        :func:`sintercond.sintering.grow_neck`.
+        :func:`sintercond.laws.sintering.grow_neck`.
       interval, couple: ``[m]`` for each observation, the history row and the couple it reads.
       times: ``[m]`` observation times (s).
       necks_um: ``[m]`` observed neck radii (um).
@@ -365,7 +365,7 @@ class KineticsPosterior:
 def kinetics_posterior(series: NeckSeries, law="grain_boundary", *, priors=None, sigma=None, sigma_prior=None,
                        exponent=6.0, size_exponent=0.0, dihedral_angle=150.0, reference_temperature=None, start=None,
                        **sampler) -> KineticsPosterior:
-    """The posterior of a kinetic law's parameters given a neck series (NUTS through :func:`sintercond.sintering.grow_neck`).
+    """The posterior of a kinetic law's parameters given a neck series (NUTS through :func:`sintercond.laws.sintering.grow_neck`).
 
     The model and fit space of :func:`fit_kinetics`; ``priors`` per fit-space parameter (default: ``Q`` uniform on
     (1, 1000) kJ/mol, ``log_rate_ref`` flat); ``sigma`` the necks' noise (um), or None: sampled (the residuals of
@@ -466,13 +466,13 @@ def lattice_conductivity(centres, radii, box, necks, kappa, law="rojek", axis=0,
     """``k*`` (W/(m K)) of a lattice whose contacts have the given necks (first stage: centres fixed).
 
     The unit cell (``centres``, ``radii``, ``box``: touching spheres, as
-    :func:`sintercond.geometry.simple_cubic_cell` and ``bcc_cell`` give) is
+    :func:`sintercond.laws.geometry.simple_cubic_cell` and ``bcc_cell`` give) is
     repeated ``cells`` times along ``axis`` and made periodic across it (three
     cells wide); each contact's conductance comes from its neck
     ``necks(r_i, r_j)`` (m) through ``law`` at the overlap ``H(a)``
-    (:func:`sintercond.sintering.neck_overlap`); the steady pipe-network solve
+    (:func:`sintercond.laws.sintering.neck_overlap`); the steady pipe-network solve
     holds the first plane of spheres at 1 K and the last at 0 K
-    (:func:`sintercond.steady.steady_state_network_conductivity`). For SC and
+    (:func:`sintercond.sim.steady.steady_state_network_conductivity`). For SC and
     BCC (every site a centre of inversion symmetry) the linear field is then
     the exact solution, so this is the infinite lattice's conductivity. The
     approach ``H(a)`` (at most 2 % of the spacing on the ramp) is left out of
@@ -563,9 +563,9 @@ def bed_conductivity_along_ramp(fit: SinteringFit, times=(0.5, 3.5, 6.5, 9.5)) -
     """``lambda_pow`` of a powder-bed REV along the ramp, each contact's neck grown by ``fit`` (the bed fit).
 
     The bed: :func:`fitting.reference.powder_bed_450` (45-150 um spheres, settled once), the 150 um cube of
-    :func:`sintercond.packing.rev_box` (Rizza & Galati's PB case on a bed of our own); each contact of the
+    :func:`sintercond.beds.packing.rev_box` (Rizza & Galati's PB case on a bed of our own); each contact of the
     cube grows its own neck from a point contact with its own radii; ``n``, ``S_ss/S_0``, ``phi`` and the
-    per-pair ``gamma`` (``D`` the larger diameter) from :func:`sintercond.geometry.rev_measures`; ``lambda_0``
+    per-pair ``gamma`` (``D`` the larger diameter) from :func:`sintercond.laws.geometry.rev_measures`; ``lambda_0``
     from their Table 1 at each time.
 
     Returns:
@@ -573,7 +573,7 @@ def bed_conductivity_along_ramp(fit: SinteringFit, times=(0.5, 3.5, 6.5, 9.5)) -
       ``n``, ``sss_over_s0``, ``phi`` and ``pairs``.
     """
     from fitting.reference import powder_bed_450
-    from sintercond import packing
+    from sintercond.beds import packing
 
     times = np.asarray(times, float)
     centres, radii, box = packing.rev_box(powder_bed_450(), 150.0)

@@ -1,7 +1,7 @@
 """Fit of the thermal-softening law through the coupled thermo-mechanical simulation.
 
 The law (Quintana-Ruiz & Campello 2020, Eq. 42, with the rate and floor of
-MECHANICS.md erratum 6; :func:`sintercond.materials.softened_modulus`)::
+MECHANICS.md erratum 6; :func:`sintercond.laws.materials.softened_modulus`)::
 
     E(theta) = max(E_min, E0 exp(min(0, rate (1 - theta / theta*))))
 
@@ -63,8 +63,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from fitting.core import FitResult, Free, least_squares
-from sintercond import examples, mechanics, simulate
-from sintercond.materials import softened_modulus
+from sintercond import examples, simulate
+from sintercond.sim import mechanics
+from sintercond.laws.materials import softened_modulus
 
 FITTABLE = ("E0", "theta_star", "rate", "E_min", "conductivity")
 """Quantities :func:`fit_softening` can fit (SI units), each through its logarithm."""
@@ -335,9 +336,9 @@ def _checked_sigma(sigma, channels) -> np.ndarray:
 
 def _check_values(values: Mapping, name):
     """``ValueError`` naming ``name[key]`` unless each of ``values`` is a quantity of :data:`FITTABLE` in its range:
-    the mechanical ones in :data:`sintercond.mechanics.PARAMETER_RANGES`, the conductivity finite and > 0 W/(m K)
+    the mechanical ones in :data:`sintercond.sim.mechanics.PARAMETER_RANGES`, the conductivity finite and > 0 W/(m K)
     (readings at E0 < 0 or theta* = 0 ran)."""
-    from sintercond.mechanics import validate_mechanical_params
+    from sintercond.sim.mechanics import validate_mechanical_params
 
     for k, v in values.items():
         if k not in FITTABLE:
@@ -499,7 +500,7 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     """A bed settled under gravity by the coupled simulation, then heated from its floor: probes and settlement.
 
     The spheres (density 3000 kg/m^3, k = 60 W/(m K), nu = 0.3, Example 5.1's
-    material) are piled by :func:`sintercond.packing.powder_bed` in a square
+    material) are piled by :func:`sintercond.beds.packing.powder_bed` in a square
     box of side ``lateral_size`` (frictionless insulated side walls), then
     settled by the coupled simulation itself (Hertz contacts, friction ``mu``
     between particles, the floor at the bed's temperature: no heat flows)
@@ -531,10 +532,10 @@ def bed_experiment(lateral_size=8e-3, height=6e-3, diameter_range=(1.6e-3, 2.4e-
     Raises:
       ValueError: the bed did not settle within ``settle_time`` (s), or the neighbour list overflowed.
     """
-    from sintercond import packing
+    from sintercond.beds import packing
     from sintercond.rollout import ListOverflow, advance
     from sintercond.state import particle_state
-    from sintercond.walls import PlaneWall
+    from sintercond.laws.walls import PlaneWall
 
     if not capacity_multiplier >= 1.0:
         raise ValueError(f"capacity_multiplier (spare room of the heating run's contact lists) must be >= 1; got "

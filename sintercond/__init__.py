@@ -10,14 +10,15 @@ stated in its docstring.
 """
 
 import os as _os
+import sys as _sys
 
 import jax as _jax
 
 if _os.environ.get("SINTERCOND_ENABLE_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
     _jax.config.update("jax_enable_x64", True)
 
-from sintercond import conductance, dryden_zok, effective, neck, sintering  # noqa: E402
-from sintercond.conductance import (  # noqa: E402
+from sintercond import _deprecation  # noqa: E402
+from sintercond.laws.conductance import (  # noqa: E402
     CONDUCTANCE_LAWS,
     ConductanceLaw,
     argento_bouvard_pair_conductance,
@@ -30,13 +31,13 @@ from sintercond.conductance import (  # noqa: E402
     series_conductance,
     validate_pair_conductance_inputs,
 )
-from sintercond.effective import (  # noqa: E402
+from sintercond.laws.effective import (  # noqa: E402
     dryden_zok_conductivity,
     dryden_zok_sigma,
     hashin_shtrikman_bounds,
     maxwell_conductivity,
 )
-from sintercond.neck import (  # noqa: E402
+from sintercond.laws.neck import (  # noqa: E402
     NECK_MODELS,
     NeckStatus,
     coble_radius,
@@ -52,19 +53,33 @@ from sintercond.neck import (  # noqa: E402
 __version__ = "0.1.0"
 
 _SUBMODULES = frozenset({
-    "cli", "conductance", "dryden_zok", "effective", "examples", "forces", "geometry", "guards", "heat_sources",
-    "io", "materials", "mechanics", "neck", "neck_growth", "neighbors", "network", "observe", "packing",
-    "packing_files", "pair_list", "plots", "rolling", "rollout", "run", "scene", "settle", "sim", "simulate", "sintering",
-    "state", "steady", "sweep", "thermal", "tortuosity", "walls",
+    "beds", "cli", "contacts", "examples", "laws", "output", "rollout", "run", "scene", "sim", "simulate", "state",
+    "sweep",
 })
+
+# the modules that moved into the folders of their layers (docs/architecture.md): old path -> folder, for one release
+_MOVED = {
+    **dict.fromkeys(["neck", "conductance", "forces", "materials", "heat_sources", "walls", "sintering", "effective",
+                     "dryden_zok", "tortuosity", "geometry"], "laws"),
+    **dict.fromkeys(["neighbors", "pair_list", "network"], "contacts"),
+    **dict.fromkeys(["thermal", "mechanics", "neck_growth", "steady", "guards"], "sim"),
+    **dict.fromkeys(["packing", "rolling", "settle", "packing_files"], "beds"),
+    **dict.fromkeys(["io", "plots", "observe"], "output"),
+}
+_MOVED_MODULES = _deprecation.MovedModules(__name__, _MOVED)
+if not any(isinstance(f, _deprecation.MovedModules) and f.package == __name__ for f in _sys.meta_path):
+    _sys.meta_path.insert(0, _MOVED_MODULES)  # before the path finders: a stale file at an old path loses
 
 
 def __getattr__(name):
-    """``sc.simulate``, ``sc.run``, ...: the submodules, imported on first use (the simulator pulls in jax-md)."""
+    """``sc.simulate``, ``sc.run``, ...: the submodules, imported on first use (the simulator pulls in jax-md); an
+    old path (``sc.network``) gives the moved module with a ``DeprecationWarning``."""
     if name in _SUBMODULES:
         import importlib
 
         return importlib.import_module(f"sintercond.{name}")
+    if name in _MOVED:
+        return _MOVED_MODULES.attribute(name)
     raise AttributeError(f"module 'sintercond' has no attribute {name!r}")
 
 
@@ -76,11 +91,8 @@ __all__ = [
     "argento_bouvard_pair_conductance",
     "batchelor_obrien_pair_conductance",
     "coble_radius",
-    "conductance",
-    "dryden_zok",
     "dryden_zok_conductivity",
     "dryden_zok_sigma",
-    "effective",
     "hashin_shtrikman_bounds",
     "maxwell_conductivity",
     "conductivity_pair_conductance",
@@ -89,14 +101,12 @@ __all__ = [
     "hertz_radius",
     "intersection_radius",
     "max_overlap",
-    "neck",
     "neck_radius",
     "neck_residual",
     "neck_status",
     "pair_conductance",
     "rojek_pair_conductance",
     "series_conductance",
-    "sintering",
     "validate_neck_inputs",
     "validate_pair_conductance_inputs",
 ]

@@ -19,7 +19,7 @@ def materialized(x):
     every gathered index (docs/devlog/thermal_gradient.md), and a per-contact scalar
     chain (a force magnitude, a stiffness) is evaluated again in each
     ``[c, 3]`` output that uses it, once per component (the contact laws,
-    :func:`sintercond.mechanics.pair_loads`). ``optimization_barrier`` is
+    :func:`sintercond.sim.mechanics.pair_loads`). ``optimization_barrier`` is
     removed before fusion on the CPU; a reduction is not fused into its
     consumers, so ``x`` goes through a two-term sum with zero (``x + 0 = x``).
     float32 is summed in float64 (exact both ways): XLA:CPU gives float32

@@ -2,7 +2,7 @@
 
 Each check raises ``ValueError`` naming the field, the allowed range and the
 first offending entry. They need concrete values; under ``jit`` invalid
-states are flagged instead (e.g. :func:`sintercond.neck.neck_status`).
+states are flagged instead (e.g. :func:`sintercond.laws.neck.neck_status`).
 """
 
 from __future__ import annotations

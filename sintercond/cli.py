@@ -36,7 +36,7 @@ COPPER_CONDUCTIVITY = 394.0  # W/(m K), Rojek et al. 2022, Sect. 5
 
 def neck_table(cases_mm=ROJEK_CASES_MM, kappa=COPPER_CONDUCTIVITY) -> str:
     """The demo table as text: neck radii (mm) and conductances (W/K) per case."""
-    from sintercond import conductance, neck
+    from sintercond.laws import conductance, neck
 
     r_i, r_j, h = (np.array(col, dtype=np.float64) for col in zip(*cases_mm))
     neck.validate_neck_inputs(r_i, r_j, h)
@@ -208,13 +208,14 @@ def effective_box(scene, bed, centres=None, radii=None, axis=2):
     if kind == "powder_bed":
         lo, hi = bed.container
         return lo, np.array([hi[0], hi[1], bed.height])
-    from sintercond.steady import face_layer_box
+    from sintercond.sim.steady import face_layer_box
 
     return face_layer_box(centres, radii, axis)
 
 
 def _effective(args) -> int:
-    from sintercond import packing, steady
+    from sintercond.beds import packing
+    from sintercond.sim import steady
     from sintercond.scene import load_scene
     from sintercond.scene.build import build_packing
 
@@ -251,7 +252,7 @@ def _effective(args) -> int:
     if args.out is not None:
         from pathlib import Path
 
-        from sintercond.io import write_pvd, write_vtp
+        from sintercond.output.io import write_pvd, write_vtp
 
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

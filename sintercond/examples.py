@@ -3,7 +3,7 @@
 :func:`example_5_1` returns ``(sim, state, params, n_steps)``: the simulator,
 its initial state, the differentiable parameters and the number of steps of
 the paper's run, after refusing a step above the mechanical limit
-(:func:`sintercond.mechanics.check_mechanical_time_step`). :func:`example_5_3` runs the
+(:func:`sintercond.sim.mechanics.check_mechanical_time_step`). :func:`example_5_3` runs the
 whole example (pour, settle, heat, ``k*`` with and without softening) and
 returns its figures.
 """
@@ -19,9 +19,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import mechanics, simulate
+from sintercond import simulate
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 
 EXAMPLE_5_1 = dict(radius=1e-3, density=3000.0, specific_heat=100.0, conductivity=60.0, E0=1e6, nu=0.3,
                    theta_star=400.0, xi_con=1.0, floor_temperature=700.0, initial_temperature=300.0)
@@ -35,13 +36,13 @@ def example_5_1(softening=True, dt=2e-5, t_end=40.0, law="conductivity", neck_mo
     A sphere (r = 1 mm, rho = 3000 kg/m^3, C = 100 J/(kg K), k = 60 W/(m K),
     E0 = 1 MPa, nu = 0.3, theta* = 400 K, xi_con = 1) at 300 K placed
     touching (zero overlap, at rest) the floor ``z = 0``, a rigid conducting
-    :class:`sintercond.walls.PlaneWall` held at 700 K; gravity ``-9.81 e_z``;
+    :class:`sintercond.laws.walls.PlaneWall` held at 700 K; gravity ``-9.81 e_z``;
     no friction or rolling (nothing pushes sideways), no environment.
 
     Conduction to the floor: with the default ``law="conductivity"`` and
     ``neck_model="hertz"`` the wall limit is ``k pi a^2 / d`` with the Hertz
     contact area ``pi a^2 = pi r delta`` and ``d = r - delta`` the current
-    centre-to-floor distance (:func:`sintercond.walls.wall_conductance_from_neck`).
+    centre-to-floor distance (:func:`sintercond.laws.walls.wall_conductance_from_neck`).
     MECHANICS.md reads the paper with ``d = r``; the two differ by
     ``delta / r`` (1.9e-3 unsoftened, 3.2e-3 fully softened at 700 K).
 
@@ -85,12 +86,12 @@ def static_overlap(load, radius, modulus, nu):
 EXAMPLE_5_3 = dict(particles=10_000, radius_mean=3e-3, radius_std=0.667e-3, truncation=3.0, lateral_size=0.1,
                    conductivity=100.0, specific_heat=100.0, density=1000.0, hot=1000.0, cold=300.0,
                    initial_temperature=300.0, duration=350.0, theta_star_softened=300.0)
-"""The data of Example 5.3 (SI units); the contact material is :class:`sintercond.settle.DemMaterial`'s default."""
+"""The data of Example 5.3 (SI units); the contact material is :class:`sintercond.beds.settle.DemMaterial`'s default."""
 
 
 def example_5_3_radii(n, seed=0):
     """``[n]`` radii (m) from N(3 mm, 0.667 mm) truncated at 3 standard deviations (redrawn outside), Example 5.3."""
-    from sintercond.packing import truncated_normal_radii
+    from sintercond.beds.packing import truncated_normal_radii
 
     d = EXAMPLE_5_3
     return truncated_normal_radii(n, d["radius_mean"], d["radius_std"], d["truncation"], seed)
@@ -98,14 +99,14 @@ def example_5_3_radii(n, seed=0):
 
 def example_5_3_bed(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_size"], seed=0, start="relaxed",
                     **settle):
-    """The settled bed of Example 5.3: :func:`example_5_3_radii` poured by :func:`sintercond.packing.pour`.
+    """The settled bed of Example 5.3: :func:`example_5_3_radii` poured by :func:`sintercond.beds.packing.pour`.
 
-    Example 5.3's contact material (:class:`sintercond.settle.DemMaterial`'s
+    Example 5.3's contact material (:class:`sintercond.beds.settle.DemMaterial`'s
     default) in an open box of side ``lateral_size`` (m); ``settle``: the
-    keyword arguments of :func:`sintercond.settle.dem_settle`. Returns a
-    :class:`sintercond.packing.Packing` with its ``settle`` report.
+    keyword arguments of :func:`sintercond.beds.settle.dem_settle`. Returns a
+    :class:`sintercond.beds.packing.Packing` with its ``settle`` report.
     """
-    from sintercond import packing, settle as settling
+    from sintercond.beds import packing, settle as settling
 
     return packing.pour(example_5_3_radii(n, seed), lateral_size, settling.DemMaterial(), seed=seed, start=start,
                         **settle)
@@ -116,7 +117,7 @@ class ConductivityEstimate:
     """Three readings of ``k*`` along ``x`` (W/(m K)) of one packing, and the heat of the run (J), MECHANICS.md erratum 9.
 
     Attributes:
-      k_steady: :func:`sintercond.steady.steady_state_conductivity` (spheres
+      k_steady: :func:`sintercond.sim.steady.steady_state_conductivity` (spheres
         touching ``x = 0`` held hot, ``x = L`` cold, no wall resistance; ``A = L H``).
       k_wall: the hot wall's power at the end of the run ``P L / (A (T_hot - T_cold))``
         (the wall contacts' resistance included; the steady flux once the run is long enough).
@@ -144,7 +145,7 @@ class Example53:
     """Example 5.3 reproduced: the poured bed, ``k*`` with and without softening, the Hashin-Shtrikman bounds.
 
     Attributes:
-      packing: the settled bed (:class:`sintercond.packing.Packing`, with its ``settle`` report).
+      packing: the settled bed (:class:`sintercond.beds.packing.Packing`, with its ``settle`` report).
       bounds: ``(lower, upper)`` Hashin-Shtrikman bounds (W/(m K)) at the bed's packing fraction (Eq. 48).
       unsoftened: :class:`ConductivityEstimate` of the settled bed (E = 1 MPa throughout).
       softened: the same after softening with ``theta* = 300 K`` (None if not asked).
@@ -170,15 +171,15 @@ def heat_run(centres, radii, lateral_size, height, duration=EXAMPLE_5_3["duratio
     Example 5.3's thermal data (k = 100 W/(m K), C = 100 J/(kg K), rho = 1000
     kg/m^3, particles at 300 K, walls ``x = 0`` at 1000 K and ``x = L`` at
     300 K). The paper holds the walls' temperatures; here the walls are
-    conducting plane walls (:mod:`sintercond.walls`): heat crosses each wall
+    conducting plane walls (:mod:`sintercond.laws.walls`): heat crosses each wall
     contact through ``k pi a^2 / d`` with the Hertz contact radius, the law
     (Eqs. 32-35) used between particles. The packing does not move (the
     static path, explicit Euler at 0.9 of the stable step, equal steps that
     end at ``duration``): exact for a settled bed whose modulus does not
     change with the temperature.
     """
-    from sintercond import steady
-    from sintercond.walls import PlaneWall
+    from sintercond.sim import steady
+    from sintercond.laws.walls import PlaneWall
 
     d = EXAMPLE_5_3
     centres, radii = np.asarray(centres, np.float64), np.asarray(radii, np.float64)
@@ -220,7 +221,7 @@ def example_5_3(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_si
                 iterations=2, start="relaxed", duration=EXAMPLE_5_3["duration"], **settle) -> Example53:
     """Example 5.3: pour ``n`` spheres into an open box, settle them, heat from the ``x`` walls, read ``k*``.
 
-    The data (:data:`EXAMPLE_5_3`, :class:`sintercond.settle.DemMaterial`):
+    The data (:data:`EXAMPLE_5_3`, :class:`sintercond.beds.settle.DemMaterial`):
     radii N(3 mm, 0.667 mm) truncated at 3 sigma, k = 100 W/(m K),
     C = 100 J/(kg K), rho = 1000 kg/m^3, E = 1 MPa, nu = 0.3, mu = 0.05 and
     mu_r = 0.2 between particles, 0 at the walls, xi_con = xi_fric = 1,
@@ -229,7 +230,7 @@ def example_5_3(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_si
 
     Readings (MECHANICS.md erratum 9):
 
-    1. Pour and settle (:func:`sintercond.packing.pour`, ``start``; the
+    1. Pour and settle (:func:`sintercond.beds.packing.pour`, ``start``; the
        settle thresholds go in ``settle``).
     2. Heat the settled bed (:func:`heat_run`, the static path: the
        unsoftened bed does not move when heated) and read ``k*`` three ways.
@@ -252,7 +253,8 @@ def example_5_3(n=EXAMPLE_5_3["particles"], lateral_size=EXAMPLE_5_3["lateral_si
     Returns:
       :class:`Example53`.
     """
-    from sintercond import effective, packing, settle as settling
+    from sintercond.beds import packing, settle as settling
+    from sintercond.laws import effective
 
     d = EXAMPLE_5_3
     seconds = {}

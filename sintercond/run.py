@@ -23,18 +23,19 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm import tqdm
 
-from sintercond import guards, neck_growth, plots
+from sintercond.output import plots
+from sintercond.sim import guards, neck_growth
 from sintercond._deprecation import old_names
 from sintercond.rollout import advance
-from sintercond.io import (append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_network_vtp, write_pvd,
-                           write_vtp)
-from sintercond.packing_files import write_table
+from sintercond.output.io import (append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_network_vtp, write_pvd,
+                                  write_vtp)
+from sintercond.beds.packing_files import write_table
 from sintercond.scene import SceneError, validate_scene
 from sintercond.scene.validate import held_temperatures
 
 from sintercond.scene.build import PackingBoxWarning, build_model, escaped_particles
-from sintercond.observe import (Observation, _history_row, _probe_fn, contact_network, coordination, history_columns, observe,
-                                read_history, state_time)
+from sintercond.output.observe import (Observation, _history_row, _probe_fn, contact_network, coordination,
+                                       history_columns, observe, read_history, state_time)
 
 
 SLOW_OUTPUT_S = 2.0
@@ -46,7 +47,7 @@ MAX_TEMPERATURE = 1e5
 
 def physical_range_check(scene):
     """``check(state)`` for :func:`advance`: temperatures finite, > 0 K and <= :data:`MAX_TEMPERATURE`, and
-    growing necks still within the time step's stability (:func:`sintercond.neck_growth.check_stable`).
+    growing necks still within the time step's stability (:func:`sintercond.sim.neck_growth.check_stable`).
 
     The error names the step and the scene keys that can drive a run there.
     """
@@ -104,7 +105,7 @@ class MeltingPointWarning(UserWarning):
 
 def run_check(scene, model, state):
     """The ``check(state)`` of a scene's run from ``state``: :func:`physical_range_check`, and with mechanics
-    :func:`sintercond.guards.motion_guard` at the speed the step was sized for (``physics.impact_velocity``)."""
+    :func:`sintercond.sim.guards.motion_guard` at the speed the step was sized for (``physics.impact_velocity``)."""
     temperatures = physical_range_check(scene)
     if model.sized_speed is None:
         return temperatures
@@ -374,7 +375,7 @@ def summary_table(summary) -> str:
     return "\n".join(f"{k:<{width}}  {v:.6g}" if isinstance(v, float) else f"{k:<{width}}  {v}" for k, v in summary.items())
 
 
-# the model build moved to sintercond.scene.build and the history rows to sintercond.observe (issue 24)
+# the model build moved to sintercond.scene.build and the history rows to sintercond.output.observe (issue 24)
 __getattr__ = old_names("sintercond.run", {
     "Model": ("sintercond.scene.build", "Model"),
     "PROGRESS_EVERY_S": ("sintercond.scene.build", "PROGRESS_EVERY_S"),
@@ -392,8 +393,8 @@ __getattr__ = old_names("sintercond.run", {
     "wall_contacts": ("sintercond.scene.build", "wall_contacts"),
     "WallContactWarning": ("sintercond.scene.build", "WallContactWarning"),
     "RAMP_STEP_FRACTION": ("sintercond.scene.build", "RAMP_STEP_FRACTION"),
-    "HISTORY_COLUMNS": ("sintercond.observe", "HISTORY_COLUMNS"),
-    "MECHANICS_COLUMNS": ("sintercond.observe", "MECHANICS_COLUMNS"),
-    "SINTERING_COLUMNS": ("sintercond.observe", "SINTERING_COLUMNS"),
-    "sintered_conductivity": ("sintercond.observe", "sintered_conductivity"),
+    "HISTORY_COLUMNS": ("sintercond.output.observe", "HISTORY_COLUMNS"),
+    "MECHANICS_COLUMNS": ("sintercond.output.observe", "MECHANICS_COLUMNS"),
+    "SINTERING_COLUMNS": ("sintercond.output.observe", "SINTERING_COLUMNS"),
+    "sintered_conductivity": ("sintercond.output.observe", "sintered_conductivity"),
 })

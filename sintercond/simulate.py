@@ -6,7 +6,7 @@ The public face of :mod:`sintercond.sim`, where the pieces live (``sim/physics.p
 Every stepping path of the package (``sintercond run``, settling, the
 softening fits, prescribed motion, the benchmarks) goes through here; the
 flash experiment's readings do too, while its gradient is a hand-written
-discrete adjoint over :func:`sintercond.thermal.explicit_update`
+discrete adjoint over :func:`sintercond.sim.thermal.explicit_update`
 (:mod:`fitting.inverse`), tested against reverse mode through :func:`rollout`:
 
 * :class:`Physics` is a frozen, hashable description of *what* is simulated
@@ -24,7 +24,7 @@ discrete adjoint over :func:`sintercond.thermal.explicit_update`
 * :class:`SimState` is the whole state (particles, contacts, step counter and
   time step) as registered frozen dataclasses; a checkpoint holds all of it.
 * :func:`simulate_table` advances a table network built once
-  (:func:`sintercond.network.contact_table`) without building a state by
+  (:func:`sintercond.contacts.network.contact_table`) without building a state by
   hand: a convenience over :func:`rollout`.
 * :func:`rollout` scans the step over ``jax.checkpoint``-ed segments of about
   ``sqrt(n_steps)`` steps and saves observables chosen by :class:`SaveAt`
@@ -33,13 +33,13 @@ discrete adjoint over :func:`sintercond.thermal.explicit_update`
 
 The conduction step itself (Rojek et al. 2022, Eqs. 1-4; sources of
 Quintana-Ruiz & Campello 2020, Eqs. 28-31, 37-41) is
-:func:`sintercond.thermal.explicit_update` (or the backward-Euler solve),
-with the heat powers of :func:`sintercond.thermal.heat_power`.
+:func:`sintercond.sim.thermal.explicit_update` (or the backward-Euler solve),
+with the heat powers of :func:`sintercond.sim.thermal.heat_power`.
 
 Conductances of contacts
 ------------------------
 ``conductance="table"``: a table of ``K_ij`` at unit conductivity, built once
-on the host (:func:`sintercond.network.contact_table`), times the
+on the host (:func:`sintercond.contacts.network.contact_table`), times the
 conductivity of the single material. Every law is linear in the
 conductivity when there is one material and no contact resistance, so this
 is exact; it is the fast path (the gradient with respect to the conductivity
@@ -54,13 +54,13 @@ where both apply (tests/test_simulate.py).
 
 ``contacts="dynamic"``: positions move (a prescribed ``motion(t)``, or the
 thermo-mechanical step); a Dense neighbour list with a skin (built from a
-sorted cell list, jax-md's Dense format; :func:`sintercond.neighbors.neighbor_list`) is updated
+sorted cell list, jax-md's Dense format; :func:`sintercond.contacts.neighbors.neighbor_list`) is updated
 inside the step, and whenever it is rebuilt a half pair list (each pair
 ``i < j`` once, within ``r_i + r_j + skin``;
-:class:`sintercond.pair_list.HalfPairs`) is rebuilt from it. The law is
+:class:`sintercond.contacts.pair_list.HalfPairs`) is rebuilt from it. The law is
 evaluated once per pair of the half list from the current overlaps at every
 step, and heat (and force) is added to one end and taken from the other
-(:func:`sintercond.pair_list.pair_exchange`): conserved by construction.
+(:func:`sintercond.contacts.pair_list.pair_exchange`): conserved by construction.
 Overflow of either list is a flag in the state, recovered by the host
 driver (:func:`sintercond.rollout.advance` with :func:`reallocate_neighbors`).
 """
@@ -76,9 +76,9 @@ import numpy as np
 
 from sintercond._deprecation import old_names
 from sintercond._validation import all_concrete, require_positive
-from sintercond.mechanics import MechanicalParams, MechanicalState, Mechanics  # noqa: F401
-from sintercond.neck_growth import NeckState, Sintering  # noqa: F401
-from sintercond.network import ContactTable
+from sintercond.sim.mechanics import MechanicalParams, MechanicalState, Mechanics  # noqa: F401
+from sintercond.sim.neck_growth import NeckState, Sintering  # noqa: F401
+from sintercond.contacts.network import ContactTable
 from sintercond.sim.contacts import (affine_shrinkage, conducting_geometry, conductance_lift,  # noqa: F401
                                      conductivity_lookup, dynamic_contacts, follow_contacts, lifted_contacts,
                                      lifted_pair_conductance, list_region, merged_law_params, neck_conductance,

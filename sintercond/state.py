@@ -175,8 +175,8 @@ class DynamicContacts:
     """The contacts of a moving packing (``Physics(contacts="dynamic")``), found again as it moves.
 
     Attributes:
-      neighbor_list: the Dense neighbour list with a skin (:class:`sintercond.neighbors.NeighborList`).
-      pairs: the half pair list (:class:`sintercond.pair_list.HalfPairs`, ``[capacity, 2]``, each pair
+      neighbor_list: the Dense neighbour list with a skin (:class:`sintercond.contacts.neighbors.NeighborList`).
+      pairs: the half pair list (:class:`sintercond.contacts.pair_list.HalfPairs`, ``[capacity, 2]``, each pair
         ``i < j`` once) the laws run on, rebuilt with the Dense list.
     """
 

@@ -9,13 +9,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import io, mechanics, network, thermal
-from sintercond.pair_list import pair_exchange, pair_sum
+from sintercond.contacts import network
+from sintercond.output import io
+from sintercond.sim import mechanics, thermal
+from sintercond.contacts.pair_list import pair_exchange, pair_sum
 
 
 def find_contacts(centres, radii, tolerance=1e-9, periodic_box=None):
     """Contacts of every particle as a padded ``[n, m]`` index table (padding the row's own index), ascending:
-    :func:`sintercond.network.contact_pairs` laid out by :func:`sintercond.network.ell_table`."""
+    :func:`sintercond.contacts.network.contact_pairs` laid out by :func:`sintercond.contacts.network.ell_table`."""
     pairs = network.contact_pairs(centres, radii, tolerance, periodic_box)
     (table,) = network.ell_table(pairs.n_particles, pairs.i, pairs.j)
     return table
@@ -29,7 +31,7 @@ def explicit_euler_step(temperature, table, capacity, dt, fixed_mask=None, fixed
 
 def contact_loads(spec, params, geometry, positions, radii, mass, modulus, nu, state, t, dt):
     """Forces and torques on every particle from its pair and wall contacts and gravity at ``t``
-    (:class:`sintercond.mechanics.Loads`): the pair laws on the whole list at once, then the walls and gravity."""
+    (:class:`sintercond.sim.mechanics.Loads`): the pair laws on the whole list at once, then the walls and gravity."""
     n = radii.shape[0]
     f, t_i, t_j, spring, rolling = mechanics.pair_loads(spec, params, geometry, radii, mass, modulus, nu,
                                                         state.velocity, state.spin, state.spring, state.rolling, dt,
@@ -60,7 +62,7 @@ def reader(module, extra="readers"):
 
 def network_pairs(path):
     """The ``(i, j)`` pairs of the lines of a contact-network VTP, read by VTK's own reader where it is installed
-    (independent of the package), else from the file's ``connectivity`` array by :func:`sintercond.io.read_vtp`."""
+    (independent of the package), else from the file's ``connectivity`` array by :func:`sintercond.output.io.read_vtp`."""
     try:
         import vtk
     except ImportError:

@@ -2,13 +2,13 @@
 
 An independent reference for the conductance network (issue 40, part 3), NOT the library's hot path. The
 solve imports nothing from ``sintercond``; the geometry takes the project's neck radius
-(``sintercond.neck.neck_radius``) so that the network (:func:`network_lattice_kstar`,
+(``sintercond.laws.neck.neck_radius``) so that the network (:func:`network_lattice_kstar`,
 :func:`network_cluster_conductance`) and the full field see the same necks. Reference values, method and
 errors: ``tests/data/fullfield_cells.md`` (written by ``benchmarks/fullfield_cells.py``).
 
 Geometry: spheres (centre ``c_s``, radius ``r_s``); two closer than ``r_i + r_j`` (overlap ``h``) share a
 neck of one of two shapes (:func:`necks`). ``"rojek"`` (default, the project's own neck): Rojek et al. (2022)'s
-volume-conserving cylinder of radius ``a = sintercond.neck.neck_radius(r_i, r_j, h)`` between the two cut
+volume-conserving cylinder of radius ``a = sintercond.laws.neck.neck_radius(r_i, r_j, h)`` between the two cut
 spheres, the geometry the pair law ``K = 1.064 kappa pi a / 2`` was fitted on. ``"lens"``: the plain union
 of the spheres, ``a`` their intersection circle. The network side is evaluated with exactly the same ``a``.
 
@@ -290,10 +290,10 @@ LATTICES = {
 
 def overlap_for_neck(a_over_r):
     """Overlap ``h/r`` of two equal spheres whose volume-conserving neck (the project's
-    :func:`sintercond.neck.neck_radius`, Rojek Eqs. 19-20) has radius ``a/r``."""
+    :func:`sintercond.laws.neck.neck_radius`, Rojek Eqs. 19-20) has radius ``a/r``."""
     from scipy.optimize import brentq
 
-    from sintercond.neck import max_overlap, neck_radius
+    from sintercond.laws.neck import max_overlap, neck_radius
 
     hmax = float(max_overlap(1.0, 1.0))
     return brentq(lambda h: float(neck_radius(1.0, 1.0, h)) - a_over_r, 1e-12, hmax * (1 - 1e-12), xtol=1e-14)
@@ -305,11 +305,11 @@ def necks(centres, radii, shape="rojek"):
 
     ``shape="rojek"``: Rojek et al. (2022)'s volume-conserving neck, the project's model: each sphere is cut
     where its section has radius ``a`` (``sqrt(r^2 - a^2)`` from its centre) and a cylinder of radius ``a``
-    joins the two cuts; ``a`` is :func:`sintercond.neck.neck_radius`. Since a sphere's cap beyond the cut
+    joins the two cuts; ``a`` is :func:`sintercond.laws.neck.neck_radius`. Since a sphere's cap beyond the cut
     lies inside that cylinder, the solid is the union of the spheres and the cylinders.
     ``shape="lens"``: the plain union of the spheres, ``a`` the radius of their intersection circle.
     """
-    from sintercond.neck import neck_radius
+    from sintercond.laws.neck import neck_radius
 
     centres = np.asarray(centres, float)
     radii = np.asarray(radii, float)
@@ -368,7 +368,7 @@ def rizza_bcc_geometry(a_corner, a_centre, r_corner=40.0):
     ``(L, r_centre, sites, radii, cylinders)``, spheres and necks touching the eighth ``[0, L/2]^3``."""
     from scipy.optimize import brentq
 
-    from sintercond.neck import max_overlap, neck_radius
+    from sintercond.laws.neck import max_overlap, neck_radius
 
     hmax = float(max_overlap(r_corner, r_corner))
     h1 = brentq(lambda h: float(neck_radius(r_corner, r_corner, h)) - a_corner, 1e-12 * r_corner, hmax * (1 - 1e-12))
@@ -410,7 +410,7 @@ def network_lattice_kstar(kind, a_over_r, length, slope=ROJEK_SLOPE):
     """The isolated (sum-of-pair-laws) network's k*/kappa of an equal-sphere cubic lattice of cell side
     ``length`` with ``r = 1`` and necks ``a``: the affine field is exact on these centrosymmetric lattices, so
     ``k* = (1/V) sum_bonds K (d_x)^2`` with ``K = slope pi a / 2`` (Rojek Eq. 45: halves in series; this is
-    :func:`sintercond.conductance.rojek_pair_conductance` at the overlap whose neck is ``a``)."""
+    :func:`sintercond.laws.conductance.rojek_pair_conductance` at the overlap whose neck is ``a``)."""
     k = slope * np.pi * a_over_r / 2.0
     bonds_dx2 = {"SC": 1.0, "BCC": 2.0, "FCC": 4.0}[kind]  # sum over a cell's bonds of (d_x / L)^2
     return k * bonds_dx2 / length

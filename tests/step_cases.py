@@ -21,11 +21,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import mechanics, simulate
+from sintercond import simulate
+from sintercond.sim import mechanics
 from sintercond.scene import validate_scene
 from sintercond.scene.build import build_model
 from sintercond.state import ParticleState
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 
 STEPS = 12
 PINNED = pathlib.Path(__file__).resolve().parent / "data" / "pinned_steps.npz"
@@ -147,7 +148,7 @@ def _api_case(conductance, integrator="explicit", pulse=True, motion=False, mate
     physics = simulate.Physics.create(conductance=conductance, held=True, pulse=pulse, integrator=integrator,
                                       conducting_walls=1)
     if conductance == "table":
-        from sintercond import network
+        from sintercond.contacts import network
         table = network.contact_table(centres, radii, 1.0)
         k_w = network.wall_conductance(centres, radii, 1.0, 0, x_wall)
         contacts = simulate.table_contacts(table, k_w, np.full(n, 250.0))

@@ -8,7 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import mechanics, rollout, simulate
+from sintercond import rollout, simulate
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
 
 R, RHO = 1e-3, 3000.0

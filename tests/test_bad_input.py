@@ -315,7 +315,7 @@ def test_scene_reference_is_generated_from_the_schema():
 def _api_cases():
     import sintercond as sc
     from fitting import core
-    from sintercond import packing
+    from sintercond.beds import packing
 
     cases = []
     laws = [("rojek_pair_conductance", sc.rojek_pair_conductance, "kappa_i"),
@@ -403,7 +403,7 @@ def _api_cases():
                             (("feng", {"thickness": 0.0}, 1.0), {}, "thickness"),
                             (("fitted", {"c1": math.nan}, 1.0), {}, "c1"),
                             (("rojek", None, 1.0, -1.0), {}, "kappa_j")]:
-        cases.append((f"validate_law_inputs{args}", sc.conductance.validate_law_inputs, args, kw, field))
+        cases.append((f"validate_law_inputs{args}", sc.laws.conductance.validate_law_inputs, args, kw, field))
     return cases
 
 

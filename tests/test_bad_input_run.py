@@ -81,7 +81,7 @@ def test_resume_of_a_finished_run_does_nothing(tmp_path, monkeypatch):
 
 
 def test_contact_table_refuses_a_nan_radius():
-    from sintercond import network
+    from sintercond.contacts import network
 
     centres = np.array([[0.0, 0, 0], [1.9, 0, 0], [3.8, 0, 0]])
     with pytest.raises(ValueError, match="radii"):
@@ -93,7 +93,7 @@ def test_contact_table_refuses_a_nan_radius():
     ({"n_steps": 10, "save_every": 3}, "save_every"), ({"dt": -1e-3}, "dt"),
 ])
 def test_simulate_refuses_bad_arguments(kwargs, field):
-    from sintercond import network
+    from sintercond.contacts import network
     from sintercond.simulate import simulate_table
 
     centres = np.array([[0.0, 0, 0], [1.9, 0, 0]])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from sintercond.conductance import (
+from sintercond.laws.conductance import (
     CONDUCTANCE_LAWS,
     ConductanceLaw,
     argento_bouvard_pair_conductance,
@@ -19,7 +19,7 @@ from sintercond.conductance import (
     series_conductance,
     validate_pair_conductance_inputs,
 )
-from sintercond.neck import intersection_radius, max_overlap, neck_radius
+from sintercond.laws.neck import intersection_radius, max_overlap, neck_radius
 
 KAPPA_CU = 394.0  # W/(m K), Rojek et al. 2022, Sect. 5-6
 
@@ -224,7 +224,7 @@ def test_validate_pair_conductance_inputs():
 
 
 def test_fitted_law_validates_and_builds_networks():
-    from sintercond.conductance import fitted_neck_law_coefficients
+    from sintercond.laws.conductance import fitted_neck_law_coefficients
 
     assert min(fitted_neck_law_coefficients()) < 0  # coefficients may be negative
     validate_pair_conductance_inputs("fitted", 1e-3, 3e-3, 0.06e-3, 394.0)
@@ -263,7 +263,7 @@ def test_fitted_pair_unequal_halves_against_fe_anchors():
 
 def test_conductance_from_neck_takes_python_floats():
     """Python-float conductivities are as good as arrays (``~True`` on a Python bool is -2, not False)."""
-    from sintercond.conductance import conductance_from_neck
+    from sintercond.laws.conductance import conductance_from_neck
 
     a, r, kappa = 8e-6, 40e-6, 15.0
     expected = 1.064 * kappa * np.pi * a / 2  # Rojek Eq. 43, two equal halves in series

@@ -11,8 +11,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import materials, neck_growth, rollout, simulate
-from sintercond.conductance import conductance_from_neck
+from sintercond import rollout, simulate
+from sintercond.laws import materials
+from sintercond.sim import neck_growth
+from sintercond.laws.conductance import conductance_from_neck
 from sintercond.state import particle_state
 
 TI64 = materials.tabulated([879.0, 1273.0], [11.52, 16.72])  # Rizza & Galati (2024) Table 1's ends, linear
@@ -82,7 +84,7 @@ def test_a_table_without_its_spec_or_a_bad_table_is_refused_naming_it():
     with pytest.raises(ValueError, match="Conduction.conductivity_table=True"):
         simulate.rollout(sim, state, params, 2)
     sim, state, params = pair(conductivity=[13.0])
-    with pytest.raises(ValueError, match="needs Params.conductivity as a sintercond.materials.Table"):
+    with pytest.raises(ValueError, match="needs Params.conductivity as a sintercond.laws.materials.Table"):
         simulate.rollout(sim, state, params, 2)
     sim, state, params = pair(conductivity=materials.Table(jnp.array([900.0, 800.0]), jnp.array([1.0, 2.0])))
     with pytest.raises(ValueError, match="strictly increasing"):

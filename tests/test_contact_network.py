@@ -10,9 +10,9 @@ import copy
 import numpy as np
 import pytest
 
-from sintercond import io
+from sintercond.output import io
 from sintercond import run as runner
-from sintercond.conductance import pair_conductance
+from sintercond.laws.conductance import pair_conductance
 from sintercond.scene import validate_scene
 from _helpers import reader
 
@@ -61,8 +61,8 @@ def test_the_networks_lines_carry_the_heat_the_particles_receive(tmp_path, sinte
         expected = pair_conductance("rojek", 0.52e-4, 0.52e-4, 0.04e-4, 12.6, 12.6)
         np.testing.assert_allclose(lines["conductance"], float(expected), rtol=1e-12)
     else:  # each line's conductance is the law at the neck it carries, on the volume-conserving approach
-        from sintercond.conductance import conductance_from_neck
-        from sintercond.sintering import neck_overlap
+        from sintercond.laws.conductance import conductance_from_neck
+        from sintercond.laws.sintering import neck_overlap
 
         a = lines["neck_radius"]
         assert np.all(a > 0)

@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import mechanics, simulate
+from sintercond import simulate
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
 
 SIGMA = 5.670367e-8  # W/(m^2 K^4), the paper's value

@@ -15,7 +15,7 @@ import re
 import pytest
 
 from sintercond import run as runner
-from sintercond.packing import bed_particle_count
+from sintercond.beds.packing import bed_particle_count
 from sintercond.scene import builtin_scenes, estimate_run, validate_scene
 from tests.test_readme import README, _doc_scene_blocks, _docs_pages, _write_doc_packing
 
@@ -74,7 +74,7 @@ def test_every_scene_of_the_docs_runs_to_completion(tmp_path, source):
     ("quintana2020_5_4_laser", 87, "87 particles")])
 def test_the_particle_counts_the_docs_state(name, count, stated):
     """docs/examples.md's particle counts of the full scenes: the bed's volume over the mean sphere's at the fill
-    fraction (sintercond.packing.bed_particle_count); "about" within 5 %."""
+    fraction (sintercond.beds.packing.bed_particle_count); "about" within 5 %."""
     from tests.test_readme import ROOT
 
     assert stated in (ROOT / "docs" / "examples.md").read_text()

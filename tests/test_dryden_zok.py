@@ -7,7 +7,7 @@ import pytest
 from jax.test_util import check_grads
 from scipy.integrate import quad
 
-from sintercond import dryden_zok as dz
+from sintercond.laws import dryden_zok as dz
 
 ALPHAS = np.pi * np.array([0.002, 0.01, 0.05, 0.1, 0.2, 0.25, 0.3, 0.4, 0.45, 0.49, 0.4999, 0.5])
 

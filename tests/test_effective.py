@@ -4,7 +4,7 @@ import jax
 import numpy as np
 import pytest
 
-from sintercond.effective import dryden_zok_conductivity, hashin_shtrikman_bounds, maxwell_conductivity
+from sintercond.laws.effective import dryden_zok_conductivity, hashin_shtrikman_bounds, maxwell_conductivity
 
 
 def test_hashin_shtrikman_printed_form():

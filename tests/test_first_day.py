@@ -58,7 +58,7 @@ def _lattice_with_beam(**beam):
 def _beam_power_at(model, t):
     import dataclasses
 
-    from sintercond import thermal
+    from sintercond.sim import thermal
 
     state = dataclasses.replace(model.state, step=np.asarray(round(t / model.dt), model.state.step.dtype))
     return np.asarray(thermal.source_power(model.physics.sources, state, model.params))
@@ -131,7 +131,7 @@ def test_a_lattice_summary_has_its_packing_fraction_and_coordination():
     """Issue 27: `nan` coordination and packing fraction on lattices."""
     import math
 
-    from sintercond import packing
+    from sintercond.beds import packing
 
     bed = packing.from_scene({"kind": "simple_cubic", "counts": [4, 3, 3], "spacing": 1e-4, "radius": 0.52e-4})
     r, a = 0.52e-4, 1e-4
@@ -219,7 +219,7 @@ def test_an_interrupted_extension_resumes_with_the_runs_own_step(tmp_path):
 
 def test_a_bed_that_settles_reports_its_progress_with_an_estimate(monkeypatch):
     """Issue 27: a bed of thousands was "building the scene's packing" for 13 minutes with nothing printed."""
-    from sintercond import packing
+    from sintercond.beds import packing
 
     monkeypatch.setattr(build, "PROGRESS_EVERY_S", 0.0)
     lines = []
@@ -243,7 +243,7 @@ def test_a_bed_that_settles_reports_its_progress_with_an_estimate(monkeypatch):
 def test_a_rolled_bed_and_the_run_report_every_phase_with_its_time(monkeypatch, tmp_path):
     """Issue 27: every phase that can take more than a few seconds says so: the rolled bed counts its spheres down
     with the time left, the network and the compile give their times, and a slow output is named."""
-    from sintercond import rolling
+    from sintercond.beds import rolling
 
     monkeypatch.setattr(build, "PROGRESS_EVERY_S", 0.0)
     monkeypatch.setattr(rolling, "PROGRESS_EVERY", 20)

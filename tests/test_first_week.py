@@ -11,7 +11,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sintercond import cli, io, mechanics, neck_growth, packing, packing_files, settle, walls
+from sintercond import cli
+from sintercond.beds import packing, packing_files, settle
+from sintercond.laws import walls
+from sintercond.output import io
+from sintercond.sim import mechanics, neck_growth
 from sintercond import run as runner
 from sintercond.scene import SceneError, load_scene, validate_scene
 from sintercond.scene.build import build_model

@@ -7,9 +7,9 @@ import pytest
 
 from fitting import sintering as fs
 from fitting.reference import rizza_galati_table
-from sintercond import conductance as cd
-from sintercond import geometry
-from sintercond import sintering as st
+from sintercond.laws import conductance as cd
+from sintercond.laws import geometry
+from sintercond.laws import sintering as st
 
 UM = 1e-6
 

@@ -23,9 +23,11 @@ import pytest
 
 from fitting import softening as sf
 from fitting.core import InvalidEvaluation
-from sintercond import examples, forces, mechanics, simulate
+from sintercond import examples, simulate
+from sintercond.laws import forces
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 
 pytestmark = pytest.mark.slow  # fits through the coupled DEM
 
@@ -168,7 +170,7 @@ def _event_pattern(sim, params, state):
     """The branches the next step takes: per particle, softening on (theta > theta*) and at the floor E_min;
     per contact (pairs of the half list, then walls x particles), touching and slipping.
 
-    Recomputed here from Eq. 42 and :mod:`sintercond.forces` (the stick-slip
+    Recomputed here from Eq. 42 and :mod:`sintercond.laws.forces` (the stick-slip
     return map of Eqs. 7-13 on the state's springs), independently of the step.
     """
     spec, mp = sim.physics.mechanics, params.mechanics
@@ -309,7 +311,7 @@ def test_gradient_through_the_bed_equals_central_differences(small_bed):
 def test_bed_heating_lists_sized_on_the_settled_bed_and_overflow_is_an_error(small_bed):
     """The heating run's pair list holds the settled bed's pairs with 1.25x room (not the loose pile's 2x), the
     springs kept pair by pair; a list too short for them makes the readings raise instead of dropping pairs."""
-    from sintercond.pair_list import HalfPairs
+    from sintercond.contacts.pair_list import HalfPairs
 
     state = small_bed.state
     p, contacts = state.particles, state.contacts

@@ -121,7 +121,7 @@ def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
     import pathlib
 
     from fitting.neck_law import fit_smooth_law
-    from sintercond.conductance import fitted_half_conductance_ratio, fitted_neck_law_coefficients
+    from sintercond.laws.conductance import fitted_half_conductance_ratio, fitted_neck_law_coefficients
 
     result, x, y = fit_smooth_law()
     stored = np.array(fitted_neck_law_coefficients())
@@ -143,12 +143,12 @@ def test_smooth_neck_law_matches_fe_and_the_half_space_limit():
 
 
 def test_fitted_pair_conductance_unequal_halves():
-    from sintercond.conductance import fitted_pair_conductance, rojek_pair_conductance
-    from sintercond.neck import neck_radius
+    from sintercond.laws.conductance import fitted_pair_conductance, rojek_pair_conductance
+    from sintercond.laws.neck import neck_radius
 
     # equal spheres: two equal halves
     k = float(fitted_pair_conductance(1.0, 1.0, 0.2, 1.0))
-    from sintercond.conductance import fitted_half_conductance_ratio, fitted_neck_law_coefficients
+    from sintercond.laws.conductance import fitted_half_conductance_ratio, fitted_neck_law_coefficients
 
     a = float(neck_radius(1.0, 1.0, 0.2))
     half = np.pi * float(fitted_half_conductance_ratio(a, jnp.asarray(fitted_neck_law_coefficients())))
@@ -162,7 +162,7 @@ def test_fitted_pair_conductance_unequal_halves():
 
 def test_reference_data_files():
     from fitting.reference import RIZZA_GALATI_TABLES, rizza_galati_table, rojek_reference
-    from sintercond import tortuosity as tt
+    from sintercond.laws import tortuosity as tt
 
     for number in RIZZA_GALATI_TABLES:
         table = rizza_galati_table(number)
@@ -224,8 +224,9 @@ def test_progress_report_from_inside_the_compiled_loop(capfd):
 def test_fitted_law_changes_a_lattice_k_star_by_the_laws_ratio():
     """Equal spheres on a simple-cubic lattice: every pair has the same a/r, so k* scales exactly with the
     half conductance, K_fitted / K_rojek = f(a/r) / (1.064 a/r) -- the smooth law's change to a packing."""
-    from sintercond import conductance, neck_radius
-    from sintercond import steady
+    from sintercond import neck_radius
+    from sintercond.laws import conductance
+    from sintercond.sim import steady
 
     spacing, r = 1e-4, 0.53e-4
     grid = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), -1).reshape(-1, 3) * spacing

@@ -1,4 +1,4 @@
-"""Contact laws of sintercond.forces against closed forms and small independent integrations.
+"""Contact laws of sintercond.laws.forces against closed forms and small independent integrations.
 
 References: Hertz's static overlap, the restitution relation of the
 delta^(1/4)-damped Hertz contact (the one LAMMPS' ``damping coeff_restitution``
@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import forces
+from sintercond.laws import forces
 
 # a 1 mm particle of Example 5.1 (rho = 3000, E = 1 MPa, nu = 0.3)
 R = 1e-3

@@ -81,7 +81,7 @@ def test_split_scheme_does_not_leak_across_a_gap():
 def test_network_by_hand_is_the_library_pair_law():
     """The network's bond conductance by hand (neck from lattice_geometry's overlap) is sintercond's
     rojek_pair_conductance at that overlap, so the SC network k* is K_pair / L."""
-    from sintercond.conductance import rojek_pair_conductance
+    from sintercond.laws.conductance import rojek_pair_conductance
 
     length, _, _, h = lattice_geometry("SC", 0.22)
     k_pair = float(rojek_pair_conductance(1.0, 1.0, h, 1.0))

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from sintercond import geometry as g
-from sintercond.neck import neck_residual
+from sintercond.laws import geometry as g
+from sintercond.laws.neck import neck_residual
 
 R = 40.0  # um: Rizza & Galati's 80 um spheres
 

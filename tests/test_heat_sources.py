@@ -5,8 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import heat_sources as hs
-from sintercond import network
+from sintercond.laws import heat_sources as hs
+from sintercond.contacts import network
 from sintercond.simulate import simulate_table
 
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from fitting import inverse
-from sintercond import network, thermal
+from sintercond.contacts import network
+from sintercond.sim import thermal
 
 D = 1e-4  # 100 um particles
 RHO, C_TRUE, KAPPA_TRUE = 4430.0, 560.0, 7.0

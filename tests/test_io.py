@@ -9,7 +9,7 @@ from xml.etree import ElementTree
 import numpy as np
 import pytest
 
-from sintercond import io
+from sintercond.output import io
 from sintercond import run as runner
 from sintercond.scene import validate_scene
 from _helpers import reader

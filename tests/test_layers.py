@@ -18,16 +18,16 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 LAYERS = {
     "private": ["_numerics", "_validation", "_symmetric", "_cache", "_deprecation"],
     "state": ["state"],
-    "laws": ["neck", "conductance", "forces", "materials", "heat_sources", "walls", "sintering", "effective",
-             "dryden_zok", "tortuosity", "geometry"],
-    "space": ["neighbors", "pair_list"],
-    "lifts": ["network", "mechanics", "thermal", "neck_growth"],
+    "laws": ["laws", "laws.neck", "laws.conductance", "laws.forces", "laws.materials", "laws.heat_sources", "laws.walls",
+             "laws.sintering", "laws.effective", "laws.dryden_zok", "laws.tortuosity", "laws.geometry"],
+    "space": ["contacts", "contacts.neighbors", "contacts.pair_list"],
+    "lifts": ["contacts.network", "sim.mechanics", "sim.thermal", "sim.neck_growth"],
     "drive": ["sim", "sim.physics", "sim.state", "sim.contacts", "sim.terms", "sim.terms.sources", "sim.terms.walls",
               "sim.terms.conduction", "sim.terms.mechanics", "sim.terms.sintering", "sim.step", "sim.stability",
-              "sim.validation", "sim.rollout", "simulate", "steady", "rollout", "guards"],
+              "sim.validation", "sim.rollout", "simulate", "sim.steady", "rollout", "sim.guards"],
     "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.typed", "scene.build",
-            "observe",
-            "settle", "rolling", "packing", "packing_files", "run", "io", "plots", "cli", "sweep", "examples"],
+            "output", "output.observe", "beds", "beds.settle", "beds.rolling", "beds.packing", "beds.packing_files",
+            "run", "output.io", "output.plots", "cli", "sweep", "examples"],
 }
 RANK = {f"sintercond.{m}": rank for rank, modules in enumerate(LAYERS.values()) for m in modules}
 
@@ -43,15 +43,23 @@ def _modules():
     return modules
 
 
+def _is_module(dotted):
+    path = ROOT.joinpath(*dotted.split("."))
+    return path.with_suffix(".py").exists() or (path / "__init__.py").exists()
+
+
 def _imports(path):
-    """The sintercond and fitting modules ``path`` imports, anywhere in it."""
+    """The sintercond and fitting modules ``path`` imports, anywhere in it: ``from sintercond.sim import thermal``
+    imports ``sintercond.sim.thermal`` (the folder ``sim`` runs no code), ``from sintercond.sim.thermal import x``
+    imports ``sintercond.sim.thermal``."""
     found = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in ("sintercond", "fitting"):
             if node.module in ("sintercond", "fitting"):
                 found |= {f"{node.module}.{a.name}" for a in node.names}
             else:
-                found.add(node.module)
+                found |= {f"{node.module}.{a.name}" if _is_module(f"{node.module}.{a.name}") else node.module
+                          for a in node.names}
         elif isinstance(node, ast.Import):
             found |= {a.name for a in node.names if a.name.split(".")[0] in ("sintercond", "fitting")}
     return found
@@ -111,14 +119,14 @@ def test_import_sintercond_as_sc_gives_every_submodule():
 
 
 @pytest.mark.parametrize("old, new", [("simulate", "sintercond.simulate:simulate_table"),
-                                      ("steady_state", "sintercond.steady:steady_state"),
-                                      ("steady_state_conductivity", "sintercond.steady:steady_state_conductivity"),
+                                      ("steady_state", "sintercond.sim.steady:steady_state"),
+                                      ("steady_state_conductivity", "sintercond.sim.steady:steady_state_conductivity"),
                                       ("steady_state_network_conductivity",
-                                       "sintercond.steady:steady_state_network_conductivity"),
-                                      ("stable_time_step", "sintercond.thermal:table_time_step"),
-                                      ("check_time_step", "sintercond.thermal:check_table_time_step")])
+                                       "sintercond.sim.steady:steady_state_network_conductivity"),
+                                      ("stable_time_step", "sintercond.sim.thermal:table_time_step"),
+                                      ("check_time_step", "sintercond.sim.thermal:check_table_time_step")])
 def test_moved_thermal_names_still_resolve_with_a_deprecation_warning(old, new):
-    from sintercond import thermal
+    from sintercond.sim import thermal
 
     module, name = new.split(":")
     with pytest.warns(DeprecationWarning, match=f"thermal.{old} moved to {module}.{name}"):
@@ -129,9 +137,9 @@ def test_moved_thermal_names_still_resolve_with_a_deprecation_warning(old, new):
             thermal.no_such_function  # noqa: B018
 
 
-@pytest.mark.parametrize("module, old, new", [("forces", "stable_time_step", "contact_time_step"),
-                                              ("mechanics", "stable_time_step", "mechanical_time_step"),
-                                              ("mechanics", "check_time_step", "check_mechanical_time_step"),
+@pytest.mark.parametrize("module, old, new", [("laws.forces", "stable_time_step", "contact_time_step"),
+                                              ("sim.mechanics", "stable_time_step", "mechanical_time_step"),
+                                              ("sim.mechanics", "check_time_step", "check_mechanical_time_step"),
                                               ("simulate", "stable_time_step", "thermal_time_step")])
 def test_renamed_time_steps_still_resolve_with_a_deprecation_warning(module, old, new):
     """Four functions were called stable_time_step (one contact's, the packing's mechanical, a simulator's and a
@@ -148,10 +156,10 @@ def test_renamed_time_steps_still_resolve_with_a_deprecation_warning(module, old
 @pytest.mark.parametrize("old, new", [("build_packing", "sintercond.scene.build"),
                                       ("scene_physics", "sintercond.scene.build"),
                                       ("WallContactWarning", "sintercond.scene.build"),
-                                      ("SINTERING_COLUMNS", "sintercond.observe"),
-                                      ("HISTORY_COLUMNS", "sintercond.observe")])
+                                      ("SINTERING_COLUMNS", "sintercond.output.observe"),
+                                      ("HISTORY_COLUMNS", "sintercond.output.observe")])
 def test_the_model_build_and_history_moved_out_of_run_resolve_with_a_deprecation_warning(old, new):
-    """The model build moved to ``sintercond.scene.build`` and the history rows to ``sintercond.observe``; what
+    """The model build moved to ``sintercond.scene.build`` and the history rows to ``sintercond.output.observe``; what
     ``run`` itself uses (``build_model``, ``history_columns``, ``read_history``) it imports, without a warning."""
     from sintercond import run
 
@@ -160,17 +168,17 @@ def test_the_model_build_and_history_moved_out_of_run_resolve_with_a_deprecation
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert run.build_model is importlib.import_module("sintercond.scene.build").build_model
-        assert run.read_history is importlib.import_module("sintercond.observe").read_history
+        assert run.read_history is importlib.import_module("sintercond.output.observe").read_history
 
 
 @pytest.mark.parametrize("old", ["relax_under_gravity", "dem_settle", "DemMaterial", "SettleReport", "DemSettled",
                                  "box_walls", "dem_physics", "GRAVITY", "KINETIC_TOL", "FORCE_TOL"])
 def test_the_settling_moved_out_of_packing_resolves_with_a_deprecation_warning(old):
-    """The settling (relaxation and DEM) moved to ``sintercond.settle``; ``packing`` keeps the geometry and the beds
+    """The settling (relaxation and DEM) moved to ``sintercond.beds.settle``; ``packing`` keeps the geometry and the beds
     built on it, and its own error (``PackingError``, the same class as ``settle``'s), without a warning."""
-    from sintercond import packing, settle
+    from sintercond.beds import packing, settle
 
-    with pytest.warns(DeprecationWarning, match=f"sintercond.packing.{old} moved to sintercond.settle.{old}"):
+    with pytest.warns(DeprecationWarning, match=f"sintercond.beds.packing.{old} moved to sintercond.beds.settle.{old}"):
         assert getattr(packing, old) is getattr(settle, old)
     with warnings.catch_warnings():
         warnings.simplefilter("error")

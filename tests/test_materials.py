@@ -1,4 +1,4 @@
-"""Temperature-dependent properties of sintercond.materials against their closed forms and central differences."""
+"""Temperature-dependent properties of sintercond.laws.materials against their closed forms and central differences."""
 
 import math
 
@@ -7,8 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import materials
-from sintercond.tortuosity import ti6al4v_conductivity, ti6al4v_conductivity_table
+from sintercond.laws import materials
+from sintercond.laws.tortuosity import ti6al4v_conductivity, ti6al4v_conductivity_table
 
 E0, THETA_STAR = 1e6, 400.0  # Example 5.1
 

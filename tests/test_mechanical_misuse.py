@@ -12,9 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import mechanics, simulate
+from sintercond import simulate
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 
 R, RHO, E0, NU, G = 1e-3, 3000.0, 1e6, 0.3, 9.81
 MASS = 4.0 / 3.0 * math.pi * R**3 * RHO

@@ -15,9 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import examples, mechanics, simulate
+from sintercond import examples, simulate
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 from _helpers import contact_loads, forced_rebuild
 
 R, RHO, E0, NU, G = 1e-3, 3000.0, 1e6, 0.3, 9.81
@@ -426,7 +427,7 @@ def test_momentum_of_a_colliding_cloud_is_conserved_to_round_off_float32_forces_
 
 @pytest.mark.slow
 def test_pair_pass_by_blocks_equals_one_pass(monkeypatch):
-    from sintercond import pair_list
+    from sintercond.contacts import pair_list
 
     rng = np.random.default_rng(4)
     grid = np.array(np.meshgrid(*[np.arange(3)] * 3, indexing="ij")).reshape(3, -1).T * 2.02 * R

@@ -7,7 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import geometry, network, packing, simulate, thermal
+from sintercond import simulate
+from sintercond.beds import packing
+from sintercond.contacts import network
+from sintercond.laws import geometry
+from sintercond.sim import thermal
 from sintercond.simulate import simulate_table
 from sintercond.rollout import advance
 from sintercond.state import ParticleState
@@ -92,7 +96,7 @@ def test_affine_shrinkage_is_a_linear_strain_toward_the_centroid():
 def test_either_list_overflowing_alone_is_flagged():
     """Bug caught (mutation 'dynamic skin overflow'): dropping the Dense list's flag survived the runs above, whose
     half list overflowed at the same time. Here each list is the tight one in turn, at the step that squeezes."""
-    from sintercond import neighbors, pair_list
+    from sintercond.contacts import neighbors, pair_list
 
     rng = np.random.default_rng(6)
     centres = rng.uniform(0.0, 8.0, (120, 3))

@@ -2,7 +2,7 @@
 
 References: angular momentum about the contact point (a sphere dropped on a belt moving at U ends rolling at
 2U/7, whatever the friction or the spring), Hertz's static overlap under the weight (a floor rising at w carries
-the sphere at w on that overlap), the collision-sized step of sintercond.forces at the wall's speed, the
+the sphere at w on that overlap), the collision-sized step of sintercond.laws.forces at the wall's speed, the
 distances the wall and the beam's spot travel per step, and the energy a resting or colliding system has.
 """
 
@@ -14,10 +14,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import examples, guards, mechanics, rollout
+from sintercond import examples, rollout
+from sintercond.sim import guards, mechanics
 from sintercond import run as runner
 from sintercond.scene import BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, validate_scene
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 from test_mechanics import E0, MASS, NU, G, R, _params, _run, _scene
 
 DELTA = examples.static_overlap(MASS * G, R, E0, NU)  # Hertz overlap under the weight (m)
@@ -229,7 +230,7 @@ def test_the_energy_guard_stops_an_unstable_step_and_passes_a_stable_one():
 def test_hertz_elastic_energy_is_the_integral_of_the_elastic_force():
     from scipy.integrate import quad
 
-    from sintercond import forces
+    from sintercond.laws import forces
 
     r_star, e_star = 3e-4, 2e9
     for delta in (1e-9, 1e-7, 1e-5):

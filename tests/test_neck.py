@@ -17,8 +17,8 @@ import pytest
 from hypothesis import given
 from jax.test_util import check_grads
 
-from sintercond import neck
-from sintercond.neck import (
+from sintercond.laws import neck
+from sintercond.laws.neck import (
     NeckStatus,
     coble_radius,
     hertz_radius,

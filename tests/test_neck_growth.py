@@ -1,6 +1,6 @@
 """Necks that grow in the simulator (first stage: the packing does not move, contacts sinter independently).
 
-References: the law tier (:func:`sintercond.sintering.grow_neck`, itself tested against closed forms), conservation of
+References: the law tier (:func:`sintercond.laws.sintering.grow_neck`, itself tested against closed forms), conservation of
 heat, the kinetic law's cap, and central differences.
 """
 
@@ -9,7 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import neck_growth, rollout, simulate, sintering
+from sintercond import rollout, simulate
+from sintercond.laws import sintering
+from sintercond.sim import neck_growth
 from sintercond.state import particle_state
 
 DENSITY, HEAT, KAPPA = 4430.0, 560.0, 7.0  # Ti6Al4V
@@ -106,7 +108,7 @@ def test_the_conductance_follows_the_necks():
     start_k = simulate.neck_conductance(sim.physics, state, params)
     end_k = simulate.neck_conductance(sim.physics, end, params)
     assert float(jnp.max(start_k)) < 1e-9  # point contacts
-    from sintercond.conductance import conductance_from_neck
+    from sintercond.laws.conductance import conductance_from_neck
     a, h = end.contacts.table_neck[0, 0], end.contacts.table_overlap[0, 0]
     expected = conductance_from_neck("rojek", a, 40e-6, 30e-6, h, KAPPA, KAPPA)
     np.testing.assert_allclose(float(end_k[0, 0]), float(expected), rtol=1e-14)
@@ -215,8 +217,8 @@ def test_held_particles_on_a_ramp_take_each_level_at_its_end_and_bad_ramps_are_r
 
 @pytest.mark.slow
 def test_the_gradient_of_k_star_at_the_end_by_the_kinetic_parameters_equals_central_differences():
-    from sintercond.network import contact_pairs
-    from sintercond.steady import steady_state_network_conductivity
+    from sintercond.contacts.network import contact_pairs
+    from sintercond.sim.steady import steady_state_network_conductivity
 
     r = 40e-6
     grid = np.stack(np.meshgrid(*(np.arange(2),) * 3, indexing="ij"), -1).reshape(-1, 3)
@@ -307,7 +309,7 @@ def test_a_one_sided_table_and_an_extrapolating_conductivity_table_are_refused()
     one_sided = dataclasses.replace(state.contacts, neighbors=state.contacts.neighbors.at[1, 0].set(1))
     with pytest.raises(ValueError, match="in one of its rows only"):
         neck_growth.neck_state(one_sided, state.particles.temperature)
-    from sintercond import materials
+    from sintercond.laws import materials
     physics = simulate.Physics.create(law="rojek", conductance="lifted", conductivity_table=True)
     table = materials.tabulated([500.0, 1500.0], [7.0, 14.0], extrapolate=True)
     with pytest.raises(ValueError, match="must clamp at its ends"):
@@ -330,7 +332,7 @@ def test_a_float32_state_runs_with_parameters_written_as_python_floats(physics):
     x[1:, 0] = np.cumsum(radii[:-1] + radii[1:]) * (1 - 1e-3)
     particles = particle_state(x, radii, np.array([1000.0, 1100.0, 1050.0]), DENSITY)
     if physics.conduction.conductance == "table":
-        from sintercond.network import contact_table
+        from sintercond.contacts.network import contact_table
         contacts = simulate.table_contacts(contact_table(x, radii, KAPPA, "rojek"))
     else:
         contacts = simulate.lifted_contacts(physics, x, radii)

@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sintercond import geometry, network, neighbors, pair_list
+from sintercond.contacts import network, neighbors, pair_list
+from sintercond.laws import geometry
 from _helpers import find_contacts
 
 
@@ -288,7 +289,7 @@ def test_remap_pair_history_padding_and_own_index():
 
 @pytest.mark.slow
 def test_pair_conductances_compiled_equal_the_eager_law():
-    from sintercond.conductance import CONDUCTANCE_LAWS, pair_conductance
+    from sintercond.laws.conductance import CONDUCTANCE_LAWS, pair_conductance
 
     # a jittered sintered simple-cubic lattice: overlaps of a few % of the radius
     rng = np.random.default_rng(9)

@@ -12,7 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import network, simulate
+from sintercond import simulate
+from sintercond.contacts import network
 from sintercond import run as runner
 from sintercond.scene import validate_scene
 from sintercond.state import particle_state

@@ -8,7 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from sintercond import geometry, packing, settle
+from sintercond.beds import packing, settle
+from sintercond.laws import geometry
 
 
 @pytest.fixture(scope="module")

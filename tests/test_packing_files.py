@@ -14,7 +14,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from sintercond import cli, conductance, io, packing_files
+from sintercond import cli
+from sintercond.beds import packing_files
+from sintercond.laws import conductance
+from sintercond.output import io
 from sintercond import run as runner
 from sintercond.scene import SceneError, load_scene
 

@@ -13,9 +13,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import mechanics, simulate
+from sintercond import simulate
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 
 R = 1e-4
 

@@ -1,4 +1,4 @@
-"""The pictures of a run (sintercond.plots): written, non-empty, decodable, and showing the data they are given."""
+"""The pictures of a run (sintercond.output.plots): written, non-empty, decodable, and showing the data they are given."""
 
 import copy
 
@@ -8,7 +8,7 @@ from matplotlib import colormaps
 from matplotlib.image import imread
 from test_scene_run import SMALL
 
-from sintercond import plots
+from sintercond.output import plots
 from sintercond import run as runner
 from sintercond.scene import validate_scene
 

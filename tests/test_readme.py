@@ -109,7 +109,7 @@ def _doc_scene_blocks():
 
 def _write_doc_packing(raw, tmp_path):
     """A ``kind = "file"`` scene of the docs given a packing to read: 27 touching spheres in a dump at its path."""
-    from sintercond import packing_files
+    from sintercond.beds import packing_files
 
     if raw["packing"]["kind"] != "file":
         return

@@ -1,4 +1,4 @@
-"""Sequential deposition with rolling (sintercond.rolling) against closed forms, statics and Visscher & Bolsterli.
+"""Sequential deposition with rolling (sintercond.beds.rolling) against closed forms, statics and Visscher & Bolsterli.
 
 The single-sphere cases drop spheres at chosen positions (a stand-in for the generator) and compare where they come
 to rest with the geometry worked out by hand; the beds are checked sphere by sphere: each at rest under gravity on
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from sintercond import packing, rolling
-from sintercond.neighbors import brute_force_pairs
+from sintercond.beds import packing, rolling
+from sintercond.contacts.neighbors import brute_force_pairs
 
 
 class Drops:
@@ -125,7 +125,7 @@ def test_no_two_spheres_overlap_beyond_the_asked_overlap(polydisperse):
 def test_equal_spheres_pack_at_visscher_and_bolsterli_fraction():
     """Visscher & Bolsterli (1972) found ~0.58 for equal spheres dropped and rolled to rest; the interior of a
     rolled pile (4 radii from the floor, walls and surface) holds 0.585 here."""
-    from sintercond.geometry import sphere_box_volume
+    from sintercond.laws.geometry import sphere_box_volume
 
     lateral = 24.0
     centres, _ = rolling.roll_deposit(np.ones(4000), lateral, np.random.default_rng(3))

@@ -4,7 +4,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import packing, rollout, settle, simulate
+from sintercond import rollout, simulate
+from sintercond.beds import packing, settle
 from sintercond.state import ParticleState
 
 

@@ -92,7 +92,7 @@ def test_the_run_restates_no_declared_default():
     declared = {key for schema in [*_SCHEMA.values(), *_PACKING.values(), _WALL] for key, spec in schema.items()
                 if _literal(spec)}
     package = Path(sc_scene.__file__).parents[1]
-    for module in ("run.py", "observe.py", "scene/build.py"):
+    for module in ("run.py", "output/observe.py", "scene/build.py"):
         source = (package / module).read_text()
         restated = sorted(set(re.findall(r'\.get\("(\w+)", ', source)) & declared)
         assert restated == [], f"{module} restates the defaults of {restated}"

@@ -12,7 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from sintercond import heat_sources, scene, simulate
+from sintercond import scene, simulate
+from sintercond.laws import heat_sources
 from sintercond import run as runner
 from sintercond.scene import restitution_damping_ratio, validate_scene
 

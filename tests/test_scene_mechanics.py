@@ -11,7 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from sintercond import cli, examples, io
+from sintercond import cli, examples
+from sintercond.output import io
 from sintercond import run as runner
 from sintercond.scene import build
 from sintercond.scene import SceneError, builtin_scenes, load_scene, restitution_damping_ratio, validate_scene

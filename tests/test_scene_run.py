@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sintercond import run as runner
-from sintercond import thermal
+from sintercond.sim import thermal
 from sintercond.scene import SceneError, load_scene, validate_scene
 
 SMALL = {
@@ -145,7 +145,7 @@ def test_cli_effective(tmp_path):
     )
     result = subprocess.run([sys.executable, "-m", "sintercond.cli", "effective", str(scene), "--axis", "0"],
                             capture_output=True, text=True, check=True)
-    from sintercond.conductance import rojek_pair_conductance
+    from sintercond.laws.conductance import rojek_pair_conductance
 
     expected = float(rojek_pair_conductance(0.52e-4, 0.52e-4, 0.04e-4, 20.0)) / 1e-4  # K_pair / a
     value = float(result.stdout.split(":")[1].split()[0])
@@ -191,8 +191,8 @@ def test_history_reports_the_heat_through_held_and_conducting_walls(tmp_path):
     """At the start (uniform 300 K) the heat through a held 900 K face of the 6x3x3 lattice is 9 pairs of the
     Rojek conductance times 600 K (its neighbours within the face are held too), and through a conducting 350 K
     face the wall conductances of the 9 particles it cuts times 50 K: closed forms of the laws."""
-    from sintercond.conductance import rojek_pair_conductance
-    from sintercond.walls import wall_conductance
+    from sintercond.laws.conductance import rojek_pair_conductance
+    from sintercond.laws.walls import wall_conductance
 
     scene = copy.deepcopy(SMALL)
     scene.pop("beam"), scene.pop("radiation"), scene.pop("boundary")

@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sintercond import observe
+from sintercond.output import observe
 from sintercond.scene import build, load_scene, validate_scene
 from sintercond.scene import schema, typed
 from sintercond.scene.typed import Scene, typed_scene

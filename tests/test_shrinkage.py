@@ -1,6 +1,6 @@
 """Many-body shrinkage of a sintering packing (``Sintering(shrinkage="many_body")``, second stage).
 
-References: the law tier (:func:`sintercond.sintering.grow_neck`, tested against closed forms) for contacts that
+References: the law tier (:func:`sintercond.laws.sintering.grow_neck`, tested against closed forms) for contacts that
 are free to approach; a closed form by symmetry (a weighted harmonic mean) for an over-constrained hexagon; a dense
 least-squares minimisation of the dissipation, written here from the equations, for a random cluster; rigid
 motions; conservation of heat; central differences.
@@ -13,7 +13,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import neck, neck_growth, simulate, sintering
+from sintercond import simulate
+from sintercond.laws import neck, sintering
+from sintercond.sim import neck_growth
 from sintercond.state import particle_state
 
 DENSITY, HEAT, KAPPA = 4430.0, 560.0, 7.0  # Ti6Al4V

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from fitting.core import Positive, least_squares
-from sintercond import network, simulate
+from sintercond import simulate
+from sintercond.contacts import network
 from sintercond.simulate import simulate_table
-from sintercond import steady
-from sintercond.conductance import rojek_pair_conductance
+from sintercond.sim import steady
+from sintercond.laws.conductance import rojek_pair_conductance
 from sintercond.state import ParticleState
 
 A, R = 1.0e-4, 0.53e-4

@@ -1,4 +1,4 @@
-"""Sintering kinetics (sintercond.sintering) against closed forms, limits and finite differences."""
+"""Sintering kinetics (sintercond.laws.sintering) against closed forms, limits and finite differences."""
 
 import jax
 import jax.numpy as jnp
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import sintercond as sc
-from sintercond import sintering as st
-from sintercond import tortuosity as tt
-from sintercond.neck import NeckStatus
+from sintercond.laws import sintering as st
+from sintercond.laws import tortuosity as tt
+from sintercond.laws.neck import NeckStatus
 
 RADIUS_PAIRS = [(40e-6, 40e-6), (1e-3, 3e-3), (29.3e-6, 40e-6), (1.0, 1000.0), (1000.0, 1.0), (20e-6, 100e-6)]
 GB = {"A": 1e-16, "activation_energy": 120.0, "dihedral_angle": 150.0}

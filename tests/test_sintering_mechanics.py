@@ -1,6 +1,6 @@
 """Necks that grow with the elastic mechanics on: the necks live on the dynamic half pair list.
 
-References: the law tier (:func:`sintercond.sintering.grow_neck`, itself tested against closed forms) along each
+References: the law tier (:func:`sintercond.laws.sintering.grow_neck`, itself tested against closed forms) along each
 contact's recorded temperature history; Hertz's static overlaps of a stack under its weight (Quintana-Ruiz &
 Campello 2020, Eq. 2) with the closed-form approach of a chain on a support; conservation of heat; rebuilds and
 reallocations against a list that never rebuilds and a brute-force contact search; central differences.
@@ -14,9 +14,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import mechanics, neck_growth, rollout, simulate, sintering
+from sintercond import rollout, simulate
+from sintercond.laws import sintering
+from sintercond.sim import mechanics, neck_growth
 from sintercond.state import particle_state
-from sintercond.walls import PlaneWall
+from sintercond.laws.walls import PlaneWall
 from _helpers import forced_rebuild
 
 DENSITY, HEAT, KAPPA = 4430.0, 560.0, 7.0  # Ti6Al4V
@@ -300,7 +302,7 @@ def coupled_cell(duration=0.002, **sintering_keys):
 def test_a_coupled_sintering_scene_closes_its_columns_onto_the_floor_and_reports_its_necks(tmp_path):
     import copy
 
-    from sintercond import io
+    from sintercond.output import io
     from sintercond import run as runner
     from sintercond.scene import validate_scene
 

@@ -5,9 +5,11 @@ import copy
 import numpy as np
 import pytest
 
-from sintercond import io, neck_growth, sintering
+from sintercond.laws import sintering
+from sintercond.output import io
+from sintercond.sim import neck_growth
 from sintercond import run as runner
-from sintercond.observe import SINTERING_COLUMNS
+from sintercond.output.observe import SINTERING_COLUMNS
 from sintercond.scene import SceneError, build, load_scene, validate_scene
 
 # a small touching lattice on a hot floor, necks from point contacts (the built-in sintering_hot_floor, shrunk)
@@ -140,8 +142,8 @@ def test_rizza_galatis_sc_cell_on_the_ramp_grows_as_the_law_tier_and_conducts_k_
     assert abs(neck / float(ramp) - 1) < 1e-3
     # a simple cubic lattice conducts K_pair / spacing along an axis (steady.py), at Table 1's lambda_0 of the
     # cell's temperature (material.conductivity_table)
-    from sintercond import materials
-    from sintercond.conductance import conductance_from_neck
+    from sintercond.laws import materials
+    from sintercond.laws.conductance import conductance_from_neck
     kappa = float(materials.tabulated(*np.asarray(scene["material"]["conductivity_table"]).T)(levels[-1]))
     assert 11.52 < kappa < 11.97  # 896.36 K: between Table 1's 879 and 913 K rows
     k_pair = conductance_from_neck("rojek", neck, r, r, float(sintering.neck_overlap(neck, r, r)), kappa, kappa)
@@ -263,7 +265,7 @@ def test_a_bad_shrinkage_is_named():
 
 
 def test_the_dump_carries_each_particles_neck_ratio_as_the_frames_do(tmp_path):
-    from sintercond.packing_files import read_packing
+    from sintercond.beds.packing_files import read_packing
 
     scene = copy.deepcopy(CELL)
     scene["run"]["formats"] = ["vtp", "lammps"]

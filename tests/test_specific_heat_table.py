@@ -15,7 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import materials, network, simulate
+from sintercond import simulate
+from sintercond.contacts import network
+from sintercond.laws import materials
 from sintercond.state import particle_state
 
 C0, C1 = 500.0, 0.4  # c(T) = C0 + C1 (T - 300) J/(kg K) on [300, 1300] K
@@ -129,7 +131,7 @@ def test_a_table_without_its_spec_or_a_bad_table_is_refused_naming_it():
     with pytest.raises(ValueError, match="Conduction.specific_heat_table=True"):
         simulate.rollout(sim, state, params, 2)
     sim, state, params = pair(specific_heat=[560.0])
-    with pytest.raises(ValueError, match="needs Params.specific_heat as a sintercond.materials.Table"):
+    with pytest.raises(ValueError, match="needs Params.specific_heat as a sintercond.laws.materials.Table"):
         simulate.rollout(sim, state, params, 2)
     with pytest.raises(ValueError, match="explicit integrator"):
         simulate.Physics.create(specific_heat_table=True, integrator="implicit")

@@ -7,7 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import network, thermal
+from sintercond.contacts import network
+from sintercond.sim import thermal
 from sintercond.state import ParticleState, heat_capacity, particle_state
 from _helpers import explicit_euler_step
 

@@ -13,7 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import packing, rolling, scene, settle
+from sintercond import scene
+from sintercond.beds import packing, rolling, settle
 from sintercond.scene import SceneError
 
 TI = settle.DemMaterial(density=4430.0, E=110e9, nu=0.34, mu=0.3, mu_r=0.05, mu_wall=0.3, mu_r_wall=0.05)
@@ -187,7 +188,7 @@ def test_a_dem_powder_bed_takes_where_its_pour_starts_and_the_build_passes_it(mo
         seen.update(kwargs)
         raise RuntimeError("stop here")
 
-    from sintercond import packing
+    from sintercond.beds import packing
     from sintercond.scene import build
 
     monkeypatch.setattr(packing, "powder_bed", fake_powder_bed)

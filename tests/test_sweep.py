@@ -19,7 +19,7 @@ SCRIPT = textwrap.dedent("""
     from sintercond.sweep import grid, sweep
     cases = grid(r_i=np.geomspace(1e-6, 1e-3, 37), ratio=np.geomspace(1.0, 1e3, 29), frac=np.linspace(0.0, 1.0, 23))
     def model(r_i, ratio, frac):
-        from sintercond.neck import max_overlap
+        from sintercond.laws.neck import max_overlap
         r_j = r_i * ratio
         h = frac * max_overlap(r_i, r_j)
         return {"a": neck_radius(r_i, r_j, h), "K": pair_conductance("rojek", r_i, r_j, h, 20.0)}

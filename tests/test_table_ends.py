@@ -1,4 +1,4 @@
-"""Tables below and above their nodes (sintercond.materials' clamped specific-heat tables), against independent
+"""Tables below and above their nodes (sintercond.laws.materials' clamped specific-heat tables), against independent
 references: NumPy's ``np.interp`` (which clamps to the end values) and the integral of that clamped function by
 SciPy's adaptive quadrature (split at the nodes), then the inverse checked by going back and forth.
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from sintercond import materials
+from sintercond.laws import materials
 
 NODES = np.array([300.0, 700.0, 1300.0])
 VALUES = np.array([520.0, 760.0, 690.0])  # a rising then a falling segment: every end differs from its neighbour

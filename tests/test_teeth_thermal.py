@@ -17,7 +17,8 @@ import pytest
 from scipy.optimize import brentq
 
 from fitting import inverse
-from sintercond import simulate, network
+from sintercond import simulate
+from sintercond.contacts import network
 from sintercond.simulate import simulate_table
 from sintercond import run as runner
 from sintercond.scene import build, validate_scene

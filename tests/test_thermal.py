@@ -5,10 +5,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import geometry, network, packing, thermal
+from sintercond.beds import packing
+from sintercond.contacts import network
+from sintercond.laws import geometry
+from sintercond.sim import thermal
 from sintercond.simulate import simulate_table
-from sintercond import steady
-from sintercond.conductance import rojek_pair_conductance
+from sintercond.sim import steady
+from sintercond.laws.conductance import rojek_pair_conductance
 from _helpers import find_contacts
 
 A, R = 1.0e-4, 0.52e-4  # lattice spacing and radius (m): sintered SC lattice, h = 2R - A
@@ -166,7 +169,7 @@ def test_quintana_ruiz_5_3_setup_inside_hashin_shtrikman():
     # built geometrically with small settling overlaps (no Hertz mechanics yet),
     # so its contacts are far smaller than their 5.3 example's: k* is small,
     # but it must lie inside the HS bounds [0, 2 k f / (3 - f)].
-    from sintercond.effective import hashin_shtrikman_bounds
+    from sintercond.laws.effective import hashin_shtrikman_bounds
 
     bed = packing.powder_bed(320.0, 480.0, diameter_range=(45.0, 150.0), seed=7)
     centres, radii, box = packing.rev_box(bed, 200.0)

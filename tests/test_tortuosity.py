@@ -14,7 +14,7 @@ import pytest
 
 import fitting.data.rizza_galati2024
 
-from sintercond import tortuosity as tt
+from sintercond.laws import tortuosity as tt
 
 DATA = pathlib.Path(fitting.data.rizza_galati2024.__file__).parent
 U0_CELL, S0_CELL = 80.0**3, 6 * 80.0**2  # 512,000 um^3, 38,400 um^2

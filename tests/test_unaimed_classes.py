@@ -14,7 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import mechanics, packing_files, simulate
+from sintercond import simulate
+from sintercond.beds import packing_files
+from sintercond.sim import mechanics
 from sintercond.state import ParticleState
 
 
@@ -164,11 +166,11 @@ def test_wall_friction_without_friction_between_the_particles_reaches_the_walls_
 @pytest.mark.parametrize("every", [1, 3, 4])
 def test_the_necks_grow_at_the_end_of_each_interval_by_the_whole_interval(every):
     """Two touching 40 um spheres at a uniform 1150 K (nothing conducts): after n steps of dt the neck is the law
-    tier's (:func:`sintercond.sintering.grow_neck`, from a point contact) after ``floor(n / every) * every * dt``:
+    tier's (:func:`sintercond.laws.sintering.grow_neck`, from a point contact) after ``floor(n / every) * every * dt``:
     it grows at the end of each interval, by all of it, and not between."""
     import jax
 
-    from sintercond import sintering
+    from sintercond.laws import sintering
     from sintercond.scene import build, validate_scene
 
     kinetics = {"A": 1.2e-18, "activation_energy": 37.0}
@@ -194,9 +196,10 @@ def test_the_wall_columns_of_the_history_count_each_walls_heat_in_closed_form(tm
     conducting wall at 500 K. At the start (the history's first row) the held floor layer is at 900 K and the rest
     at 300 K: the floor's column reads 4 K_pair (900 - 300) (the four columns' first contacts, Rojek's K of the
     overlap) and the top wall's sum K_w (500 - 300) over its four particles (the wall law at their penetration,
-    :func:`sintercond.walls.wall_conductance`)."""
-    from sintercond import run as runner, walls
-    from sintercond.conductance import rojek_pair_conductance
+    :func:`sintercond.laws.walls.wall_conductance`)."""
+    from sintercond import run as runner
+    from sintercond.laws import walls
+    from sintercond.laws.conductance import rojek_pair_conductance
     from sintercond.scene import validate_scene
 
     r, a, kappa = 40e-6, 78e-6, 7.0
@@ -302,7 +305,7 @@ def test_a_settled_sphere_rests_on_hertz_s_overlap_and_the_report_says_so():
     """One sphere (r = 3 mm, Example 5.3's material) dropped 0.2 mm onto the floor settles to Hertz's overlap of its
     weight, delta = (3 m g / (4 E* sqrt(r)))^(2/3), E* = E / (1 - nu^2); the report's figures are that state's: the
     largest overlap over the radius, the kinetic and force ratios below the thresholds they met, the time steps * dt."""
-    from sintercond import settle
+    from sintercond.beds import settle
 
     r, material = 3e-3, settle.DemMaterial()
     centres = np.array([[0.01, 0.01, r + 2e-4]])

@@ -14,7 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from sintercond import mechanics, simulate
+from sintercond import simulate
+from sintercond.sim import mechanics
 from sintercond.state import particle_state
 
 R1, R2 = 1e-3, 1.5e-3

@@ -4,8 +4,9 @@ import jax
 import numpy as np
 import pytest
 
-from sintercond import NECK_MODELS, walls
-from sintercond.conductance import pair_conductance
+from sintercond import NECK_MODELS
+from sintercond.laws import walls
+from sintercond.laws.conductance import pair_conductance
 
 MODELS = ("coble", "hertz", "intersection", "volume_conserving")
 

@@ -14,14 +14,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import heat_sources, materials, mechanics, neck_growth, network, packing, settle, simulate, thermal, walls
+from sintercond import simulate
+from sintercond.beds import packing, settle
+from sintercond.contacts import network
+from sintercond.laws import heat_sources, materials, walls
+from sintercond.sim import mechanics, neck_growth, thermal
 from sintercond.scene.schema import output_interval
 from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
 from sintercond.scene.typed import Wall, typed_scene
 from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
                               default_penetration, file_packing, file_temperatures, restitution_damping_ratio)
-from sintercond.conductance import validate_pair_conductance_inputs
+from sintercond.laws.conductance import validate_pair_conductance_inputs
 from sintercond.state import particle_state
 
 
@@ -45,7 +49,7 @@ class Model:
     lattice: bool = False  # a simple cubic packing (k* between its end layers)
     output_every: int = 1  # steps between outputs: run.output_every, or about DEFAULT_OUTPUTS over the run
     checkpoint_every: int = 1  # steps between checkpoints (run.checkpoint_every or DEFAULT_CHECKPOINT_OUTPUTS outputs)
-    planes: tuple = ()  # the scene's walls as sintercond.walls.PlaneWall at the packing built (scene_walls), once
+    planes: tuple = ()  # the scene's walls as sintercond.laws.walls.PlaneWall at the packing built (scene_walls), once
 
     @property
     def physics(self) -> simulate.Physics:
@@ -69,11 +73,11 @@ PROGRESS_EVERY_S = 5.0
 
 
 class SettlingProgress:
-    """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.packing`: a line through ``log``
+    """``progress(phase, steps, max_steps, figure, target)`` for :mod:`sintercond.beds.packing`: a line through ``log``
     at most every :data:`PROGRESS_EVERY_S` seconds with the steps taken, the settling figure against its target
     and an estimate of the time left from the figure's recent rate of decay (it falls about exponentially); a
     rolled bed (phase ``"rolling"``) gives the spheres down and the time left at their rate; ``worst``, the sphere
-    the net force is largest on (:func:`sintercond.settle.sphere_text`)."""
+    the net force is largest on (:func:`sintercond.beds.settle.sphere_text`)."""
 
     def __init__(self, log, particles):
         self.log, self.particles = log, particles
@@ -107,7 +111,7 @@ class SettlingProgress:
 
 def initial_temperatures(scene):
     """The particles' start temperatures (K): ``initial.temperature``, or with ``initial.from_file`` the packing
-    file's temperature column (:func:`sintercond.packing_files.read_temperatures`)."""
+    file's temperature column (:func:`sintercond.beds.packing_files.read_temperatures`)."""
     scene = typed_scene(scene)
     if scene.initial.from_file:
         return np.array(file_temperatures(scene.packing))
@@ -116,7 +120,7 @@ def initial_temperatures(scene):
 
 def build_packing(scene, log=None):
     """``(centres, radii, bed)`` of a validated scene: listed spheres as given, else
-    :func:`sintercond.packing.from_scene`; a bed that settles reports its progress through ``log``
+    :func:`sintercond.beds.packing.from_scene`; a bed that settles reports its progress through ``log``
     (:class:`SettlingProgress`).
 
     ``bed``: the bed's figures for the summary (empty for listed spheres).
@@ -125,7 +129,7 @@ def build_packing(scene, log=None):
 
 
 def _scene_packing(scene, log=None):
-    """:func:`build_packing` and the :class:`sintercond.settle.DemSettled` state of a DEM pour (None for any other
+    """:func:`build_packing` and the :class:`sintercond.beds.settle.DemSettled` state of a DEM pour (None for any other
     packing, or one whose radii were changed after it settled)."""
     scene = typed_scene(scene)
     p = scene.packing
@@ -184,7 +188,7 @@ def mechanics_on(scene) -> bool:
 
 
 def contact_material(scene) -> dict:
-    """The ``[mechanics]`` section as :class:`~sintercond.mechanics.MechanicalParams` names (floats, SI).
+    """The ``[mechanics]`` section as :class:`~sintercond.sim.mechanics.MechanicalParams` names (floats, SI).
 
     ``mechanics.restitution`` e becomes ``xi_con``
     (:func:`sintercond.scene.restitution_damping_ratio`); wall coefficients
@@ -220,7 +224,7 @@ def dem_material(scene) -> settle.DemMaterial:
 def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
     """The coupled spec of a validated scene with mechanics: ``thermal_physics`` made dynamic, the walls pushing.
 
-    Every wall of the scene is a :class:`~sintercond.walls.PlaneWall` of
+    Every wall of the scene is a :class:`~sintercond.laws.walls.PlaneWall` of
     ``Mechanics.walls``; a held wall pushes as an insulated one (its
     particles are held by ``Conduction.held``, :func:`_apply_walls`).
     """
@@ -238,7 +242,7 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
 
 
 _BOX_FACES = ((2, "min"), (0, "min"), (0, "max"), (1, "min"), (1, "max"))
-"""The faces of :func:`sintercond.settle.box_walls`, in its order: floor, x = 0, x = L, y = 0, y = L."""
+"""The faces of :func:`sintercond.beds.settle.box_walls`, in its order: floor, x = 0, x = L, y = 0, y = L."""
 
 
 def packing_box(scene):
@@ -251,7 +255,7 @@ def packing_box(scene):
 
 
 def container_walls(scene) -> tuple:
-    """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.settle.box_walls`) on each face
+    """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.beds.settle.box_walls`) on each face
     the scene gives no wall of its own (``physics.container``, true by default): without them the moving bed
     spreads over the floor, or falls."""
     scene = typed_scene(scene)
@@ -309,9 +313,9 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
 
     The time step: ``run.dt`` or, for ``"auto"``, 0.9 of the stable step
     ``min_i C_i / (sum_j K_ij + sum_w K_iw + G_i)`` where ``G_i`` linearises
-    convection and radiation (:func:`sintercond.thermal.source_conductance`);
+    convection and radiation (:func:`sintercond.sim.thermal.source_conductance`);
     with mechanics, of the smaller of that (at the initial contacts) and the
-    mechanical step (:func:`sintercond.mechanics.mechanical_time_step`: Eq. 47
+    mechanical step (:func:`sintercond.sim.mechanics.mechanical_time_step`: Eq. 47
     and the tangential and rotational bounds of MECHANICS.md erratum 8, at
     the approach speed ``physics.impact_velocity`` plus the fastest wall's
     normal speed, at the unsoftened modulus: ``E_min <= E0``, so no state
@@ -393,7 +397,7 @@ class _Built(NamedTuple):
 
 
 def _scene_pairs(scene, centres, radii, log):
-    """The contacts of the packing (:func:`sintercond.network.contact_pairs`), the conduction law's domain checked
+    """The contacts of the packing (:func:`sintercond.contacts.network.contact_pairs`), the conduction law's domain checked
     on them (a :class:`SceneError` naming the contact)."""
     m, c = scene.material, scene.conduction
     log(f"network: contacts and conductances of {len(radii):,} particles")
@@ -484,8 +488,8 @@ def _coupled_model(scene, physics, planes, particles, params, settled, log) -> _
 
 
 def _settled_motion(settled, spec, motion, contacts):
-    """``motion`` continuing a DEM pour's settled state (:class:`sintercond.settle.DemSettled`): its velocities and
-    spins, its pair springs carried to the run's half pair list by ``(i, j)`` (:func:`sintercond.mechanics.remap_history`),
+    """``motion`` continuing a DEM pour's settled state (:class:`sintercond.beds.settle.DemSettled`): its velocities and
+    spins, its pair springs carried to the run's half pair list by ``(i, j)`` (:func:`sintercond.sim.mechanics.remap_history`),
     and the springs against each of its walls on the run's wall in the same plane; a wall the pour did not have
     starts unloaded. The packing then carries the tangential and rolling loads it settled with, as a resumed run
     does, instead of slipping into the run from unloaded springs."""
@@ -574,7 +578,7 @@ def _walls(scene) -> list:
 
 
 def scene_walls(scene, centres, radii) -> list[walls.PlaneWall]:
-    """The scene's walls as :class:`~sintercond.walls.PlaneWall` (insulated ones included).
+    """The scene's walls as :class:`~sintercond.laws.walls.PlaneWall` (insulated ones included).
 
     A wall plane lies at the packing's extreme along its axis, moved
     ``penetration`` mean radii into it; its normal points into the packing.
@@ -621,7 +625,7 @@ FEW_WALL_CONTACTS = 0.5
 def wall_supports(scene, centres, radii, planes=None) -> np.ndarray:
     """``[n, 3]`` bool: the displacement components held in a many-body sintering run: the vertical one of the
     particles resting on a floor (a wall on axis 2, side min); the packing shrinks away from other walls
-    (:func:`sintercond.neck_growth.neck_state`)."""
+    (:func:`sintercond.sim.neck_growth.neck_state`)."""
     supports = np.zeros((len(radii), 3), bool)
     planes = scene_walls(scene, centres, radii) if planes is None else planes
     for wall, plane in zip(_walls(scene), planes):

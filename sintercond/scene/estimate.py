@@ -37,8 +37,8 @@ def estimate_run(scene) -> RunEstimate:
     the linearised convection ``2 pi Nu k_E r`` and radiation
     ``16 pi eps sigma T^3 r^2`` at the highest temperature the scene names.
     """
-    from sintercond.heat_sources import STEFAN_BOLTZMANN
-    from sintercond.packing import bed_particle_count
+    from sintercond.laws.heat_sources import STEFAN_BOLTZMANN
+    from sintercond.beds.packing import bed_particle_count
 
     packing, material, run = scene["packing"], scene["material"], scene["run"]
     if packing["kind"] == "spheres":
@@ -165,11 +165,11 @@ def beam_step(beam) -> float | None:
 
 
 def _mechanical_step_estimate(scene, r, wall_speed=0.0):
-    """:func:`sintercond.forces.contact_time_step` of two of the smallest spheres meeting at
+    """:func:`sintercond.laws.forces.contact_time_step` of two of the smallest spheres meeting at
     ``physics.impact_velocity`` plus ``wall_speed`` (s): Eq. 47 and the symplectic-Euler bounds (erratum 8).
 
     The estimate :func:`estimate_run` counts steps with; the run's own step
-    (:func:`sintercond.mechanics.mechanical_time_step`) takes every listed pair
+    (:func:`sintercond.sim.mechanics.mechanical_time_step`) takes every listed pair
     and wall (a wall contact is stiffer: about 0.8 of this).
     """
     m, physics = scene["mechanics"], scene["physics"]
@@ -189,7 +189,7 @@ def _contact_step(shear):
     dispatched ops)."""
     import jax
 
-    from sintercond import forces
+    from sintercond.laws import forces
 
     def step(r, mass, e, nu, v, xi_con, xi_fric, xi_rol):
         g_star = forces.effective_shear_modulus(e, nu, e, nu, shear)

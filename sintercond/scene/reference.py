@@ -5,8 +5,8 @@ from __future__ import annotations
 
 
 
-from sintercond.conductance import CONDUCTANCE_LAWS
-from sintercond.sintering import KINETIC_LAWS
+from sintercond.laws.conductance import CONDUCTANCE_LAWS
+from sintercond.laws.sintering import KINETIC_LAWS
 from sintercond.scene.schema import (
     MAX_FRAMES, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MAX_MEMORY_BYTES, MAX_OUTPUT_BYTES, MAX_STEPS, _LAW_PARAMS,
     _PACKING, _SCHEMA, _SINTERING_PARAMS, _WALL, _describe,
@@ -30,18 +30,18 @@ def scene_reference() -> str:
         lines.append("")
 
     table("[packing] kind = \"powder_bed\"", _PACKING["powder_bed"],
-          "A random bed at rest under gravity (`sintercond.packing.powder_bed`): rolled, at most 1,000,000 particles "
+          "A random bed at rest under gravity (`sintercond.beds.packing.powder_bed`): rolled, at most 1,000,000 particles "
           "(the default); relaxed or DEM-poured, at most 20,000.")
     table("[packing] kind = \"simple_cubic\"", _PACKING["simple_cubic"],
           "Sphere centres at `radius + spacing * (i, j, k)`.")
     table("[packing] kind = \"poured\"", _PACKING["poured"],
           "Spheres of normally distributed radii poured into an open square box and settled with the DEM "
-          "(`sintercond.packing.pour`: Hertz, Mindlin, rolling resistance, gravity, the box walls) with the contact "
+          "(`sintercond.beds.packing.pour`: Hertz, Mindlin, rolling resistance, gravity, the box walls) with the contact "
           "material of `[mechanics]` and `material.density`; settled means kinetic energy and force balance below "
           "the thresholds the summary reports. Example 5.3's bed (`quintana2020_5_3`).")
     table("[packing] kind = \"file\"", _PACKING["file"],
           "A packing read from a file (a CT scan, a LIGGGHTS or LAMMPS pour, another code): "
-          "`sintercond.packing_files`. The particles are used as they are; `sintercond effective` measures k* "
+          "`sintercond.beds.packing_files`. The particles are used as they are; `sintercond effective` measures k* "
           "between the face layers of its bounding box.")
     table("[packing] kind = \"spheres\"", _PACKING["spheres"],
           f"Spheres listed one by one (at most {MAX_LISTED_SPHERES}), e.g. one sphere on a floor.")
@@ -62,7 +62,7 @@ def scene_reference() -> str:
           "heat through the contact they make, `held` walls hold the particles touching them at the start at "
           "their temperature (those particles still move), `insulated` walls only push. The time step "
           '`run.dt = "auto"` is 0.9 x the smallest of the thermal limit, the mechanical one '
-          "(`sintercond.mechanics.mechanical_time_step`: Eq. 47 and the tangential and rotational bounds of "
+          "(`sintercond.sim.mechanics.mechanical_time_step`: Eq. 47 and the tangential and rotational bounds of "
           "MECHANICS.md erratum 8 at the unsoftened modulus and the approach speed `impact_velocity` plus the "
           "fastest wall's normal speed), the step in which a moving wall advances a tenth of the smallest radius, "
           "and the step in which a beam's spot advances a fifth of its radius; a larger `run.dt` is refused, "
@@ -75,7 +75,7 @@ def scene_reference() -> str:
     table("[softening]", _SCHEMA["softening"],
           "Thermal softening of Young's modulus (Eq. 42, MECHANICS.md erratum 6), with `physics.mechanics = true`.")
     table("[sintering]", _SCHEMA["sintering"],
-          "Necks that grow with each contact's temperature history (`sintercond.neck_growth`): each contact's "
+          "Necks that grow with each contact's temperature history (`sintercond.sim.neck_growth`): each contact's "
           "volume-conserving neck (Rojek et al. 2022, Eqs. 23-27) grows by the kinetic law, and the conductance "
           "law is applied to the grown neck at every step; with `shrinkage = \"many_body\"` the contacts' force "
           "balance also moves the particles (else the packing stays). Touching "

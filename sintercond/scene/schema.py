@@ -9,10 +9,10 @@ import math
 from typing import NamedTuple
 
 
-from sintercond.conductance import CONDUCTANCE_LAWS
-from sintercond.mechanics import PARAMETER_RANGES
-from sintercond.neck import NECK_MODELS
-from sintercond.sintering import KINETIC_LAWS
+from sintercond.laws.conductance import CONDUCTANCE_LAWS
+from sintercond.sim.mechanics import PARAMETER_RANGES
+from sintercond.laws.neck import NECK_MODELS
+from sintercond.laws.sintering import KINETIC_LAWS
 
 
 class SceneError(ValueError):
@@ -40,7 +40,7 @@ def _choice(*options):
 
 
 def _parameter(field):
-    """The scene rule of a :class:`sintercond.mechanics.MechanicalParams` field: the Python API's range."""
+    """The scene rule of a :class:`sintercond.sim.mechanics.MechanicalParams` field: the Python API's range."""
     low, high, unit = PARAMETER_RANGES[field]
     return _within(low, high, unit)
 
@@ -124,7 +124,7 @@ _SCHEMA = {
                                           "c in [1, 100000] J/(kg K)", lambda v: True), False, "K, J/(kg K)",
                                    doc="c(T): each particle's capacity at its own temperature, piecewise linear "
                                        "between the pairs and clamped beyond them; the run steps the enthalpy int c "
-                                       "dT, so heat is conserved to round-off (sintercond.thermal.enthalpy_update)"),
+                                       "dT, so heat is conserved to round-off (sintercond.sim.thermal.enthalpy_update)"),
         "conductivity": Key(float, _within(1e-6, 1e4, "W/(m K)"), True, "W/(m K)",
                             doc="solid conductivity kappa (with conductivity_table: the one number sintercond "
                                 "effective and the run's estimate take)"),
@@ -132,7 +132,7 @@ _SCHEMA = {
                                          "1e5] K, kappa in [1e-06, 10000] W/(m K)", lambda v: True), False,
                                   "K, W/(m K)",
                                   doc="kappa(T): each particle conducts at its own temperature, piecewise linear "
-                                      "between the pairs and clamped beyond them (sintercond.materials.Table); the "
+                                      "between the pairs and clamped beyond them (sintercond.laws.materials.Table); the "
                                       "run's conductances are then evaluated at every step"),
         "melting_point": Key(float, TEMPERATURE, False, "K",
                              doc="melting point (or solidus): the model has no melting, so a run whose hottest "
@@ -213,7 +213,7 @@ _SCHEMA = {
         "container": Key(bool, None, False, default=True,
                          doc="with a powder_bed: its box [0, lateral_size]^2 over the floor z = 0 holds the moving "
                              "particles, an insulated wall on each face the scene gives no [[walls]] of its own "
-                             "(sintercond.settle.box_walls); false: only the scene's walls, and the bed spreads. A "
+                             "(sintercond.beds.settle.box_walls); false: only the scene's walls, and the bed spreads. A "
                              "run warns (PackingBoxWarning) when particles leave the box"),
         "skin": Key(float, _within(0.0, 10.0, low_open=True), False, "largest radii", default=0.1,
                     doc="Verlet skin of the contact list; it is rebuilt once a particle moved half of it"),
@@ -254,7 +254,7 @@ _SCHEMA = {
     },
     "sintering": {
         "law": Key(str, _choice(*sorted(KINETIC_LAWS)), False, default="grain_boundary",
-                   doc="kinetic law of the necks (sintercond.sintering): grain_boundary (Bouvard & McMeeking; "
+                   doc="kinetic law of the necks (sintercond.laws.sintering): grain_boundary (Bouvard & McMeeking; "
                        "Nosewicz et al. 2013), power_law (d(a^n)/dt = K0 exp(-Q/RT) (r*/r_ref)^p) or viscous "
                        "(Frenkel)"),
         "every": Key(int, _within(1, 1e6), False, "steps", default=1,
@@ -267,7 +267,7 @@ _SCHEMA = {
                              "many_body: the overdamped balance of the contacts' sintering forces and dashpots moves "
                              "the particles at each neck update, those resting on a floor (a wall on axis 2, side min) held "
                              "vertically "
-                             "(sintercond.neck_growth)"),
+                             "(sintercond.sim.neck_growth)"),
         "start_necks": Key(str, _choice("point", "overlap"), False,
                            doc="with physics.mechanics (point if not given): point, every contact starts as a point "
                                "contact and its overlap stays elastic (the bed keeps its load); overlap, every "
@@ -275,7 +275,7 @@ _SCHEMA = {
                                "no elastic load. Without the mechanics the necks start from the packing's overlaps"),
         "k_star_axis": Key(int, _choice(0, 1, 2), False,
                            doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
-                               "steady solve on the grown necks at each output (sintercond.steady, the face "
+                               "steady solve on the grown necks at each output (sintercond.sim.steady, the face "
                                "layers of the packing held hot and cold), each particle at its conductivity "
                                "(material.conductivity_table at its temperature, or material.conductivity)"),
     },
@@ -322,7 +322,7 @@ _SCHEMA = {
 SOFT_MODULUS = Key(float, _within(1.0, 1e12, "Pa"), False, "Pa",
                    doc="pour at this Young's modulus first, below mechanics.young_modulus, then carry the settled "
                        "bed to the real one with every contact deformation scaled by (soft_modulus / E)^(2/3) (the "
-                       "same forces; sintercond.settle.stiffen) and settle it there: a metal's real stiffness "
+                       "same forces; sintercond.beds.settle.stiffen) and settle it there: a metal's real stiffness "
                        "(110 GPa) makes a direct pour take millions of steps; 1e7 Pa settles 45-105 um Ti6Al4V; "
                        "absent: pour at the real modulus")
 """A poured packing's soft stage (both pouring kinds take it)."""
@@ -330,9 +330,9 @@ SOFT_MODULUS = Key(float, _within(1.0, 1e12, "Pa"), False, "Pa",
 POUR_START = Key(str, _choice("relaxed", "deposit", "rolled"), False, default="relaxed",
                  doc="deposit: the DEM collapses the loose pile itself (a real pour); relaxed: the pile is first "
                      "collapsed without friction, then the DEM settles it (cheaper, denser); rolled: the spheres "
-                     "are first rolled down the pile to rest on their supports (point contacts, sintercond.rolling), "
+                     "are first rolled down the pile to rest on their supports (point contacts, sintercond.beds.rolling), "
                      "then the DEM settles them")
-"""Where the DEM of a pour starts from (sintercond.packing.pour's ``start``)."""
+"""Where the DEM of a pour starts from (sintercond.beds.packing.pour's ``start``)."""
 
 
 _PACKING = {
@@ -348,11 +348,11 @@ _PACKING = {
         "method": Key(str, _choice(*PACKING_METHODS), False, default="roll",
                       doc="how the bed is made: roll (spheres dropped one by one that roll down the pile to rest "
                           "on three supports, the bed of a poured frictional powder, solid fraction ~0.6; "
-                          "sintercond.rolling; up to 1e6 spheres), relax (a ballistic deposit collapsed without "
+                          "sintercond.beds.rolling; up to 1e6 spheres), relax (a ballistic deposit collapsed without "
                           "friction by damped harmonic repulsion, denser, ~0.66; its dynamics take ~1e5 steps, "
                           "minutes for 1e3 spheres, ~15 min for 1e4; up to 20,000) or dem (poured and settled "
                           "with the contact laws of the [mechanics] section, which it then needs; "
-                          "sintercond.packing.pour; SI units; up to 20,000)"),
+                          "sintercond.beds.packing.pour; SI units; up to 20,000)"),
         "soft_modulus": SOFT_MODULUS,
         "start": POUR_START._replace(default=None, doc="with method = \"dem\" (relaxed if not given): "
                                      + POUR_START.doc),
@@ -443,7 +443,7 @@ _LAW_PARAMS = {
 # the kinetic laws' parameters in a scene: physical ranges
 _SINTERING_PARAMS = {
     "A": Key(float, _within(0.0, 1e6, "m^4 K/s", low_open=True), False, "m^4 K/s",
-             doc="Omega delta_b D_0b gamma_s / k_B of the grain-boundary law (sintercond.sintering.grain_boundary_a)"),
+             doc="Omega delta_b D_0b gamma_s / k_B of the grain-boundary law (sintercond.laws.sintering.grain_boundary_a)"),
     "activation_energy": Key(float, _within(0.0, 1e4, "kJ/mol"), False, "kJ/mol", doc="Q of exp(-Q / (R T))"),
     "dihedral_angle": Key(float, _within(0.0, 180.0, "degrees", low_open=True), False, "degrees",
                           doc="psi; the grain-boundary neck stops at the equilibrium neck r_min sin(psi/2)"),
@@ -527,9 +527,9 @@ def _numbers(name, value, length, rule, integer=False):
 
 
 def file_packing(packing):
-    """``(centres, radii)`` (m) of a ``kind = "file"`` packing (:func:`sintercond.packing_files.read_packing`, read
+    """``(centres, radii)`` (m) of a ``kind = "file"`` packing (:func:`sintercond.beds.packing_files.read_packing`, read
     once per file version); a file that cannot be read raises :class:`SceneError` naming ``packing.path``."""
-    from sintercond.packing_files import PackingFileError, read_packing
+    from sintercond.beds.packing_files import PackingFileError, read_packing
 
     try:
         return read_packing(packing["path"], packing.get("format", "auto"), packing.get("length_unit", "m"))
@@ -539,9 +539,9 @@ def file_packing(packing):
 
 def file_temperatures(packing):
     """``[n]`` start temperatures (K) of a ``kind = "file"`` packing's temperature column
-    (:func:`sintercond.packing_files.read_temperatures`); :class:`SceneError` naming ``initial.from_file`` if the file
+    (:func:`sintercond.beds.packing_files.read_temperatures`); :class:`SceneError` naming ``initial.from_file`` if the file
     has none."""
-    from sintercond.packing_files import PackingFileError, read_temperatures
+    from sintercond.beds.packing_files import PackingFileError, read_temperatures
 
     try:
         return read_temperatures(packing["path"], packing.get("format", "auto"))

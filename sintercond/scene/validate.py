@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sintercond.conductance import CONDUCTANCE_LAWS
-from sintercond.mechanics import validate_mechanical_params
-from sintercond.sintering import KINETIC_LAWS
+from sintercond.laws.conductance import CONDUCTANCE_LAWS
+from sintercond.sim.mechanics import validate_mechanical_params
+from sintercond.laws.sintering import KINETIC_LAWS
 from sintercond.scene.estimate import estimate_run
 from sintercond.scene.schema import (
     DEFAULT_CHECKPOINT_OUTPUTS, Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, POUR_START,
@@ -211,7 +211,7 @@ def check_distinct_centres(packing, centres):
     where, fix = f"particles {i} and {j} of the packing", ""
     kind = None if packing is None else packing["kind"]
     if kind == "file":
-        from sintercond.packing_files import particle_lines
+        from sintercond.beds.packing_files import particle_lines
 
         lines = particle_lines(packing["path"], packing["format"])
         where = f"packing.path: particles {i} and {j} (lines {int(lines[i])} and {int(lines[j])} of the file)"
@@ -228,9 +228,9 @@ RADIUS = _within(*RADIUS_RANGE, "m")
 
 
 def _check_packing(packing, conduction, sintering=False):
-    from sintercond import neck
-    from sintercond.packing import MAX_PARTICLES, MAX_ROLLED_PARTICLES, PackingError, check_bed
-    from sintercond.packing_files import LENGTH_UNITS, particle_lines
+    from sintercond.laws import neck
+    from sintercond.beds.packing import MAX_PARTICLES, MAX_ROLLED_PARTICLES, PackingError, check_bed
+    from sintercond.beds.packing_files import LENGTH_UNITS, particle_lines
 
     if packing["kind"] == "file":
         packing["path"] = str(Path(packing["path"]).resolve())  # scene.json then finds it from anywhere
@@ -260,7 +260,7 @@ def _check_packing(packing, conduction, sintering=False):
         check_distinct_centres(packing, packing["centres"])
         return
     if packing["kind"] == "poured":
-        from sintercond.packing import check_radius_distribution
+        from sintercond.beds.packing import check_radius_distribution
 
         try:
             check_radius_distribution(packing["radius_mean"], packing["radius_std"], packing["truncation"])

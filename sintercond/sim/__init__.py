@@ -6,3 +6,7 @@ host loop (:mod:`~sintercond.sim.rollout`).
 
 :mod:`sintercond.simulate` is the public face of all of it: import from there.
 """
+
+from sintercond._deprecation import lazy_names
+
+__getattr__ = lazy_names(__name__, {})  # sintercond.sim.thermal, ...: the modules, imported on first use

@@ -5,7 +5,7 @@ Three representations (:data:`sintercond.state.Contacts`): a table of ``K_ij`` a
 (``conductance="lifted"``: the law turns necks into conductances from ``Params`` at every rollout, so law
 parameters and per-material conductivities are differentiable) and a half pair list that follows the motion
 (``contacts="dynamic"``: a Dense neighbour list with a skin, rebuilt inside the step, and the pairs ``i < j``
-within ``r_i + r_j + skin``; :class:`sintercond.pair_list.HalfPairs`). The law is lifted once per representation:
+within ``r_i + r_j + skin``; :class:`sintercond.contacts.pair_list.HalfPairs`). The law is lifted once per representation:
 :func:`conductance_lift` onto the table, :func:`pair_conductance` onto the pair list, each evaluating it once per
 pair (the table: with the pair in index order, so both rows get bitwise the same ``K``).
 """
@@ -19,16 +19,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import mechanics, neck_growth
-from sintercond.conductance import CONDUCTANCE_LAWS, conductance_from_neck
-from sintercond.neck import NECK_MODELS
-from sintercond.neighbors import did_buffer_overflow, did_rebuild
-from sintercond.pair_list import (allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs, half_pairs_overflowed,
-                                  padded_half_pairs, pair_exchange)
+from sintercond.sim import mechanics, neck_growth
+from sintercond.laws.conductance import CONDUCTANCE_LAWS, conductance_from_neck
+from sintercond.laws.neck import NECK_MODELS
+from sintercond.contacts.neighbors import did_buffer_overflow, did_rebuild
+from sintercond.contacts.pair_list import (allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs,
+                                           half_pairs_overflowed, padded_half_pairs, pair_exchange)
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, SimState
 from sintercond.state import DynamicContacts, LiftedContacts, ParticleState, TableContacts
-from sintercond.walls import wall_neck_radius
+from sintercond.laws.walls import wall_neck_radius
 
 
 def merged_law_params(physics: Physics, params: Params) -> dict:
@@ -93,19 +93,19 @@ def pair_neck_conductance(physics: Physics, state: SimState, params: Params):
 def pair_conductance(physics: Physics, radii, material, geometry, conductivity, law_params):
     """Conductances ``[c]`` (W/K) of the pairs of a half list from their current overlaps: neck, then the law, once per pair.
 
-    ``geometry``: :func:`sintercond.mechanics.pair_geometry` of the list.
+    ``geometry``: :func:`sintercond.sim.mechanics.pair_geometry` of the list.
     """
     return _law_on_pairs(physics, radii, material, (geometry.i, geometry.j, geometry.valid),
                          _pair_neck(physics, radii, geometry), geometry.overlap, conductivity, law_params)
 
 
 def _pair_neck(physics, radii, g):
-    """Neck radii ``[c]`` (m) of the touching pairs of a :class:`sintercond.mechanics.PairGeometry`."""
+    """Neck radii ``[c]`` (m) of the touching pairs of a :class:`sintercond.sim.mechanics.PairGeometry`."""
     return jnp.where(g.touching, NECK_MODELS[physics.neck](radii[g.i], radii[g.j], g.overlap), 0.0)
 
 
 def sintered_geometry(geometry, neck_overlap):
-    """The :class:`sintercond.mechanics.PairGeometry` the elastic laws see on sintered pairs: each overlap less the
+    """The :class:`sintercond.sim.mechanics.PairGeometry` the elastic laws see on sintered pairs: each overlap less the
     approach ``H(a)`` its neck accounts for (``neck_overlap`` ``[c]``, m), touching only where that stays positive.
 
     Sintering moves the spheres together by the neck's approach without loading them (Rojek et al. 2022); the
@@ -116,10 +116,10 @@ def sintered_geometry(geometry, neck_overlap):
 
 
 def conducting_geometry(geometry, neck_overlap):
-    """The :class:`sintercond.mechanics.PairGeometry` the conductance laws see on sintered pairs: each touching
+    """The :class:`sintercond.sim.mechanics.PairGeometry` the conductance laws see on sintered pairs: each touching
     pair's overlap, or its neck's approach ``H(a)`` (``neck_overlap`` ``[c]``, m) where that is larger (necks grown
     on pairs that have not moved together: independent contacts, point contacts), so the volume-conserving neck of
-    it is ``max(a, neck(delta))``. ``geometry``: with the gap :data:`sintercond.neck_growth.POINT_CONTACT_GAP`."""
+    it is ``max(a, neck(delta))``. ``geometry``: with the gap :data:`sintercond.sim.neck_growth.POINT_CONTACT_GAP`."""
     overlap = jnp.where(geometry.touching, jnp.maximum(geometry.overlap, neck_overlap), 0.0)
     return geometry._replace(touching=geometry.touching & (overlap > 0), overlap=overlap)
 
@@ -155,8 +155,8 @@ def follow_contacts(neighbor_fn, positions, radii, contacts: DynamicContacts, hi
 
     Updates the Dense list (it rebuilds once a particle moved half the
     skin); when it rebuilt, rebuilds the half pair list from it and carries
-    the per-pair ``history`` (a :class:`sintercond.mechanics.MechanicalState`
-    or None) to the new pairs (:func:`sintercond.mechanics.remap_history`),
+    the per-pair ``history`` (a :class:`sintercond.sim.mechanics.MechanicalState`
+    or None) to the new pairs (:func:`sintercond.sim.mechanics.remap_history`),
     all under one ``lax.cond``. ``overflow``: either list ran out of room.
     """
     nbrs = neighbor_fn.update(positions, contacts.neighbor_list)
@@ -172,7 +172,7 @@ def follow_contacts(neighbor_fn, positions, radii, contacts: DynamicContacts, hi
 
 
 def table_contacts(table, wall_conductance=None, wall_temperature=None) -> TableContacts:
-    """Contacts of ``conductance="table"`` from a :class:`sintercond.network.ContactTable` at unit conductivity."""
+    """Contacts of ``conductance="table"`` from a :class:`sintercond.contacts.network.ContactTable` at unit conductivity."""
     return TableContacts(neighbors=table.neighbors, conductance=table.conductance,
                          wall_conductance=None if wall_conductance is None else jnp.asarray(wall_conductance),
                          wall_temperature=None if wall_temperature is None else jnp.asarray(wall_temperature))
@@ -182,13 +182,13 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
                     pairs=None) -> LiftedContacts:
     """Contacts of ``conductance="lifted"``: the neck of every pair and of every conducting wall (host, once).
 
-    Pairs as :func:`sintercond.network.contact_pairs` finds them, necks by
-    ``physics.neck``, laid out with :func:`sintercond.network.ell_table`.
+    Pairs as :func:`sintercond.contacts.network.contact_pairs` finds them, necks by
+    ``physics.neck``, laid out with :func:`sintercond.contacts.network.ell_table`.
     ``walls``: ``(penetration [n], temperature)`` per conducting wall (m, K),
     penetration <= 0 where a particle does not touch it. ``pairs``: the
-    :class:`~sintercond.network.ContactPairs` if the caller already searched.
+    :class:`~sintercond.contacts.network.ContactPairs` if the caller already searched.
     """
-    from sintercond.network import contact_pairs, ell_table
+    from sintercond.contacts.network import contact_pairs, ell_table
 
     radii = np.asarray(radii, np.float64)
     p = contact_pairs(centres, radii, tolerance, periodic_box) if pairs is None else pairs
@@ -223,7 +223,7 @@ def list_region(positions, radii, margin=None):
 def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=None):
     """Contacts of ``contacts="dynamic"`` and their neighbour-list functions: ``(contacts, neighbor_fns)``.
 
-    A Dense list with a Verlet skin from a sorted cell list (:func:`sintercond.neighbors.neighbor_list`):
+    A Dense list with a Verlet skin from a sorted cell list (:func:`sintercond.contacts.neighbors.neighbor_list`):
     inside the step it is rebuilt only once a particle moved ``skin / 2``,
     and the half pair list (``DynamicContacts.pairs``, the pairs the laws run on)
     with it. Both are sized here with ``capacity_multiplier`` spare room.
@@ -231,7 +231,7 @@ def dynamic_contacts(positions, radii, skin, capacity_multiplier=1.25, margin=No
     ``neighbor_fns`` to :func:`simulator`. The list keeps the float dtype of
     ``positions`` (float32 positions give a float32 list; others float64).
     """
-    from sintercond.neighbors import neighbor_list
+    from sintercond.contacts.neighbors import neighbor_list
 
     dtype = jnp.float32 if np.asarray(positions).dtype == np.float32 else jnp.float64
     positions = np.asarray(positions, np.float64)

@@ -1,5 +1,5 @@
 """What is simulated: :class:`Physics`, a static, hashable spec in sub-specs (:class:`Conduction`,
-:class:`Sources`, :class:`sintercond.mechanics.Mechanics`, :class:`sintercond.neck_growth.Sintering`) that mirror
+:class:`Sources`, :class:`sintercond.sim.mechanics.Mechanics`, :class:`sintercond.sim.neck_growth.Sintering`) that mirror
 :class:`sintercond.sim.state.Params`.
 
 The step (:func:`sintercond.sim.step.simulator`) branches on it in Python: a sub-spec that is ``None`` is off and
@@ -14,10 +14,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from sintercond.conductance import CONDUCTANCE_LAWS
-from sintercond.mechanics import Mechanics
-from sintercond.neck import NECK_MODELS
-from sintercond.neck_growth import Sintering
+from sintercond.laws.conductance import CONDUCTANCE_LAWS
+from sintercond.sim.mechanics import Mechanics
+from sintercond.laws.neck import NECK_MODELS
+from sintercond.sim.neck_growth import Sintering
 
 _INTEGRATORS = ("explicit", "implicit")
 _CONDUCTANCE_MODES = ("table", "lifted")
@@ -43,10 +43,10 @@ class Conduction:
         and held particles only).
       implicit_tol: relative residual of the implicit CG solve.
       held: some particles are held at fixed temperatures.
-      conductivity_table: ``Params.conductivity`` is a :class:`sintercond.materials.Table`, the
+      conductivity_table: ``Params.conductivity`` is a :class:`sintercond.laws.materials.Table`, the
         conductivity against temperature (one material): each particle conducts at its own temperature,
         and the conductances are evaluated at every step. Needs ``conductance="lifted"``.
-      specific_heat_table: ``Params.specific_heat`` is a :class:`sintercond.materials.Table`, the specific heat
+      specific_heat_table: ``Params.specific_heat`` is a :class:`sintercond.laws.materials.Table`, the specific heat
         against temperature (one material): each particle's capacity ``C_i = m_i c(T_i)`` at its temperature at
         the start of every step (explicit Euler: ``sum_i C_i(T^n) (T_i^(n+1) - T_i^n)`` equals the heat in, so
         the enthalpy ``sum_i m_i int c dT`` is kept to first order in the step). Needs the explicit integrator.
@@ -144,20 +144,20 @@ class Physics:
       motion: prescribed positions ``fn(t) -> [n, 3]`` (m) for dynamic
         contacts, or None (positions stay).
       sources: :class:`Sources`: beam, convection, radiation, pulse, a custom source.
-      mechanics: :class:`sintercond.mechanics.Mechanics`, the coupled
+      mechanics: :class:`sintercond.sim.mechanics.Mechanics`, the coupled
         thermo-mechanical step (Quintana-Ruiz & Campello 2020, Eqs. 43-46;
-        :mod:`sintercond.mechanics`): particles move under contact forces,
+        :mod:`sintercond.sim.mechanics`): particles move under contact forces,
         gravity and walls, and heat flows through the contacts the motion
         opens, closes and grows. Needs ``contacts="dynamic"``,
         ``conduction.conductance="lifted"``, the explicit integrator, no
         prescribed ``motion``, ``conduction.conducting_walls=0`` (walls are
         ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
-      sintering: :class:`sintercond.neck_growth.Sintering`, necks that grow with each contact's temperature
-        history (:mod:`sintercond.neck_growth`: contacts on their own on a packing that does not move, or
+      sintering: :class:`sintercond.sim.neck_growth.Sintering`, necks that grow with each contact's temperature
+        history (:mod:`sintercond.sim.neck_growth`: contacts on their own on a packing that does not move, or
         many-body shrinkage that moves the particles). Needs ``conduction.conductance="lifted"``, the explicit
         integrator, the ``"volume_conserving"`` neck model, ``Params.sintering`` and ``SimState.sintering``;
         without mechanics ``contacts="static"`` (the necks on the table), with mechanics the necks live on the
-        dynamic half pair list (``MechanicalState.neck``, :func:`sintercond.neck_growth.with_pair_necks`) and
+        dynamic half pair list (``MechanicalState.neck``, :func:`sintercond.sim.neck_growth.with_pair_necks`) and
         the elastic laws act on each overlap less its neck's approach. None: the necks stay.
     """
 
@@ -175,12 +175,12 @@ class Physics:
         if self.contacts not in _CONTACT_MODES:
             raise ValueError(f"Physics.contacts must be one of {list(_CONTACT_MODES)}; got {self.contacts!r}")
         if self.mechanics is not None and not isinstance(self.mechanics, Mechanics):
-            raise ValueError(f"Physics.mechanics must be a sintercond.mechanics.Mechanics or None; got "
+            raise ValueError(f"Physics.mechanics must be a sintercond.sim.mechanics.Mechanics or None; got "
                              f"{self.mechanics!r}")
         c = self.conduction
         if self.sintering is not None:
             if not isinstance(self.sintering, Sintering):
-                raise ValueError(f"Physics.sintering must be a sintercond.neck_growth.Sintering or None; got "
+                raise ValueError(f"Physics.sintering must be a sintercond.sim.neck_growth.Sintering or None; got "
                                  f"{self.sintering!r}")
             needs = {"contacts": ("dynamic" if self.mechanics is not None else "static", self.contacts),
                      "conduction.conductance": ("lifted", c.conductance),
@@ -217,11 +217,11 @@ class Physics:
         """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
 
         ``mechanics=True`` turns the coupled step on, with ``walls`` and the
-        other :class:`sintercond.mechanics.Mechanics` fields in ``mechanical``
+        other :class:`sintercond.sim.mechanics.Mechanics` fields in ``mechanical``
         (``gravity``, ``friction``, ``rolling``, ``wall_friction``, ...),
-        normalised by :meth:`sintercond.mechanics.Mechanics.create`; without it
+        normalised by :meth:`sintercond.sim.mechanics.Mechanics.create`; without it
         those keywords are refused (nothing would move). ``sintering``: a
-        :class:`sintercond.neck_growth.Sintering` or None.
+        :class:`sintercond.sim.neck_growth.Sintering` or None.
         """
         if not isinstance(mechanics, (bool, np.bool_)):
             raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")

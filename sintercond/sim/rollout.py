@@ -14,7 +14,7 @@ run``, the settling of a bed, the settle before a fit's experiment), and after e
    computed on it inside the same compiled chunk, to ``on_chunk``, which may
    stop the run (a bed that has settled, a kill for a resume test).
 
-Every chunk is compiled with :func:`sintercond.mechanics.compiler_options`
+Every chunk is compiled with :func:`sintercond.sim.mechanics.compiler_options`
 of the spec, and the same compiled chunk runs on the same inputs whatever the
 history, so a run resumed from a checkpoint is bitwise identical to an
 uninterrupted one.
@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from sintercond import mechanics, neck_growth
+from sintercond.sim import mechanics, neck_growth
 from sintercond.sim.state import Params, SimState, Simulator
 from sintercond.sim.validation import check_mechanical_step, validate_inputs
 
@@ -286,7 +286,7 @@ def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk
 
 def finite_temperatures(state: SimState) -> None:
     """:func:`advance`'s default check: every temperature finite, and a sintering state still stable
-    (:func:`sintercond.neck_growth.check_stable`, first: the cause of the other)."""
+    (:func:`sintercond.sim.neck_growth.check_stable`, first: the cause of the other)."""
     neck_growth.check_stable(state)
     if not bool(jnp.all(jnp.isfinite(state.particles.temperature))):
         raise FloatingPointError(f"non-finite temperature at step {int(state.step)}; reduce the time step")

@@ -7,7 +7,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from sintercond import thermal
+from sintercond.sim import thermal
 from sintercond.sim.state import Params, SimState, Simulator
 from sintercond.sim.step import simulator
 from sintercond.sim.terms.conduction import total_conductance
@@ -19,7 +19,7 @@ def thermal_time_step(sim: Simulator, state: SimState, params: Params, source_co
     The contacts at the state's geometry (static, or the dynamic half pair list at its positions with the
     conducting walls it touches: :func:`sintercond.sim.terms.conduction.total_conductance`);
     ``source_conductance`` ``G_i`` (W/K, optional) linearises sources that depend on the temperature
-    (:func:`sintercond.thermal.source_conductance`). inf for a particle with
+    (:func:`sintercond.sim.thermal.source_conductance`). inf for a particle with
     no conductance. At or below it every new temperature is a convex
     combination of old ones and the sources' reference temperatures.
     """

@@ -18,11 +18,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond.mechanics import MechanicalParams, MechanicalState
-from sintercond.neck_growth import NeckState
+from sintercond.sim.mechanics import MechanicalParams, MechanicalState
+from sintercond.sim.neck_growth import NeckState
 from sintercond.sim.physics import Physics
 from sintercond.state import Contacts, ParticleState, pytree_dataclass
-from sintercond.tortuosity import preheating_temperature
+from sintercond.laws.tortuosity import preheating_temperature
 
 
 @pytree_dataclass
@@ -92,7 +92,7 @@ class HeldRampParams:
 
 def held_ramp_temperature(ramp: HeldRampParams, start, t):
     """The held temperatures ``[n]`` (K) at time ``t`` (s) of a :class:`HeldRampParams` from ``start`` ``[n]``:
-    the level of :func:`sintercond.tortuosity.preheating_temperature` (its reading at the step's end)."""
+    the level of :func:`sintercond.laws.tortuosity.preheating_temperature` (its reading at the step's end)."""
     level = preheating_temperature(t, 0.0, ramp.duration, 0.0, 1.0, ramp.steps, at_step_end=True)
     return start + (ramp.end_temperature - start) * level
 
@@ -108,10 +108,10 @@ class Params:
         merged over the law's defaults; ``{}`` for the defaults.
       beam, convection, radiation, pulse: source parameters, or None where
         the physics has no such source.
-      mechanics: :class:`sintercond.mechanics.MechanicalParams` (moduli,
+      mechanics: :class:`sintercond.sim.mechanics.MechanicalParams` (moduli,
         damping, friction, softening) with ``Physics.mechanics``, else None.
       sintering: the kinetic law's parameters in use (e.g. ``{"A": 1e-17, "activation_energy": 40.0}``),
-        merged over the law's defaults (:data:`sintercond.sintering.KINETIC_LAWS`), with
+        merged over the law's defaults (:data:`sintercond.laws.sintering.KINETIC_LAWS`), with
         ``Physics.sintering``; else None.
       held_ramp: :class:`HeldRampParams` with ``Conduction.held_ramp``, else None.
     """
@@ -141,10 +141,10 @@ class SimState:
       overflow: bool scalar, set when a dynamic neighbour list overflowed
         since the last host check (the results after it are invalid).
       mechanics: velocities, spins and contact springs
-        (:class:`sintercond.mechanics.MechanicalState`) with
+        (:class:`sintercond.sim.mechanics.MechanicalState`) with
         ``Physics.mechanics``, else None (nothing traced).
       sintering: the start approaches, the growth interval's start temperatures and the stability flag
-        (:class:`sintercond.neck_growth.NeckState`) with ``Physics.sintering``, else None; the necks
+        (:class:`sintercond.sim.neck_growth.NeckState`) with ``Physics.sintering``, else None; the necks
         themselves are ``contacts.neck``.
     """
 
@@ -212,10 +212,10 @@ def params_in_precision(params: Params, dtype) -> Params:
 def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechanics=None, sintering=None) -> SimState:
     """A :class:`SimState` at ``step`` (default 0) with time step ``dt`` (s).
 
-    ``mechanics``: a :class:`sintercond.mechanics.MechanicalState` for
-    ``Physics.mechanics`` (:func:`sintercond.mechanics.mechanical_state`).
-    ``sintering``: a :class:`sintercond.neck_growth.NeckState` for ``Physics.sintering``
-    (:func:`sintercond.neck_growth.neck_state`).
+    ``mechanics``: a :class:`sintercond.sim.mechanics.MechanicalState` for
+    ``Physics.mechanics`` (:func:`sintercond.sim.mechanics.mechanical_state`).
+    ``sintering``: a :class:`sintercond.sim.neck_growth.NeckState` for ``Physics.sintering``
+    (:func:`sintercond.sim.neck_growth.neck_state`).
     """
     dtype = particles.temperature.dtype
 

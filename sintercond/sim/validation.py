@@ -8,7 +8,8 @@ import warnings
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import materials, mechanics, neck_growth
+from sintercond.laws import materials
+from sintercond.sim import mechanics, neck_growth
 from sintercond._validation import all_concrete, fail_where, require_positive
 from sintercond.sim.state import Params, SimState, Simulator
 from sintercond.sim.terms import sources
@@ -20,12 +21,12 @@ MAX_INITIAL_OVERLAP = 0.5
 
 
 def _checked_property(name, value, tabulated, symbol, unit, bound, needs):
-    """``[n_materials]`` values of ``Params.<name>``, a :class:`sintercond.materials.Table` where the spec's
+    """``[n_materials]`` values of ``Params.<name>``, a :class:`sintercond.laws.materials.Table` where the spec's
     ``<name>_table`` says so (one material: its first node's value); raises ``ValueError`` naming the field."""
     field = f"Params.{name}"
     if tabulated:
         if not isinstance(value, materials.Table):
-            raise ValueError(f"Conduction.{name}_table needs {field} as a sintercond.materials.Table "
+            raise ValueError(f"Conduction.{name}_table needs {field} as a sintercond.laws.materials.Table "
                              f"(materials.tabulated(T, {symbol})); got {value!r}")
         if value.extrapolate:
             raise ValueError(f"{field} (a table) must clamp at its ends (extrapolate=False): the stable step is "
@@ -50,7 +51,7 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     time step finite and > 0; conductivities and specific heats finite and > 0,
     one per material, every particle's material among them; finite positions
     and temperatures > 0 K; with mechanics the contact parameters
-    (:func:`sintercond.mechanics.validate_mechanical_params`, the scene's rules),
+    (:func:`sintercond.sim.mechanics.validate_mechanical_params`, the scene's rules),
     finite velocities and spins, and no two listed spheres at the same centre
     or overlapping by more than :data:`MAX_INITIAL_OVERLAP` of the smaller
     radius. Traced leaves are skipped (under ``jit`` they are the caller's).
@@ -100,7 +101,7 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     if sim.physics.mechanics is None:
         return
     if params.mechanics is None:
-        raise ValueError("Physics.mechanics needs Params.mechanics (sintercond.mechanics.MechanicalParams)")
+        raise ValueError("Physics.mechanics needs Params.mechanics (sintercond.sim.mechanics.MechanicalParams)")
     mechanics.validate_mechanical_params(params.mechanics, len(kappa))
     m = state.mechanics
     for name in ("velocity", "spin"):
@@ -160,13 +161,13 @@ limit then."""
 def check_mechanical_step(sim: Simulator, state: SimState, params: Params) -> None:
     """Raise ``ValueError`` when a mechanical state's time step exceeds the stability limit of its stiffest contact
     as it stands (Quintana-Ruiz & Campello 2020, Eq. 47, and the symplectic-Euler bounds of MECHANICS.md's
-    erratum 8, :func:`sintercond.mechanics.mechanical_time_step` with ``fraction = safety = 1``): at the deepest
+    erratum 8, :func:`sintercond.sim.mechanics.mechanical_time_step` with ``fraction = safety = 1``): at the deepest
     overlap of its listed pairs and walls and the fastest relative speed of its listed pairs (or of a particle
     against a wall). Beyond it the step adds energy at every contact and the packing flies apart.
 
     A bound on the state, not on the run: contacts that a fall or an impact will press deeper are the caller's to
     size for (``mechanical_time_step`` with the approach speed expected) or the run's guards'
-    (:func:`sintercond.guards.motion_guard`). Traced states are not checked.
+    (:func:`sintercond.sim.guards.motion_guard`). Traced states are not checked.
     """
     spec = sim.physics.mechanics
     if spec is None or not all_concrete(state, params):
@@ -192,4 +193,4 @@ def check_mechanical_step(sim: Simulator, state: SimState, params: Params) -> No
         raise ValueError(f"SimState.dt = {dt:.6g} s exceeds the stability limit {limit:.6g} s of the state's stiffest "
                          f"contact (overlap {delta:.3g} m, relative speed {v_rel:.3g} m/s; Eq. 47 and the "
                          f"symplectic-Euler bounds at E0): the packing would fly apart. Use dt <= {limit:.6g} s, or "
-                         "size it with sintercond.mechanics.mechanical_time_step at the approach speed you expect")
+                         "size it with sintercond.sim.mechanics.mechanical_time_step at the approach speed you expect")

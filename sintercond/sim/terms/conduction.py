@@ -1,9 +1,9 @@
 """The conduction term: heat through the contacts of a thermal step and the temperature update.
 
 The pipe network of Rojek et al. (2022), Eqs. 1-4: capacities ``C_i = m_i c`` (Eq. 1), heat ``K_ij (T_j - T_i)``
-through each contact (Eq. 3), explicit Euler (:func:`sintercond.thermal.explicit_update`), the enthalpy step of a
-specific-heat table (:func:`sintercond.thermal.enthalpy_update`) or backward Euler
-(:func:`sintercond.thermal.backward_euler_solve`). Its parameters are ``Params.conductivity``,
+through each contact (Eq. 3), explicit Euler (:func:`sintercond.sim.thermal.explicit_update`), the enthalpy step of a
+specific-heat table (:func:`sintercond.sim.thermal.enthalpy_update`) or backward Euler
+(:func:`sintercond.sim.thermal.backward_euler_solve`). Its parameters are ``Params.conductivity``,
 ``Params.specific_heat``, ``Params.law`` and ``Params.held_ramp``; held particles end every step at their fixed
 temperature or on their ramp (Rizza & Galati 2024, Eq. 6).
 
@@ -18,9 +18,9 @@ import functools
 
 import jax.numpy as jnp
 
-from sintercond import mechanics, thermal
-from sintercond.network import network_laplacian
-from sintercond.pair_list import pair_sum
+from sintercond.sim import mechanics, thermal
+from sintercond.contacts.network import network_laplacian
+from sintercond.contacts.pair_list import pair_sum
 from sintercond.sim.contacts import (conductivity_lookup, follow_contacts, merged_law_params, neck_conductance,
                                      pair_conductance, pair_heat_power, sintered_pair_conductance)
 from sintercond.sim.physics import Physics
@@ -119,7 +119,7 @@ def heat_power(physics: Physics, neighbor_fn, state: SimState, prep: Prepared, c
 
 def total_conductance(physics: Physics, state: SimState, prep: Prepared):
     """``[n]`` each particle's ``sum_j K_ij + sum_w K_iw`` (W/K) at the state's contacts, necks and temperatures:
-    the denominator of the explicit limit ``C_i / sum K`` (:func:`sintercond.thermal.explicit_stability_limit`).
+    the denominator of the explicit limit ``C_i / sum K`` (:func:`sintercond.sim.thermal.explicit_stability_limit`).
 
     Static contacts: the table's rows (the rollout's conductances, or the necks' now) and the conducting walls.
     Dynamic contacts: the half pair list at the state's positions (with the mechanics' sintered necks, the
@@ -167,7 +167,7 @@ def held_temperature(physics: Physics, state: SimState, prep: Prepared):
 
 def explicit_heat(physics: Physics, state: SimState, prep: Prepared, power):
     """The temperatures after an explicit step with heat power ``power`` (W) in: ``T + dt P / C``, or with a
-    specific-heat table the enthalpy's step (:func:`sintercond.thermal.enthalpy_update`)."""
+    specific-heat table the enthalpy's step (:func:`sintercond.sim.thermal.enthalpy_update`)."""
     particles = state.particles
     fixed = particles.fixed if physics.conduction.held else None
     if physics.conduction.specific_heat_table:

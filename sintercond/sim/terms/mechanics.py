@@ -1,10 +1,10 @@
 """The contact-mechanics term: the coupled thermo-mechanical step of Quintana-Ruiz & Campello (2020).
 
 Forces and heat powers at ``t`` from one state, then symplectic Euler (their Eqs. 43-46): Hertz with damping,
-Mindlin friction and rolling resistance on the half pair list (:func:`sintercond.mechanics.pair_loads`, Eqs. 2-20),
-gravity and walls (:func:`sintercond.mechanics.body_loads`), heat through the contacts the motion opens and grows
+Mindlin friction and rolling resistance on the half pair list (:func:`sintercond.sim.mechanics.pair_loads`, Eqs. 2-20),
+gravity and walls (:func:`sintercond.sim.mechanics.body_loads`), heat through the contacts the motion opens and grows
 (Eqs. 32-36) and through conducting walls. Its parameters are ``Params.mechanics``
-(:class:`sintercond.mechanics.MechanicalParams`); with sintering, the elastic laws act on each overlap less its
+(:class:`sintercond.sim.mechanics.MechanicalParams`); with sintering, the elastic laws act on each overlap less its
 neck's approach (:func:`sintercond.sim.contacts.sintered_geometry`) and heat flows through the larger of the two
 (:func:`sintercond.sim.contacts.conducting_geometry`).
 """
@@ -15,8 +15,8 @@ import dataclasses
 
 import jax.numpy as jnp
 
-from sintercond import mechanics, neck_growth
-from sintercond.pair_list import map_pair_blocks, pair_exchange, pair_sum
+from sintercond.sim import mechanics, neck_growth
+from sintercond.contacts.pair_list import map_pair_blocks, pair_exchange, pair_sum
 from sintercond.sim.contacts import (conducting_geometry, conductivity_lookup, follow_contacts, merged_law_params,
                                      pair_conductance, pair_heat_flow, sintered_geometry)
 from sintercond.sim.physics import Physics
@@ -36,7 +36,7 @@ def elastic_constants(physics: Physics, mp, particles: ParticleState):
 def contact_forces(physics: Physics, state: SimState, params: Params):
     """``(geometry, force [c, 3])`` of a mechanical state's listed pairs: the force on ``i`` from ``j`` (N) that the
     step's contact laws give at this state (Hertz with damping, Mindlin friction and its spring, Quintana-Ruiz &
-    Campello 2020 Eqs. 2-13), ``geometry`` the :class:`sintercond.mechanics.PairGeometry` of the pairs."""
+    Campello 2020 Eqs. 2-13), ``geometry`` the :class:`sintercond.sim.mechanics.PairGeometry` of the pairs."""
     if physics.mechanics is None:
         raise ValueError("contact_forces needs Physics.mechanics")
     particles, motion, mp = state.particles, state.mechanics, params.mechanics

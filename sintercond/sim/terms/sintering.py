@@ -1,7 +1,7 @@
-"""The sintering term: necks that grow with each contact's temperature history (:mod:`sintercond.neck_growth`).
+"""The sintering term: necks that grow with each contact's temperature history (:mod:`sintercond.sim.neck_growth`).
 
 At the end of every growth interval (``Sintering.every`` steps) each neck grows over the interval at its pair's
-temperatures (Rojek et al. 2022's volume-conserving geometry; the kinetic laws of :mod:`sintercond.sintering`),
+temperatures (Rojek et al. 2022's volume-conserving geometry; the kinetic laws of :mod:`sintercond.laws.sintering`),
 independently or by the many-body balance that moves the particles, and the explicit step is checked against the
 stability limit on the grown necks (a flag in ``NeckState.unstable``, refused on the host). Without mechanics the
 necks live on the contacts' pairs: a static packing's (``LiftedContacts.neck``, a pair list that never rebuilds), or
@@ -16,7 +16,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from sintercond import mechanics, neck_growth, thermal
+from sintercond.sim import mechanics, neck_growth, thermal
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Prepared, SimState
 from sintercond.sim.terms import conduction
@@ -30,7 +30,7 @@ def _at_interval_end(spec, state: SimState, grow, *carried):
 
 
 def _next_interval(physics: Physics, state: SimState, prep: Prepared, carried, particles, total):
-    """``carried`` (a :class:`sintercond.neck_growth.NeckState`) starting the next interval, flagged unstable when the
+    """``carried`` (a :class:`sintercond.sim.neck_growth.NeckState`) starting the next interval, flagged unstable when the
     step exceeds the explicit limit ``C_i / sum K`` on the grown conductances ``total`` ``[n]`` (W/K)."""
     if physics.conduction.held:  # held particles are reset every step: their rows do not count
         total = jnp.where(particles.fixed, 0.0, total)
@@ -42,7 +42,7 @@ def _next_interval(physics: Physics, state: SimState, prep: Prepared, carried, p
 def _contact_set(physics: Physics, state: SimState, particles):
     """``(pairs, neck, active, normal, geometry)`` of the contacts whose necks grow: a static packing's pairs (all
     active, normals from the positions), or with the mechanics the half pair list (the pairs whose spheres touch,
-    :data:`sintercond.neck_growth.POINT_CONTACT_GAP`)."""
+    :data:`sintercond.sim.neck_growth.POINT_CONTACT_GAP`)."""
     if physics.mechanics is None:
         return state.contacts.pairs, state.contacts.neck, True, None, None
     geometry = mechanics.pair_geometry(particles.positions, particles.radii, state.contacts.pairs.pairs,
@@ -52,7 +52,7 @@ def _contact_set(physics: Physics, state: SimState, particles):
 
 
 def grow(physics: Physics, state: SimState, prep: Prepared) -> SimState:
-    """The necks grown at the end of a growth interval (:func:`sintercond.neck_growth.grow_necks`, the many-body
+    """The necks grown at the end of a growth interval (:func:`sintercond.sim.neck_growth.grow_necks`, the many-body
     balance moving the particles), on the contacts' pairs: the static packing's, or with the mechanics the half
     pair list's. The next interval is flagged unstable when the grown network exceeds the explicit limit."""
     spec = physics.sintering

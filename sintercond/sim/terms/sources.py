@@ -1,13 +1,13 @@
 """The heat-sources term: beam (nozzle or laser), convection, radiation, a prescribed pulse and a user source.
 
-The laws are :func:`sintercond.thermal.source_power` (Quintana-Ruiz & Campello 2020, Eqs. 29-31 for the beam,
+The laws are :func:`sintercond.sim.thermal.source_power` (Quintana-Ruiz & Campello 2020, Eqs. 29-31 for the beam,
 37-39 convection, 41 radiation); this term says which are on (``Physics.sources``) and checks that each has its
 parameters (``Params.beam``, ``.convection``, ``.radiation``, ``.pulse``).
 """
 
 from __future__ import annotations
 
-from sintercond import thermal
+from sintercond.sim import thermal
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import BeamParams, ConvectionParams, Params, PulseParams, RadiationParams, SimState
 
@@ -28,5 +28,5 @@ def power(physics: Physics, state: SimState, params: Params):
 
 
 def power_parts(physics: Physics, state: SimState, params: Params):
-    """:func:`power` as ``(terms, pulse)``, the pulse apart (:func:`sintercond.thermal.source_power_parts`)."""
+    """:func:`power` as ``(terms, pulse)``, the pulse apart (:func:`sintercond.sim.thermal.source_power_parts`)."""
     return thermal.source_power_parts(physics.sources, state, params)

@@ -1,6 +1,6 @@
 """The conducting-walls term: heat between the particles and plane walls at a temperature.
 
-A wall is a neighbour of infinite radius (:mod:`sintercond.walls`): the conductance law on the wall's neck,
+A wall is a neighbour of infinite radius (:mod:`sintercond.laws.walls`): the conductance law on the wall's neck,
 ``r_j -> inf``, both halves at the particle's conductivity. A thermal step's walls are fixed
 (``Conduction.conducting_walls``: their penetrations, or conductances at unit conductivity, are in the contacts);
 a mechanical step's walls are ``Mechanics.walls`` in mode ``"conducting"``, at the penetration of the step.
@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from sintercond.sim.contacts import conductivity_lookup, merged_law_params
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Prepared, SimState
-from sintercond.walls import wall_conductance_from_neck, wall_neck_radius
+from sintercond.laws.walls import wall_conductance_from_neck, wall_neck_radius
 
 
 def wall_lift(physics: Physics, particles, contacts, params, law_params):
@@ -45,7 +45,7 @@ def conducting_mechanical_walls(physics: Physics):
 
 def mechanical_wall_conductance(physics: Physics, radii, penetration, conductivity, law_params):
     """``[n]`` conductances (W/K) of the particles to a conducting mechanical wall at their ``penetration`` (m):
-    the law on the wall's neck (:mod:`sintercond.walls`, ``r_j -> inf``), both halves at the particle's
+    the law on the wall's neck (:mod:`sintercond.laws.walls`, ``r_j -> inf``), both halves at the particle's
     ``conductivity``."""
     return wall_conductance_from_neck(physics.conduction.law, wall_neck_radius(physics.neck, radii, penetration),
                                       radii, penetration, conductivity, conductivity, law_params)

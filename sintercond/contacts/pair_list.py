@@ -1,7 +1,7 @@
 """The half pair list: each contact candidate once, the pairs the contact laws run on, and sums over it.
 
 :func:`half_pairs` keeps each pair ``i < j`` of a Dense neighbour table
-(:func:`sintercond.neighbors.neighbor_list`) within ``r_i + r_j + skin``
+(:func:`sintercond.contacts.neighbors.neighbor_list`) within ``r_i + r_j + skin``
 (size-aware), sorted by ``(i, j)``, rebuilt whenever the table is rebuilt,
 in a fixed-capacity buffer with its own overflow flag
 (:func:`half_pairs_overflowed`). Per-pair values (the springs) follow their
@@ -20,7 +20,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from sintercond.neighbors import CANDIDATE_MARGIN
+from sintercond.contacts.neighbors import CANDIDATE_MARGIN
 from sintercond.state import pytree_dataclass
 
 

@@ -3,7 +3,7 @@
 Lumped capacitances ``C_i = m_i c`` exchange heat through the network,
 ``C_i dT_i/dt = sum_j K_ij (T_j - T_i)`` (Rojek et al. 2022, Eqs. 1-4);
 particles may be held at fixed temperatures. For a static packing the
-conductances are computed once (:mod:`sintercond.network`) and each step is
+conductances are computed once (:mod:`sintercond.contacts.network`) and each step is
 one gather-and-sum over the padded contact table.
 
 * :func:`table_time_step`: ``min_i C_i / sum_j K_ij``. At or below it
@@ -15,7 +15,7 @@ one gather-and-sum over the padded contact table.
 
 Time stepping a whole table network is :func:`sintercond.simulate.simulate_table`
 (a convenience over the simulator); steady states and ``k*`` are in
-:mod:`sintercond.steady`.
+:mod:`sintercond.sim.steady`.
 """
 
 from __future__ import annotations
@@ -27,13 +27,13 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.sparse.linalg import cg
 
-from sintercond import heat_sources, materials
+from sintercond.laws import heat_sources, materials
 from sintercond._validation import shown
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
 from sintercond._symmetric import linear_call
-from sintercond.network import (ContactTable, gather_laplacian, network_laplacian,
-                                total_conductance)
+from sintercond.contacts.network import (ContactTable, gather_laplacian, network_laplacian,
+                                         total_conductance)
 
 
 def table_time_step(capacity, table: ContactTable):
@@ -79,7 +79,7 @@ def explicit_update(temperature, power, capacity, dt, fixed_mask=None, fixed_tem
     ``capacity`` ``C_i = m_i c`` (J/K), Rojek et al. (2022) Eq. 1.
 
     ``network=(scale, conductance, neighbors)`` adds the conduction of a
-    padded table, ``P - scale L T`` (:func:`sintercond.network.network_laplacian`;
+    padded table, ``P - scale L T`` (:func:`sintercond.contacts.network.network_laplacian`;
     ``scale`` a scalar or ``[n]``), inside the update: the same numbers as
     passing that power, with a derivative written for reverse mode
     (:func:`_conduction_update`). ``pulse=(field, switch)`` adds
@@ -116,9 +116,9 @@ def _held(new, fixed_mask, fixed_temperature):
 def enthalpy_update(temperature, power, mass, dt, specific_heat, fixed_mask=None, fixed_temperature=None):
     """The explicit Euler step of the enthalpy with a specific heat against temperature: ``h(T') = h(T) + dt P / m``.
 
-    ``h(T) = int c dT`` of the clamped table ``specific_heat`` (a :class:`sintercond.materials.Table`,
-    :func:`sintercond.materials.integrate_table`), inverted in closed form on its quadratic pieces
-    (:func:`sintercond.materials.invert_table_integral`): each particle's enthalpy moves by exactly the heat
+    ``h(T) = int c dT`` of the clamped table ``specific_heat`` (a :class:`sintercond.laws.materials.Table`,
+    :func:`sintercond.laws.materials.integrate_table`), inverted in closed form on its quadratic pieces
+    (:func:`sintercond.laws.materials.invert_table_integral`): each particle's enthalpy moves by exactly the heat
     in, so a network's exchange (``sum_i P_i = 0``) keeps ``sum_i m_i h(T_i)`` to round-off, and the step is
     Rojek et al. (2022) Eq. 2's ``C dT/dt = P`` with ``C = m c(T)`` at first order. ``power`` ``[n]`` (W),
     ``mass`` ``[n]`` (kg); held particles reset to their values.
@@ -368,11 +368,11 @@ def source_conductance(sources, radii, params, temperature_bound):
 # Old names, kept for one release: functions that moved up a layer (they drive the simulator, which imports this
 # module; resolved by name so that this module imports nothing above it, tests/test_layers.py) and the table's time
 # step, renamed so that each time-step function has its own name (issue 24).
-__getattr__ = old_names("sintercond.thermal", {
+__getattr__ = old_names("sintercond.sim.thermal", {
     "simulate": ("sintercond.simulate", "simulate_table"),
-    "steady_state": ("sintercond.steady", "steady_state"),
-    "steady_state_conductivity": ("sintercond.steady", "steady_state_conductivity"),
-    "steady_state_network_conductivity": ("sintercond.steady", "steady_state_network_conductivity"),
-    "stable_time_step": ("sintercond.thermal", "table_time_step"),
-    "check_time_step": ("sintercond.thermal", "check_table_time_step"),
+    "steady_state": ("sintercond.sim.steady", "steady_state"),
+    "steady_state_conductivity": ("sintercond.sim.steady", "steady_state_conductivity"),
+    "steady_state_network_conductivity": ("sintercond.sim.steady", "steady_state_network_conductivity"),
+    "stable_time_step": ("sintercond.sim.thermal", "table_time_step"),
+    "check_time_step": ("sintercond.sim.thermal", "check_table_time_step"),
 })

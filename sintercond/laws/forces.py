@@ -114,7 +114,7 @@ def shear_modulus(E, nu):
     """Shear modulus ``G = E / (2 (1 + nu))`` of an isotropic solid (Sect. 2, after Eq. 9).
 
     Args:
-      E: Young's modulus (Pa); softened by :func:`sintercond.materials.softened_modulus`
+      E: Young's modulus (Pa); softened by :func:`sintercond.laws.materials.softened_modulus`
         it softens ``G`` too (erratum 6).
       nu: Poisson ratio.
 
@@ -670,6 +670,6 @@ def contact_time_step(r_star, m_star, e_star, g_star, v_rel, *, delta=None, xi_c
 
 
 # Old names, kept for one release: each time-step function has its own name (issue 24).
-__getattr__ = old_names("sintercond.forces", {
-    "stable_time_step": ("sintercond.forces", "contact_time_step"),
+__getattr__ = old_names("sintercond.laws.forces", {
+    "stable_time_step": ("sintercond.laws.forces", "contact_time_step"),
 })

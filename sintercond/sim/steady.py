@@ -6,10 +6,10 @@
 * :func:`steady_state_conductivity`: ``k*`` of a packing between two held
   faces, conductances lifted from the overlaps through a law.
 * :func:`steady_state_network_conductivity`: the same with ``K_ij`` given per
-  pair (necks grown by :mod:`sintercond.sintering`, or any other law).
+  pair (necks grown by :mod:`sintercond.laws.sintering`, or any other law).
 
 These sit above the simulator (they build its contacts and lift), which is why
-they are not in :mod:`sintercond.thermal`.
+they are not in :mod:`sintercond.sim.thermal`.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from jax.scipy.sparse.linalg import cg
 
 from sintercond import simulate as sim_module
 from sintercond._validation import all_concrete
-from sintercond.conductance import validate_pair_conductance_inputs
-from sintercond.network import ContactTable, contact_pairs, ell_table, heat_inflow, laplacian, wall_inflow
+from sintercond.laws.conductance import validate_pair_conductance_inputs
+from sintercond.contacts.network import ContactTable, contact_pairs, ell_table, heat_inflow, laplacian, wall_inflow
 
 
 def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
@@ -170,11 +170,11 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
 
     As :func:`steady_state_conductivity` (same hot and cold sets, ``L`` and
     ``A``), with ``K_ij`` supplied per pair instead of computed from the
-    overlaps: necks grown by :mod:`sintercond.sintering`, or any other law.
+    overlaps: necks grown by :mod:`sintercond.laws.sintering`, or any other law.
 
     Args:
       centres: ``[n, 3]`` (m). radii: ``[n]`` (m).
-      pairs: :class:`sintercond.network.ContactPairs` of the packing.
+      pairs: :class:`sintercond.contacts.network.ContactPairs` of the packing.
       pair_conductance: ``[n_pairs]`` ``K_ij`` (W/K) in the order of ``pairs`` (differentiable).
       axis, box, tol: as :func:`steady_state_conductivity`.
     """

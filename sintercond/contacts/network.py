@@ -8,7 +8,7 @@ is then a gather and a row sum, with no scatter, which XLA fuses into one
 loop.
 
 Contacts are found on the host with a vectorised NumPy cell list (cells of
-twice the largest radius, :func:`sintercond.neighbors.cell_list_pairs`) and
+twice the largest radius, :func:`sintercond.contacts.neighbors.cell_list_pairs`) and
 confirmed in float64 from the centre distances; :func:`contact_pairs` gives
 them as per-pair arrays, :func:`ell_table` lifts per-pair values to the
 table. The table is built once for a static packing (no JAX compile).
@@ -26,8 +26,8 @@ import numpy as np
 from sintercond._numerics import materialized
 from sintercond._symmetric import self_adjoint
 from sintercond._validation import require_finite, require_positive
-from sintercond.conductance import pair_conductance, validate_pair_conductance_inputs
-from sintercond.neighbors import cell_list_pairs, minimum_image
+from sintercond.laws.conductance import pair_conductance, validate_pair_conductance_inputs
+from sintercond.contacts.neighbors import cell_list_pairs, minimum_image
 
 
 @jax.tree_util.register_dataclass
@@ -90,7 +90,7 @@ def contact_pairs(centres, radii, tolerance=1e-9, periodic_box=None) -> ContactP
     Spheres ``i, j`` are in contact when ``|c_i - c_j| <= (r_i + r_j)(1 + tolerance)``
     (touching lattices have gaps of a few ulp). With ``periodic_box`` (``[3]``
     side lengths, m) distances are minimum-image. See
-    :func:`sintercond.neighbors.cell_list_pairs`.
+    :func:`sintercond.contacts.neighbors.cell_list_pairs`.
 
     Args:
       centres: ``[n, 3]`` (m). radii: ``[n]`` (m).
@@ -150,14 +150,14 @@ def _compiled_law(law, neck_model):
 def pair_conductances(law, pairs: ContactPairs, kappa_i, kappa_j, params=None, neck_model=None) -> np.ndarray:
     """Validated ``K_ij`` (W/K) of :class:`ContactPairs`, ``[n_pairs]``, on the host.
 
-    As :func:`sintercond.conductance.pair_conductance` (validated first),
+    As :func:`sintercond.laws.conductance.pair_conductance` (validated first),
     compiled as one call on a length padded to a power of two with harmless
     touching pairs: eager dispatch would compile every operation at every new
     length (about 1 s); the bucketed length lets packings of similar size,
     and the persistent compilation cache, reuse the compiled law.
 
     Args:
-      law, params, neck_model: as :func:`sintercond.conductance.pair_conductance`.
+      law, params, neck_model: as :func:`sintercond.laws.conductance.pair_conductance`.
       pairs: the contacts (:func:`contact_pairs`).
       kappa_i, kappa_j: ``[n_pairs]`` conductivities of the two particles (W/(m K)).
     """
@@ -187,7 +187,7 @@ def contact_table(centres, radii, kappa, law="rojek", params=None, neck_model=No
       centres: ``[n, 3]`` (m).
       radii: ``[n]`` (m).
       kappa: solid conductivity, scalar or ``[n]`` per particle (W/(m K)).
-      law, params, neck_model: as :func:`sintercond.conductance.pair_conductance`.
+      law, params, neck_model: as :func:`sintercond.laws.conductance.pair_conductance`.
       tolerance: relative gap still counted as contact.
       periodic_box: ``[3]`` box side lengths (m) for a periodic packing, or None.
 
@@ -293,12 +293,12 @@ def wall_conductance(centres, radii, kappa, axis, position, law="rojek", *, para
     """Conductance (W/K) of each particle to a plane wall ``p[axis] = position`` (0 if not touching).
 
     The wall enters the pair law as a neighbour of infinite radius
-    (:mod:`sintercond.walls`); the overlap is the particle's penetration
+    (:mod:`sintercond.laws.walls`); the overlap is the particle's penetration
     ``r - |c[axis] - position|``. Validated like any pair: the law's
     parameters and conductivities, and penetrations inside the neck model's
     domain (``r/3`` for the volume-conserving neck).
     """
-    from sintercond import walls
+    from sintercond.laws import walls
 
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)

@@ -113,7 +113,7 @@ def integrate_table(theta, temperatures, values):
     False): exact, piecewise quadratic, continued along the end values outside (``f``'s unit times K).
 
     With ``f`` a specific heat (J/(kg K)) it is the specific enthalpy above the first node (J/kg): what
-    :func:`sintercond.thermal.enthalpy_update` keeps. Differentiable in ``theta`` and the table.
+    :func:`sintercond.sim.thermal.enthalpy_update` keeps. Differentiable in ``theta`` and the table.
     """
     theta = jnp.asarray(theta)
     dtype = theta.dtype if jnp.issubdtype(theta.dtype, jnp.floating) else jnp.result_type(float)
@@ -233,11 +233,11 @@ def ti6al4v_conductivity_property(extrapolate=False) -> Table:
     (``sintercond/data/ti6al4v_conductivity_rizza2024.csv``, their source:
     Qi et al. 2007): lambda_0 from 11.52 at 879 K to 16.72 at 1273 K. Outside
     that range it is clamped (default) or extrapolated linearly; unlike
-    :func:`sintercond.tortuosity.ti6al4v_conductivity`, which returns NaN
+    :func:`sintercond.laws.tortuosity.ti6al4v_conductivity`, which returns NaN
     there. Neither is data below 879 K (room-temperature Ti6Al4V is about
     6.7 W/(m K); extrapolation gives ~3.8 at 293 K, clamping 11.5).
     """
-    from sintercond.tortuosity import ti6al4v_conductivity_table
+    from sintercond.laws.tortuosity import ti6al4v_conductivity_table
 
     _, temperatures, conductivities = ti6al4v_conductivity_table()
     return tabulated(temperatures, conductivities, extrapolate)

@@ -6,7 +6,7 @@ a representative volume: the relative density ``n = U_0s / U_0``, the fraction
 ``S_ss / S_0`` of the volume's faces occupied by solid, the neck constriction
 ``gamma = (D - 2x) / D`` of a pair (Eq. 4, ``x`` the neck radius, ``D`` the
 larger diameter of the pair) and ``phi``, the largest coordination number in
-the volume. :mod:`sintercond.geometry` computes these inputs from a packing.
+the volume. :mod:`sintercond.laws.geometry` computes these inputs from a packing.
 All functions are pure and differentiable (``phi`` is a real exponent, so it
 can be fitted).
 """

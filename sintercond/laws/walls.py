@@ -18,7 +18,7 @@ neck model                    sphere ``r`` cutting a plane by ``h`` (the penetra
 ============================  ===========================================================
 
 The volume-conserving form: with ``s = sqrt(r^2 - a^2)`` the one-cap residual
-``F = a^2 (r + 2s) / (3 (r + s)^2) - h`` (:mod:`sintercond.neck`) vanishes iff
+``F = a^2 (r + 2s) / (3 (r + s)^2) - h`` (:mod:`sintercond.laws.neck`) vanishes iff
 ``2 s^2 + (3h - r) s + 3hr - r^2 = 0``, whose larger root is the one above
 (``s = r`` at ``h = 0``, ``s = 0`` at ``h = r/3``).
 
@@ -42,8 +42,8 @@ import numpy as np
 
 from sintercond._validation import shown
 from sintercond._numerics import as_float_arrays, safe_sqrt
-from sintercond.conductance import (_feng_half_conductance, _merge_params, _resolve_law, _resolve_neck_model,
-                                    fitted_half_conductance_ratio, series_conductance)
+from sintercond.laws.conductance import (_feng_half_conductance, _merge_params, _resolve_law, _resolve_neck_model,
+                                         fitted_half_conductance_ratio, series_conductance)
 
 WALL_MODES = ("held", "conducting", "insulated")
 

@@ -22,7 +22,7 @@ solved in closed form: no time steps, so a bed of ``n`` spheres costs ``O(n)``
 arcs on a three-dimensional bin grid of the spheres already down.
 
 Beds from it are looser than the frictionless relaxation of
-:func:`sintercond.settle.relax_under_gravity` (each sphere stays where it first
+:func:`sintercond.beds.settle.relax_under_gravity` (each sphere stays where it first
 found three supports, as a poured frictional powder does): solid fraction
 about 0.58 for equal spheres (Visscher & Bolsterli's figure) and 0.6 for the
 20-60 um powders of the examples, against 0.65-0.66 relaxed; a mean
@@ -198,7 +198,7 @@ neck, which ``sinter_swelling`` or the sintering physics make)."""
 
 SURFACE_POINTS = 64
 """Lateral grid (``SURFACE_POINTS^2`` points) on which :func:`roll_deposit` follows the pile's mean surface height: the
-grid of :func:`sintercond.packing.Packing`'s ``height``."""
+grid of :func:`sintercond.beds.packing.Packing`'s ``height``."""
 
 
 class _Pile(NamedTuple):
@@ -369,7 +369,7 @@ def roll_deposit(radii, lateral_size, rng, overlap=0.0, progress=None, fill_heig
       rng: a NumPy ``Generator`` (the lateral drop positions, and the roll direction off a sphere's top).
       overlap: each sphere comes to rest at ``(r_i + r_j)(1 - overlap)`` from the spheres it touches
         (relative overlap, in ``[0, MAX_OVERLAP]``): 0 gives point contacts; a small value makes the supports
-        contacts that :func:`sintercond.geometry.contacts` and the pipe network count.
+        contacts that :func:`sintercond.laws.geometry.contacts` and the pipe network count.
       progress: ``progress("rolling", spheres down, n, spheres down, n)`` every :data:`PROGRESS_EVERY` spheres
         and at the end, or None.
       fill_height: stop once the pile's mean surface height (the highest sphere surface above each point of a

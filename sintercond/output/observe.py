@@ -10,8 +10,11 @@ from typing import Any, NamedTuple
 import jax
 import numpy as np
 
-from sintercond import forces, mechanics, neck_growth, network, simulate, steady, walls
-from sintercond.neck import NECK_MODELS
+from sintercond import simulate
+from sintercond.contacts import network
+from sintercond.laws import forces, walls
+from sintercond.sim import mechanics, neck_growth, steady
+from sintercond.laws.neck import NECK_MODELS
 
 from sintercond.scene.build import _walls, scene_walls
 
@@ -26,7 +29,7 @@ particles touching a wall, and the largest overlap of a pair or a wall contact."
 
 
 SINTERING_COLUMNS = ("mean_neck_ratio", "max_neck_ratio", "shrinkage")
-"""Columns a run with ``[sintering]`` adds (:func:`sintercond.neck_growth.neck_statistics`): the mean and largest
+"""Columns a run with ``[sintering]`` adds (:func:`sintercond.sim.neck_growth.neck_statistics`): the mean and largest
 neck ratio ``a / min(r_i, r_j)`` over the contacts and the mean linear shrinkage of their approaches."""
 
 
@@ -42,8 +45,8 @@ def history_columns(model) -> tuple:
 
 def sintered_conductivity(model, state) -> float:
     """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
-    (:func:`sintercond.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
-    layers are held hot and cold; any other packing's face layers (:func:`sintercond.steady.face_layer_box`)."""
+    (:func:`sintercond.sim.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
+    layers are held hot and cold; any other packing's face layers (:func:`sintercond.sim.steady.face_layer_box`)."""
     radii = model.radii
     axis = model.k_star_axis
     if state.mechanics is not None:  # the necks on the half pair list, the packing where it has moved to
@@ -111,7 +114,7 @@ def observe(scene, model, state, probe) -> Observation:
 
     Heat into the packing through a conducting wall: ``sum_i K_iw (T_w - T_i)``
     with ``K_iw`` the wall conductance of the scene's law at the current
-    penetration (:func:`sintercond.walls.wall_conductance`); through a held
+    penetration (:func:`sintercond.laws.walls.wall_conductance`); through a held
     wall: the power its held particles lose to the rest,
     ``-sum_i P_i`` over them (what holds them at their temperature).
     With mechanics: the contact force ``m (v(t + dt) - v(t)) / dt - m g``

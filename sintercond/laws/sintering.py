@@ -14,7 +14,7 @@ caps cut off the spheres, ``h_n = h_ci + h_cj - h``. Solved for ``h`` with
 
     h = H(a) = a^2 sum_k (r_k + 2 s_k) / (3 (r_k + s_k)^2)
 
-(the residual ``F`` of :mod:`sintercond.neck` is ``H(a) - h``), with no
+(the residual ``F`` of :mod:`sintercond.laws.neck` is ``H(a) - h``), with no
 cancellation anywhere in ``0 <= a <= min(r_i, r_j)``. Its limits: Coble's
 ``H ~ a^2 / (2 r*)``, ``r* = 2 r_i r_j / (r_i + r_j)`` (Rojek Eqs. 11-12), as
 ``a -> 0``; ``H = 2r/3`` at ``a = r`` for equal spheres (Eqs. 18-19). The slope
@@ -95,7 +95,7 @@ import numpy as np
 from sintercond._numerics import as_float_arrays, safe_power, sqrt_difference_of_squares
 from sintercond._validation import (all_concrete, concrete_arrays, fail_where, law_params_valid, require_law_params,
                                     require_positive)
-from sintercond.neck import NeckStatus
+from sintercond.laws.neck import NeckStatus
 
 GAS_CONSTANT = 8.314462618
 """Molar gas constant R, J/(mol K) (CODATA 2018, exact)."""
@@ -113,7 +113,7 @@ _MAX_NECK_SLACK_ULPS = 8  # a given as the rounded min(r_i, r_j) still counts as
 def neck_overlap(a, r_i, r_j):
     """Overlap (approach) ``h`` of two spheres joined by a volume-conserving neck of radius ``a``.
 
-    The closed-form inverse of :func:`sintercond.neck.neck_radius` (Rojek et
+    The closed-form inverse of :func:`sintercond.laws.neck.neck_radius` (Rojek et
     al. 2022, Eqs. 23-27; module docstring): ``H(a) = a^2 sum_k (r_k + 2 s_k) /
     (3 (r_k + s_k)^2)``, ``s_k = sqrt(r_k^2 - a^2)``. Gradients are closed-form
     and finite on the whole domain, at ``a = 0`` (Coble's limit, slope 0) and
@@ -144,7 +144,7 @@ def neck_overlap_slope(a, r_i, r_j):
 
 
 def neck_overlap_status(a, r_i, r_j):
-    """Per-pair :class:`sintercond.neck.NeckStatus` of a neck radius (int32), usable under ``jit``.
+    """Per-pair :class:`sintercond.laws.neck.NeckStatus` of a neck radius (int32), usable under ``jit``.
 
     ``OK`` for ``0 < a <= min(r)``; ``NO_CONTACT`` for ``a = 0`` (a point
     contact, ``h = 0``); ``BEYOND_MAX_OVERLAP`` for ``a > min(r)``;
@@ -328,7 +328,7 @@ class KineticLaw(NamedTuple):
       params_allowing_zero: parameters that may be 0 (others > 0, except ``params_any_sign``).
       params_any_sign: parameters that may take any finite value.
       force: ``fn(a, r_i, r_j, params)``: the contact's sintering force over ``pi gamma_s`` (m), for the
-        many-body balance of :mod:`sintercond.neck_growth` (only its ratios between contacts enter there):
+        many-body balance of :mod:`sintercond.sim.neck_growth` (only its ratios between contacts enter there):
         Bouvard & McMeeking's ``4 r* (1 - cos(psi/2)) + a sin(psi/2)`` for grain-boundary diffusion;
         ``r*`` (a force in proportion to the contact's size) for the power law and viscous flow, which
         give no force of their own.
@@ -675,7 +675,7 @@ def preheating_history(output_times, *, t_end=9.5, temperature_start=845.0, temp
     to ``temperature_end`` (17.12 K each), with the erratum of Eq. 6 (the step
     count belongs inside its ``int()``). Each step is held at the temperature it
     ends at, ``T = 845 K + ceil(t / 0.38 s) 17.12 K``: the reading that
-    reproduces their Table 1 (879 K at 0.5 s; :func:`sintercond.tortuosity.preheating_temperature`
+    reproduces their Table 1 (879 K at 0.5 s; :func:`sintercond.laws.tortuosity.preheating_temperature`
     with ``at_step_end=True``); the other reading holds each step 17.12 K lower.
 
     Returns:

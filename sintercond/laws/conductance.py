@@ -2,7 +2,7 @@
 
 A conductance law turns the pair geometry (radii ``r_i``, ``r_j``, overlap
 ``h``, and a neck or contact radius ``a`` from a neck model of
-:mod:`sintercond.neck`) and the materials (conductivities ``kappa_i``,
+:mod:`sintercond.laws.neck`) and the materials (conductivities ``kappa_i``,
 ``kappa_j``) into the conductance ``K_ij`` of the pipe joining the two centres,
 so that the heat flow into ``i`` is ``K_ij (T_j - T_i)`` (Rojek et al. 2022,
 Eq. 4). Units: lengths in m and conductivities in W/(m K) give W/K; any
@@ -26,7 +26,7 @@ The neck radius each law uses is stated above and can be swapped with
 ``neck_model=``. Laws that look alike differ by conventions: Rojek's ``a`` is
 the cylindrical-neck radius, Quintana-Ruiz's the lens radius. Pairs with
 ``h <= 0`` have ``K = 0`` with zero gradient; pairs where the neck model is
-undefined give NaN (see :mod:`sintercond.neck`).
+undefined give NaN (see :mod:`sintercond.laws.neck`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, safe_divide
 from sintercond._validation import all_concrete, concrete_arrays, law_params_valid, require_law_params, require_positive
-from sintercond.neck import NECK_MODELS, validate_neck_inputs
+from sintercond.laws.neck import NECK_MODELS, validate_neck_inputs
 
 ROJEK_SLOPE = 1.064
 """Slope of Rojek et al. (2022), Eq. 40: ``K_i / K_cyl = 1.064 a / r``."""
@@ -150,7 +150,7 @@ class ConductanceLaw(NamedTuple):
         called only for pairs in contact (``h > 0``, ``a > 0``).
       default_params: the law's parameters and their defaults; these are
         the differentiable (fittable) inputs.
-      neck_model: default key of :data:`sintercond.neck.NECK_MODELS`.
+      neck_model: default key of :data:`sintercond.laws.neck.NECK_MODELS`.
       reference: paper and equations.
       params_allowing_zero: parameters that may be 0; all others must be > 0
         (except ``params_any_sign``).
@@ -216,7 +216,7 @@ def pair_conductance(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_
       kappa_j: conductivity of particle j; defaults to ``kappa_i``.
       params: overrides of ``law.default_params`` (arrays allowed: these
         are what a fit differentiates).
-      neck_model: key of :data:`sintercond.neck.NECK_MODELS`; defaults to
+      neck_model: key of :data:`sintercond.laws.neck.NECK_MODELS`; defaults to
         the law's.
 
     Returns:
@@ -282,7 +282,7 @@ def validate_pair_conductance_inputs(law, r_i, r_j, h, kappa_i, kappa_j=None, pa
     the law and neck model exist, the parameters are known, finite and
     positive (``contact_resistance`` may be 0), the conductivities finite and
     > 0, and the geometry inside the neck model's domain
-    (:func:`sintercond.neck.validate_neck_inputs`).
+    (:func:`sintercond.laws.neck.validate_neck_inputs`).
     """
     law = _resolve_law(law)
     model = _resolve_neck_model(law, neck_model)
@@ -294,7 +294,7 @@ def rojek_pair_conductance(r_i, r_j, h, kappa, slope=ROJEK_SLOPE, contact_conduc
     """Rojek et al. (2022) pair conductance of two sintered spheres.
 
     Each half is ``K_k = slope * kappa_k * pi * a`` (Eq. 43) with ``a`` the
-    volume-conserving neck radius (:func:`sintercond.neck.neck_radius`); the
+    volume-conserving neck radius (:func:`sintercond.laws.neck.neck_radius`); the
     halves combine in series (Eq. 9), with a finite contact conductance
     ``K_c`` in series as well when given (Eq. 8). For equal materials and no
     contact resistance this is ``slope * kappa * pi * a / 2`` (Eq. 45).

@@ -18,7 +18,7 @@ From the fastest path to the reference:
   Per-pair quantities of a Dense table (a neck, a contact age) follow the
   pair through rebuilds and reallocations with :func:`remap_pair_history`.
 * The half pair list the contact laws run on (each pair once), built from
-  this Dense list, is :mod:`sintercond.pair_list`.
+  this Dense list, is :mod:`sintercond.contacts.pair_list`.
 * :func:`cell_list_pairs`: the contacts of a static packing on the host, in
   vectorised NumPy (a cell list, no per-particle Python loop, no compile).
 * :func:`brute_force_pairs`: the O(n^2) reference for tests.
@@ -470,7 +470,7 @@ def remap_pair_history(old_idx, new_idx, values, fill=0):
     For each row ``i`` and slot ``k`` of ``new_idx``, the old slot of row ``i``
     holding the same neighbour gives the value; a pair absent from the old
     table, and every padding slot, gets ``fill``. Padding is either ``n``
-    (jax-md) or the row's own index (:class:`sintercond.network.ContactTable`).
+    (jax-md) or the row's own index (:class:`sintercond.contacts.network.ContactTable`).
     The tables may differ in width (a reallocation). As JaxDEM's
     ``_remap_history_array`` and LAMMPS' ``fix neigh/history`` do.
 

@@ -1,25 +1,25 @@
 """Settle a packing under gravity: the harmonic relaxation and the thermo-mechanical DEM.
 
 Two ways to let a pile of spheres (e.g. the deposit of
-:func:`sintercond.packing.deposit_spheres`) come to rest under gravity, each
+:func:`sintercond.beds.packing.deposit_spheres`) come to rest under gravity, each
 checked: a pile that has not settled within its budget raises
 :class:`PackingError`; it is never returned half-fallen.
 
-:func:`relax_under_gravity` (the default of :func:`sintercond.packing.powder_bed` and scenes): damped dynamics of
+:func:`relax_under_gravity` (the default of :func:`sintercond.beds.packing.powder_bed` and scenes): damped dynamics of
 gravity plus stiff harmonic repulsion between overlapping spheres and with
 the floor and side walls (frictionless, so the pile collapses to a dense
 random packing), on a pair list rebuilt on the host whenever a sphere
 has moved half the skin, until the net force on every sphere is below
 ``force_tol`` of its weight. Contacts end up as small overlaps (the weight
 of the pile over the stiffness, ~1e-3 of a radius), which
-:func:`sintercond.geometry.contacts` counts as contacts.
+:func:`sintercond.laws.geometry.contacts` counts as contacts.
 
-:func:`dem_settle` (``method="dem"``, :func:`sintercond.packing.pour`): the real
-thermo-mechanical DEM of :mod:`sintercond.mechanics` instead: Hertz contacts
+:func:`dem_settle` (``method="dem"``, :func:`sintercond.beds.packing.pour`): the real
+thermo-mechanical DEM of :mod:`sintercond.sim.mechanics` instead: Hertz contacts
 with damping, Mindlin friction with history, rolling resistance, gravity and
 the plane walls of the box (:func:`box_walls`), stepped by
 :mod:`sintercond.simulate` on the host loop :func:`sintercond.rollout.advance` at the automatic time step of
-:func:`sintercond.mechanics.mechanical_time_step`, until the kinetic energy and
+:func:`sintercond.sim.mechanics.mechanical_time_step`, until the kinetic energy and
 the largest net force over a sphere's weight are below stated thresholds
 (:data:`KINETIC_TOL`, :data:`FORCE_TOL`), reported in a :class:`SettleReport`
 (``packing.settle``). The contact material is a :class:`DemMaterial`
@@ -27,14 +27,14 @@ the largest net force over a sphere's weight are below stated thresholds
 contacts keep the step large and the pour cheap; nothing is stiffened or
 softened behind the user's back). It costs ~1e3-1e4 DEM steps from a
 relaxed pile, ~1e5 from the loose deposit, so ``"relax"`` stays the default
-of :func:`sintercond.packing.powder_bed` and scenes.
+of :func:`sintercond.beds.packing.powder_bed` and scenes.
 
 Everything here runs in float64 (NumPy, and JAX inside ``jax.enable_x64``)
 whatever precision the thermal model uses: the packing of a scene does not
 depend on ``SINTERCOND_ENABLE_X64``.
 
 The geometry (sampled sizes, the deposit, the bed's figures, representative
-volumes) and the beds built from it are :mod:`sintercond.packing`'s; it
+volumes) and the beds built from it are :mod:`sintercond.beds.packing`'s; it
 imports this module, never the other way.
 """
 
@@ -56,18 +56,18 @@ from sintercond._validation import shown
 class PackingError(ValueError):
     """A bed that cannot be built or did not settle; the message says which quantity and its range.
 
-    Raised here and by :mod:`sintercond.packing` (the same class: ``sintercond.packing.PackingError``).
+    Raised here and by :mod:`sintercond.beds.packing` (the same class: ``sintercond.beds.packing.PackingError``).
     """
 
 
 def _pair_list(x, r, skin, capacity=0):
     """Pairs ``i < j`` closer than ``r_i + r_j + skin``, sorted by ``(i, j)``, padded to a power of two.
 
-    From the host cell list (:func:`sintercond.neighbors.cell_list_pairs`, O(n)) with a relative reach
+    From the host cell list (:func:`sintercond.contacts.neighbors.cell_list_pairs`, O(n)) with a relative reach
     covering the skin for the smallest pair, then the exact test: the pairs (and their order) the O(n^2) search
     found, which took most of a 3,290-sphere bed's build.
     """
-    from sintercond.neighbors import cell_list_pairs
+    from sintercond.contacts.neighbors import cell_list_pairs
 
     i, j = cell_list_pairs(x, r, tolerance=skin / (2.0 * float(np.min(r))))
     near = np.sum((x[i] - x[j]) ** 2, axis=-1) < (r[i] + r[j] + skin) ** 2
@@ -230,7 +230,7 @@ class DemMaterial:
     Quintana-Ruiz & Campello (2020), Sect. 5.3: rho = 1000 kg/m^3, E = 1 MPa,
     nu = 0.3, mu = 0.05 and mu_r = 0.2 between particles, 0 against the walls,
     xi_con = xi_fric = 1, xi_rol = 0.2. The laws are those of
-    :mod:`sintercond.mechanics` (Hertz with damping, Eqs. 2-6; Mindlin
+    :mod:`sintercond.sim.mechanics` (Hertz with damping, Eqs. 2-6; Mindlin
     stick-slip with its spring, Eqs. 7-13; rolling resistance, Eqs. 15-20;
     rigid walls of Remark 1).
 
@@ -271,8 +271,8 @@ class DemMaterial:
             raise PackingError(f"DemMaterial.nu must be in [0, 0.5); got {shown(self.nu)}")
 
     def mechanical_params(self):
-        """The :class:`sintercond.mechanics.MechanicalParams` of this material (float64 scalars)."""
-        from sintercond.mechanics import MechanicalParams
+        """The :class:`sintercond.sim.mechanics.MechanicalParams` of this material (float64 scalars)."""
+        from sintercond.sim.mechanics import MechanicalParams
 
         f = lambda x: jnp.asarray(float(x), jnp.float64)  # noqa: E731
         return MechanicalParams(E0=f(self.E), nu=f(self.nu), xi_con=f(self.xi_con), xi_fric=f(self.xi_fric),
@@ -299,7 +299,7 @@ class SettleReport:
         (contacts, walls, gravity) taken from one probe step as ``m_i dv_i / dt``
         (exact for symplectic Euler); ``force_tol`` the threshold it met.
       max_overlap: largest sphere-sphere or sphere-wall overlap over the radius.
-      step_overlap: overlap (m) the time step was sized for (:func:`sintercond.mechanics.mechanical_time_step`).
+      step_overlap: overlap (m) the time step was sized for (:func:`sintercond.sim.mechanics.mechanical_time_step`).
       v_rel: approach speed (m/s) the time step was sized for.
       reallocations: neighbour-list reallocations; wall_seconds: run time (s).
       soft_modulus: the Young's modulus (Pa) of the soft stage a stiffened bed settled at first
@@ -354,9 +354,9 @@ def box_walls(lateral_size):
     """The five insulated walls of an open square box ``[0, L]^2`` with its floor at ``z = 0``.
 
     Order: floor, ``x = 0``, ``x = L``, ``y = 0``, ``y = L``
-    (:class:`sintercond.walls.PlaneWall`, normals into the box).
+    (:class:`sintercond.laws.walls.PlaneWall`, normals into the box).
     """
-    from sintercond.walls import PlaneWall
+    from sintercond.laws.walls import PlaneWall
 
     L = float(lateral_size)
     return (PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), PlaneWall((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)),
@@ -416,7 +416,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     ``temperature`` (K, scalar or ``[n]``): no heat moves; with
     ``softening`` the moduli follow Eq. 42 at those temperatures.
 
-    The time step is automatic: :func:`sintercond.mechanics.mechanical_time_step`
+    The time step is automatic: :func:`sintercond.sim.mechanics.mechanical_time_step`
     (Eq. 47 and the tangential and rolling bounds, erratum 8) at the approach
     speed ``v_rel`` (default: free fall from the highest sphere to the floor,
     at least over one mean diameter) and at the larger of that collision's
@@ -441,7 +441,7 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     Args:
       centres: ``[n, 3]`` start positions (m), at rest, no sphere below the floor.
       radii: ``[n]`` (m).
-      walls: :class:`sintercond.walls.PlaneWall` s (e.g. :func:`box_walls`).
+      walls: :class:`sintercond.laws.walls.PlaneWall` s (e.g. :func:`box_walls`).
       material: :class:`DemMaterial`.
       max_time: simulated time (s) allowed to settle.
       soft_modulus: Young's modulus (Pa) of a soft pour first, ``0 < soft_modulus < material.E``, or None.
@@ -468,7 +468,8 @@ def dem_settle(centres, radii, walls, material=DemMaterial(), temperature=300.0,
     start = time.perf_counter()
     centres = np.asarray(centres, np.float64)
     radii = np.broadcast_to(np.asarray(radii, np.float64), (len(centres),))
-    from sintercond import mechanics, simulate
+    from sintercond import simulate
+    from sintercond.sim import mechanics
     from sintercond.state import particle_state
 
     with jax.enable_x64(True):
@@ -506,8 +507,9 @@ def _settle(sim, physics, state, fns, material, v_rel, start, phase, *, kinetic_
     The time step is sized here, at ``v_rel`` and the static column's overlap; ``soft``: the
     ``(modulus, steps)`` of the soft stage it was stiffened from, for the report.
     """
-    from sintercond import mechanics, simulate
-    from sintercond.forces import effective_mass, hertz_collision_overlap
+    from sintercond import simulate
+    from sintercond.sim import mechanics
+    from sintercond.laws.forces import effective_mass, hertz_collision_overlap
     from sintercond.rollout import ListOverflow, advance
 
     particles, contacts = state.particles, state.contacts
@@ -587,7 +589,7 @@ def stiffened_positions(centres, radii, pairs, walls, ratio, iterations=STIFFEN_
 
     Args:
       centres: ``[n, 3]`` (m); radii ``[n]`` (m); pairs ``[c, 2]`` candidate pairs (padding ``(n, n)`` ignored);
-      walls: :class:`sintercond.walls.PlaneWall` s; ratio: in (0, 1].
+      walls: :class:`sintercond.laws.walls.PlaneWall` s; ratio: in (0, 1].
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.linalg import lsqr

@@ -349,7 +349,7 @@ def dryden_zok_conductivity(k, f, alpha_bar, coordination, nodes: int = DEFAULT_
     As ``alpha -> pi/2`` this tends to the law of mixtures ``k f``, which
     exceeds the Hashin-Shtrikman upper bound ``2 k f / (3 - f)`` once
     ``sigma > 2 / (3 - f)``; for nearly dense solids Dryden & Zok (Sect. V)
-    point to Maxwell's estimate (:func:`sintercond.effective.maxwell_conductivity`).
+    point to Maxwell's estimate (:func:`sintercond.laws.effective.maxwell_conductivity`).
     """
     return jnp.asarray(k) * jnp.asarray(f) * dryden_zok_sigma(cap_angle(alpha_bar, coordination), nodes)
 

@@ -2,7 +2,7 @@
 
 A powder bed is built in one of three ways (``method``, :data:`METHODS`):
 
-- ``"roll"`` (the default): :func:`sintercond.rolling.roll_deposit` drops the
+- ``"roll"`` (the default): :func:`sintercond.beds.rolling.roll_deposit` drops the
   spheres one by one and lets each roll down the pile to a stable rest on
   three supports or the floor (sequential deposition with rolling, in closed
   form, O(n): a 1e4-sphere bed in seconds). The bed is a stable frictional
@@ -13,12 +13,12 @@ A powder bed is built in one of three ways (``method``, :data:`METHODS`):
   on a lateral bin grid) and keeps the lowest of :data:`DEPOSIT_TRIES` drops
   of each (solid fraction ~0.45, about 1.4 times the asked height); the pile
   then collapses without friction under gravity,
-  :func:`sintercond.settle.relax_under_gravity` (damped harmonic contacts),
+  :func:`sintercond.beds.settle.relax_under_gravity` (damped harmonic contacts),
   into a denser random packing (~0.66). Its damped dynamics take ~1e5 steps
   whatever the bed's width (a 1e4-sphere bed ~15 min on two cores).
 - ``"dem"`` (:func:`pour`): the real thermo-mechanical DEM,
-  :func:`sintercond.settle.dem_settle`, settles a rolled, relaxed or
-  ballistic deposit; the bed keeps its :class:`sintercond.settle.SettleReport`
+  :func:`sintercond.beds.settle.dem_settle`, settles a rolled, relaxed or
+  ballistic deposit; the bed keeps its :class:`sintercond.beds.settle.SettleReport`
   (``packing.settle``).
 
 A pile that has not settled raises :class:`PackingError`; it is never
@@ -34,7 +34,7 @@ representative volume out of the bed's interior, away from floor and walls,
 as Rizza & Galati (2024, Sect. 3.3) did for their 150 um PB cube with
 45-150 um particles.
 
-The settling moved to :mod:`sintercond.settle` (issue 24); its names still
+The settling moved to :mod:`sintercond.beds.settle` (issue 24); its names still
 resolve from here for one release, with a ``DeprecationWarning``.
 """
 
@@ -46,10 +46,10 @@ import math
 import numpy as np
 
 from sintercond._validation import shown
-from sintercond import rolling as _rolling
-from sintercond import settle as _settle
+from sintercond.beds import rolling as _rolling
+from sintercond.beds import settle as _settle
 from sintercond._deprecation import old_names
-from sintercond.settle import PackingError
+from sintercond.beds.settle import PackingError
 
 FILL_FRACTION = 0.62
 """Solid fraction assumed to size a bed: ``n = FILL_FRACTION L^2 H / mean volume`` spheres."""
@@ -71,7 +71,7 @@ walls, over its radius): the contacts' small overlaps, as a relaxed bed's (media
 radii on the 3,290-sphere bed of ``benchmarks/bed_build.py``), so the pipe network sees them."""
 
 _DEFAULT_MATERIAL = _settle.DemMaterial()
-"""The contact material of a pour unless one is given: Example 5.3's (:class:`sintercond.settle.DemMaterial`)."""
+"""The contact material of a pour unless one is given: Example 5.3's (:class:`sintercond.beds.settle.DemMaterial`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,9 +91,9 @@ class Packing:
       isolated: spheres touching neither another sphere nor the floor or a wall (0 when settled).
       residual_force: largest net force on a sphere over its weight at the end of the settling (NaN for a
         rolled bed: each sphere came to rest on its supports when it was placed; nothing is integrated).
-      settle: the :class:`sintercond.settle.SettleReport` of a DEM settle (``method="dem"``), else None.
-      roll: the :class:`sintercond.rolling.RollReport` of a rolled bed (``method="roll"``), else None.
-      settled: the :class:`sintercond.settle.DemSettled` state a DEM settle ended in (velocities, spins and the
+      settle: the :class:`sintercond.beds.settle.SettleReport` of a DEM settle (``method="dem"``), else None.
+      roll: the :class:`sintercond.beds.rolling.RollReport` of a rolled bed (``method="roll"``), else None.
+      settled: the :class:`sintercond.beds.settle.DemSettled` state a DEM settle ended in (velocities, spins and the
         springs of its contacts and walls: what a run with the mechanics continues), else None.
     """
 
@@ -111,7 +111,8 @@ class Packing:
     settled: _settle.DemSettled | None = dataclasses.field(default=None, compare=False, repr=False)
 
     def summary(self) -> dict:
-        """The bed's figures as a flat dict (for a run summary); a DEM bed adds its :class:`sintercond.settle.SettleReport`'s."""
+        """The bed's figures as a flat dict (for a run summary); a DEM bed adds its
+        :class:`sintercond.beds.settle.SettleReport`'s."""
         figures = {"particles": len(self.radii), "bed_height_m": self.height, "bed_top_m": float(self.container[1][2]),
                    "packing_fraction": self.packing_fraction, "coordination": self.coordination,
                    "isolated_particles": self.isolated}
@@ -269,14 +270,14 @@ harmonically relaxed pile, or the loose ballistic deposit itself."""
 
 def pour(radii, lateral_size, material=_DEFAULT_MATERIAL, seed=0, start="relaxed", temperature=300.0, walls=None,
          progress=None, **settle) -> Packing:
-    """Pour spheres into an open square box ``[0, L]^2`` and settle them with the DEM (:func:`sintercond.settle.dem_settle`).
+    """Pour spheres into an open square box ``[0, L]^2`` and settle them with the DEM (:func:`sintercond.beds.settle.dem_settle`).
 
     The spheres are first dropped one by one (:func:`deposit_spheres`, a loose
     pile several times the bed's height). ``start="deposit"``: the DEM settles
     that pile itself (a real pour: the pile collapses under gravity with
     Hertz, Mindlin friction, rolling resistance and the walls; it takes
     ~0.3 s of simulated time, ~1e4-1e5 steps). ``start="relaxed"`` (cheaper):
-    the pile is first collapsed by :func:`sintercond.settle.relax_under_gravity` (frictionless
+    the pile is first collapsed by :func:`sintercond.beds.settle.relax_under_gravity` (frictionless
     harmonic contacts), then the DEM settles it from there under the real
     laws; the result meets the same thresholds, but its structure comes from
     a frictionless collapse (denser than a frictional pour would give).
@@ -284,17 +285,18 @@ def pour(radii, lateral_size, material=_DEFAULT_MATERIAL, seed=0, start="relaxed
     Args:
       radii: ``[n]`` (m), ``2 max(radii) < lateral_size``.
       lateral_size: box side (m).
-      material: :class:`sintercond.settle.DemMaterial` (default: Example 5.3's).
+      material: :class:`sintercond.beds.settle.DemMaterial` (default: Example 5.3's).
       seed: random seed of the deposit (reproducible).
       start: one of :data:`STARTS`.
       temperature: K, while settling (no heat moves).
-      walls: the box's :class:`~sintercond.walls.PlaneWall` s (default :func:`sintercond.settle.box_walls`).
+      walls: the box's :class:`~sintercond.laws.walls.PlaneWall` s (default :func:`sintercond.beds.settle.box_walls`).
       progress: ``progress(phase, steps, max_steps, figure, target)`` after every chunk of the relaxed start and
-        of the DEM settle (:func:`sintercond.settle.relax_under_gravity`, :func:`sintercond.settle.dem_settle`), or None.
-      settle: keyword arguments of :func:`sintercond.settle.dem_settle` (``kinetic_tol``, ``force_tol``, ``max_time``, ...).
+        of the DEM settle (:func:`sintercond.beds.settle.relax_under_gravity`,
+        :func:`sintercond.beds.settle.dem_settle`), or None.
+      settle: keyword arguments of :func:`sintercond.beds.settle.dem_settle` (``kinetic_tol``, ``force_tol``, ``max_time``, ...).
 
     Returns:
-      :class:`Packing` with its :class:`sintercond.settle.SettleReport` (``packing.settle``).
+      :class:`Packing` with its :class:`sintercond.beds.settle.SettleReport` (``packing.settle``).
 
     Raises:
       PackingError: bad input, or a bed that did not settle (naming what missed its threshold).
@@ -303,7 +305,7 @@ def pour(radii, lateral_size, material=_DEFAULT_MATERIAL, seed=0, start="relaxed
 
 
 def _pour(radii, lateral_size, material, seed, start, temperature, walls, progress=None, **settle):
-    """:func:`pour`, also returning the :class:`sintercond.settle.DemSettled` state."""
+    """:func:`pour`, also returning the :class:`sintercond.beds.settle.DemSettled` state."""
     if start not in STARTS:
         raise PackingError(f"start must be one of {list(STARTS)}; got {start!r}")
     radii = np.asarray(radii, np.float64)
@@ -363,10 +365,10 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), *, seed=0, ma
         :data:`MAX_PARTICLES` for the others).
       height_tolerance: refuse a settled bed whose mean surface height is off
         ``height`` by more than this fraction.
-      method: ``"roll"`` (:func:`sintercond.rolling.roll_deposit`, any unit of length), ``"relax"``
-        (:func:`sintercond.settle.relax_under_gravity`, any unit of length) or ``"dem"`` (:func:`pour` with
+      method: ``"roll"`` (:func:`sintercond.beds.rolling.roll_deposit`, any unit of length), ``"relax"``
+        (:func:`sintercond.beds.settle.relax_under_gravity`, any unit of length) or ``"dem"`` (:func:`pour` with
         ``material``, SI units: metres).
-      material: :class:`sintercond.settle.DemMaterial` for ``method="dem"`` (default: Example 5.3's).
+      material: :class:`sintercond.beds.settle.DemMaterial` for ``method="dem"`` (default: Example 5.3's).
       progress: ``progress(phase, steps, max_steps, figure, target)`` as the bed is made (spheres down for
         ``"roll"``, steps for the settling ones), or None.
       overlap: the relative overlap of a rolled bed's contacts (``method="roll"``), in ``[0, 0.01]``.
@@ -374,8 +376,8 @@ def powder_bed(lateral_size, height, diameter_range=(45.0, 150.0), *, seed=0, ma
 
     Returns:
       :class:`Packing`, with its height, packing fraction, coordination and
-      isolated spheres (and the :class:`sintercond.rolling.RollReport` for ``"roll"``, the
-      :class:`sintercond.settle.SettleReport` for ``"dem"``).
+      isolated spheres (and the :class:`sintercond.beds.rolling.RollReport` for ``"roll"``, the
+      :class:`sintercond.beds.settle.SettleReport` for ``"dem"``).
 
     Raises:
       PackingError: invalid sizes (:func:`check_bed`) or method, or a bed that did not settle.
@@ -420,7 +422,7 @@ def from_scene(p, progress=None) -> Packing:
     """The packing of a validated scene's ``[packing]`` table (radii after ``sinter_swelling``).
 
     ``powder_bed``: :func:`powder_bed` with ``method`` (``"roll"`` by default,
-    or ``"dem"`` with the :class:`sintercond.settle.DemMaterial` keys of an optional ``dem``
+    or ``"dem"`` with the :class:`sintercond.beds.settle.DemMaterial` keys of an optional ``dem``
     table), radii then grown by ``sinter_swelling`` (settled contacts become necks). ``simple_cubic``: centres
     ``radius + spacing * (i, j, k)``, container ``[0, (counts - 1) spacing + 2 radius]``; its packing fraction
     the infinite lattice's (a sphere less the 6 caps its neighbours cut, over the cell ``spacing^3``), its
@@ -450,7 +452,7 @@ def rev_box(packing: Packing, size, floor_clearance=None):
     """A cube of side ``size`` centred laterally, starting ``floor_clearance`` above the floor.
 
     Returns ``(centres, radii, box)`` of the spheres that intersect the cube,
-    ready for :func:`sintercond.geometry.rev_measures`. The default clearance
+    ready for :func:`sintercond.laws.geometry.rev_measures`. The default clearance
     is the largest diameter, to stay clear of the floor's ordering. The cube
     must fit inside the container and below the bed's mean surface height
     (``packing.height``; the highest sphere top if that is unknown), so that
@@ -470,7 +472,7 @@ def rev_box(packing: Packing, size, floor_clearance=None):
     return packing.centres[touching], packing.radii[touching], (lo, hi)
 
 
-# the settling moved to sintercond.settle (issue 24): relaxation and DEM
-__getattr__ = old_names("sintercond.packing", {name: ("sintercond.settle", name) for name in (
+# the settling moved to sintercond.beds.settle (issue 24): relaxation and DEM
+__getattr__ = old_names("sintercond.beds.packing", {name: ("sintercond.beds.settle", name) for name in (
     "relax_under_gravity", "DemMaterial", "KINETIC_TOL", "FORCE_TOL", "SettleReport", "DemSettled", "box_walls",
     "dem_physics", "GRAVITY", "dem_settle")})

@@ -169,7 +169,7 @@ def neck_volume(x, r_i, r_j, h=0.0):
     surfaces, less the spheres: ``pi x^2 h_n - V_cap_i - V_cap_j`` with
     ``h_n = h_ci + h_cj - h``.
     """
-    from sintercond.neck import neck_residual  # one definition of Z
+    from sintercond.laws.neck import neck_residual  # one definition of Z
 
     return float(np.pi / 3.0 * np.asarray(neck_residual(x, r_i, r_j, h)))
 

@@ -1,7 +1,7 @@
 """Effective conductivity of porous and sintered solids: bounds and closed-form models.
 
 The Dryden & Zok (2004) self-consistent sphere model lives in
-:mod:`sintercond.dryden_zok` and is re-exported here; this module adds the
+:mod:`sintercond.laws.dryden_zok` and is re-exported here; this module adds the
 Hashin-Shtrikman bounds and Maxwell's estimate. Conductivities in W/(m K)
 (any consistent unit), volume fractions dimensionless; all functions are
 pure, broadcast and are differentiable.
@@ -12,7 +12,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from sintercond._numerics import as_float_arrays, safe_divide
-from sintercond.dryden_zok import (  # noqa: F401  (re-exported)
+from sintercond.laws.dryden_zok import (  # noqa: F401  (re-exported)
     batchelor_obrien_conductivity,
     cap_angle,
     dryden_zok_conductivity,

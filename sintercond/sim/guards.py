@@ -1,6 +1,6 @@
 """Run-time guards of the coupled step: the host refuses a state the explicit step was not sized for.
 
-The automatic mechanical step (:func:`sintercond.mechanics.mechanical_time_step`)
+The automatic mechanical step (:func:`sintercond.sim.mechanics.mechanical_time_step`)
 is sized for a largest normal approach speed ``v_rel``: Eq. 47's collision
 duration and the symplectic-Euler bounds at the overlap of a collision at
 that speed (Quintana-Ruiz & Campello 2020; MECHANICS.md erratum 8). A run
@@ -16,7 +16,7 @@ for :func:`sintercond.rollout.advance` that, after every compiled chunk,
    the smaller radius (Hertz's small-strain law has left its domain: a wall
    driven through a soft particle);
 2. balances the mechanical energy when no wall moves: kinetic plus Hertz
-   elastic energy (:func:`sintercond.forces.hertz_elastic_energy`, at the
+   elastic energy (:func:`sintercond.laws.forces.hertz_elastic_energy`, at the
    current, possibly softened, moduli) minus gravity's work since the start
    may not exceed the energy at the start by more than
    :data:`ENERGY_TOLERANCE` of the energies involved. Damping and friction
@@ -37,7 +37,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sintercond import forces, mechanics, simulate
+from sintercond import simulate
+from sintercond.laws import forces
+from sintercond.sim import mechanics
 
 ENERGY_TOLERANCE = 0.25
 """Allowed excess of the mechanical energy over its start, as a fraction of the energies involved (the

@@ -2,30 +2,30 @@
 
 Quintana-Ruiz & Campello (2020), Sects. 2 and 4, with the readings of
 ``MECHANICS.md`` (cited as "erratum N"). The contact laws of one contact are
-:mod:`sintercond.forces`; this module lifts them to a jax-md Dense neighbour
+:mod:`sintercond.laws.forces`; this module lifts them to a jax-md Dense neighbour
 table (``[n, m]``, padding ``n``) and to plane walls, and integrates the
 motion. :mod:`sintercond.simulate` builds the coupled step from it
 (``Physics(mechanics=Mechanics(...))``, the sub-spec :class:`Mechanics`).
 
 Pairs
 -----
-The laws run on a half pair list (:class:`sintercond.pair_list.HalfPairs`,
+The laws run on a half pair list (:class:`sintercond.contacts.pair_list.HalfPairs`,
 ``[capacity, 2]``, each pair ``i < j`` once, kept within
 ``r_i + r_j + skin``), built from the jax-md Dense list whenever that list
 is rebuilt (MECHANICS.md, "Contacts and history"). The force on ``i`` is
-added to ``i`` and subtracted from ``j`` (:func:`sintercond.pair_list.pair_exchange`),
+added to ``i`` and subtracted from ``j`` (:func:`sintercond.contacts.pair_list.pair_exchange`),
 so momentum is conserved by construction; the springs belong to the pair
 (``[capacity, 3]``, the spring of ``i`` relative to ``j``) and follow it
 through rebuilds and reallocations (:func:`remap_history`). The list is
 sorted by ``(i, j)``, so the sums over it do not depend on when the list was
 last rebuilt or on its capacity. The per-pair part (:func:`pair_loads`) is
 separate from the sums so that the coupled step can evaluate long lists
-block by block (:func:`sintercond.pair_list.map_pair_blocks`, on the CPU)
+block by block (:func:`sintercond.contacts.pair_list.map_pair_blocks`, on the CPU)
 and sum once.
 
 Walls (Remark 1)
 ----------------
-A :class:`sintercond.walls.PlaneWall` is the partner ``j`` of every particle
+A :class:`sintercond.laws.walls.PlaneWall` is the partner ``j`` of every particle
 with infinite radius, mass and modulus: ``r* = r_i``, ``m* = m_i``,
 ``E* = E_i/(1 - nu_i^2)``, ``G* = G_i``, ``j* = I_i + m_i r_i^2``; its surface
 velocity enters the relative velocity and its point moves with it
@@ -53,11 +53,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from sintercond._validation import all_concrete, shown
-from sintercond import forces
+from sintercond.laws import forces
 from sintercond._deprecation import old_names
 from sintercond._numerics import materialized
-from sintercond.materials import softened_modulus
-from sintercond.pair_list import HalfPairs, remap_half_pairs
+from sintercond.laws.materials import softened_modulus
+from sintercond.contacts.pair_list import HalfPairs, remap_half_pairs
 from sintercond.state import pytree_dataclass
 
 
@@ -71,7 +71,7 @@ class Mechanics:
     is the thermal step alone: nothing of this is traced.
 
     Attributes:
-      walls: :class:`sintercond.walls.PlaneWall` s that push, rub and (mode
+      walls: :class:`sintercond.laws.walls.PlaneWall` s that push, rub and (mode
         ``"conducting"``) exchange heat at their fixed temperature: a tuple,
         each wall's ``point``, ``normal`` and ``velocity`` tuples of floats
         (:meth:`create` converts sequences). Static: the number of walls
@@ -113,7 +113,7 @@ class Mechanics:
     force_dtype: str | None = None
 
     def __post_init__(self):
-        from sintercond.walls import PlaneWall
+        from sintercond.laws.walls import PlaneWall
 
         if self.shear not in forces.SHEAR_CONVENTIONS:
             raise ValueError(f"Mechanics.shear must be one of {list(forces.SHEAR_CONVENTIONS)}; got {self.shear!r}")
@@ -148,7 +148,7 @@ class Mechanics:
         """A normalised :class:`Mechanics`: walls and gravity as tuples of floats, NumPy booleans as bools, and
         ``wall_friction`` (``wall_rolling``) True where ``friction`` (``rolling``) is off, so that two specs that
         mean the same step compare equal and compile once. ``flags``: the other fields."""
-        from sintercond.walls import PlaneWall
+        from sintercond.laws.walls import PlaneWall
 
         for name, value in (("friction", friction), ("rolling", rolling), ("wall_friction", wall_friction),
                             ("wall_rolling", wall_rolling)):  # bool("no") is True: friction="no" turned it on
@@ -289,7 +289,7 @@ class MechanicalState:
       rolling: ``[capacity, 3]`` rolling springs per pair (rad); None without rolling.
       wall_spring, wall_rolling: ``[n_walls, n, 3]`` the same against each wall.
       neck: ``[capacity]`` the sintered neck radius of each pair (m), with
-        ``Physics.sintering`` (:mod:`sintercond.neck_growth`); None without.
+        ``Physics.sintering`` (:mod:`sintercond.sim.neck_growth`); None without.
       neck_overlap: ``[capacity]`` its approach ``H(a)`` (m, Rojek et al.
         2022, Eqs. 23-27): the part of the pair's overlap the neck accounts
         for, which the elastic laws do not see; None without sintering.
@@ -313,7 +313,7 @@ def mechanical_state(spec, positions, contacts, velocity=None, spin=None) -> Mec
       positions: ``[n, 3]`` (m), for shapes and dtype.
       contacts: the :class:`sintercond.state.DynamicContacts` of
         :func:`sintercond.simulate.dynamic_contacts` (or its
-        :class:`sintercond.pair_list.HalfPairs`): the springs are laid on
+        :class:`sintercond.contacts.pair_list.HalfPairs`): the springs are laid on
         its half pair list.
     """
     for name, value in (("velocity", velocity), ("spin", spin)):
@@ -392,7 +392,7 @@ def compiler_options(physics):
 class PairGeometry(NamedTuple):
     """The pairs of a half pair list ``[c, 2]`` (``i < j``; padding ``(n, n)``).
 
-    ``pairs``: the list (for :func:`sintercond.pair_list.pair_sum`); ``i``,
+    ``pairs``: the list (for :func:`sintercond.contacts.pair_list.pair_sum`); ``i``,
     ``j``: its ends, padding replaced by particle 0 (safe to gather);
     ``valid`` (a real pair); ``touching`` (overlap > 0); ``normal``
     ``[c, 3]`` unit vector from ``i`` to ``j`` (``e_z`` for padding);
@@ -452,7 +452,7 @@ def particle_modulus(spec, params: MechanicalParams, temperature, material):
 class Body:
     """One side of a set of contacts as the contact laws see it (SI units; arrays over the contacts).
 
-    A wall is a body of infinite radius and mass (:mod:`sintercond.walls`) that does not spin.
+    A wall is a body of infinite radius and mass (:mod:`sintercond.laws.walls`) that does not spin.
 
     Attributes:
       radius: (m).
@@ -605,7 +605,7 @@ def remap_history(state: MechanicalState, old_pairs, new_pairs) -> MechanicalSta
     """Carry the pair springs (and sintered necks) from the half list ``old_pairs`` to ``new_pairs`` by ``(i, j)``
     identity.
 
-    :func:`sintercond.pair_list.remap_half_pairs`: a pair new to the list
+    :func:`sintercond.contacts.pair_list.remap_half_pairs`: a pair new to the list
     starts at zero; the lists may differ in capacity (a reallocation). Call
     it when the list is rebuilt (under the rebuild's ``lax.cond``).
     """
@@ -630,7 +630,7 @@ def integrate(positions, state: MechanicalState, force, torque, mass, radii, dt)
 
 
 def mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v_rel, delta=None, **kwargs):
-    """Time step of the packing: :func:`sintercond.forces.contact_time_step` for its stiffest contact (s).
+    """Time step of the packing: :func:`sintercond.laws.forces.contact_time_step` for its stiffest contact (s).
 
     Evaluated for every pair of the neighbour table (touching or not) and
     every particle against every wall, at the unsoftened modulus ``E0``
@@ -638,7 +638,7 @@ def mechanical_time_step(spec, particles, neighbors, params: MechanicalParams, v
     for the static overlap under a load if that exceeds the collision's),
     approach speed ``v_rel`` (m/s), and the damping ratios of ``params``.
     The tangential and rolling modes count only when friction or rolling is
-    on. ``kwargs`` go to :func:`sintercond.forces.contact_time_step`
+    on. ``kwargs`` go to :func:`sintercond.laws.forces.contact_time_step`
     (``fraction``, ``safety``). Compiled once per :class:`Mechanics` spec and shapes
     (eagerly it dispatches ~100 operations: seconds at set-up). Concrete inputs are checked first: ``v_rel``
     finite and > 0 m/s, ``delta`` None or finite and >= 0 m, ``params`` by :func:`validate_mechanical_params`
@@ -701,7 +701,7 @@ def check_mechanical_time_step(dt, spec, particles, neighbors, params: Mechanica
 
 
 # Old names, kept for one release: each time-step function has its own name (issue 24).
-__getattr__ = old_names("sintercond.mechanics", {
-    "stable_time_step": ("sintercond.mechanics", "mechanical_time_step"),
-    "check_time_step": ("sintercond.mechanics", "check_mechanical_time_step"),
+__getattr__ = old_names("sintercond.sim.mechanics", {
+    "stable_time_step": ("sintercond.sim.mechanics", "mechanical_time_step"),
+    "check_time_step": ("sintercond.sim.mechanics", "check_mechanical_time_step"),
 })

@@ -3,18 +3,18 @@ its update.
 
 First stage (SINTERING.md section 3 of the design notes; docs/simulator.md): the packing does not move and each
 contact sinters on its own. The neck radius ``a`` of every contact is state; every ``Sintering.every`` thermal steps
-it grows by the kinetic law of :mod:`sintercond.sintering` over those steps' duration, and the contact's approach
+it grows by the kinetic law of :mod:`sintercond.laws.sintering` over those steps' duration, and the contact's approach
 follows it through Rojek et al. (2022)'s volume-conserving geometry, ``h = H(a)`` (Eqs. 23-27;
-:func:`sintercond.sintering.neck_overlap`). The conductance law is applied to the grown neck at every step
+:func:`sintercond.laws.sintering.neck_overlap`). The conductance law is applied to the grown neck at every step
 (``Conduction(conductance="lifted")``), so the pipe network stiffens as the necks grow, and the parameters of both
 laws stay differentiable.
 
 The temperature of a growth interval
 ------------------------------------
 A neck update covers the ``every`` steps since the last one. The pair temperature of the interval is the mean of the
-pair temperature (:func:`sintercond.sintering.pair_temperature`, the mean of the two particles) at its start and at
+pair temperature (:func:`sintercond.laws.sintering.pair_temperature`, the mean of the two particles) at its start and at
 its end, and the neck grows over the interval at that constant temperature, integrated exactly by
-:func:`sintercond.sintering.grow_neck`. The trapezoid makes the error second order in the interval for a smooth
+:func:`sintercond.laws.sintering.grow_neck`. The trapezoid makes the error second order in the interval for a smooth
 temperature history (``benchmarks/sintering_step.py`` measures it against ``every``).
 
 Shrinkage
@@ -37,7 +37,7 @@ approach rate ``dh/dt`` with the dashpot ``eta_N``, and on every particle that i
 ``m / eta_N`` is some 1e-24 s, so the balance is quasi-static. Over an update interval it is taken in the
 displacements ``u`` with each contact's secant dashpot: the free growth of the first stage gives the contact's free
 approach ``dh_free`` over the interval (``eta_N dh_free = F_s dt`` for a free pair), so
-``w_ij = F_s,ij / dh_free,ij`` (``F_s`` from the kinetic law's ``force``, :class:`sintercond.sintering.KineticLaw`)
+``w_ij = F_s,ij / dh_free,ij`` (``F_s`` from the kinetic law's ``force``, :class:`sintercond.laws.sintering.KineticLaw`)
 and the balance is the sparse symmetric positive semi-definite system::
 
     sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0
@@ -61,7 +61,7 @@ gradient treats the choice of the free motions as fixed (exact for distances, ne
 temperatures away from position-dependent sources; for absolute positions, to within the choice's own
 dependence on the weights). The components given in ``NeckState.supports`` do not move (particles resting on a plate:
 the plate's normal). Each contact's neck then follows its approach through Rojek's geometry,
-``a = H^-1(H(a_0) + dh)`` (:func:`sintercond.neck.neck_radius`), never below ``a_0`` and never beyond the
+``a = H^-1(H(a_0) + dh)`` (:func:`sintercond.laws.neck.neck_radius`), never below ``a_0`` and never beyond the
 law's cap. Only sintering forces enter: gravity and external loads do not (for the 45-105 um Ti6Al4V of the
 preheating scenes a particle's weight is some 1e-8 N against sintering forces of some 1e-4 N, ``pi gamma_s r*``
 with ``gamma_s`` about 2 N/m), so the grain-boundary law's ``A`` need not be split into its factors.
@@ -69,8 +69,8 @@ The shrinkage of :func:`neck_statistics` is then measured from the positions.
 
 With the mechanics
 ------------------
-With :class:`sintercond.mechanics.Mechanics` on (dynamic contacts), the neck of each pair is history on the half
-pair list, :attr:`sintercond.mechanics.MechanicalState.neck` with its approach ``neck_overlap = H(a)``, carried
+With :class:`sintercond.sim.mechanics.Mechanics` on (dynamic contacts), the neck of each pair is history on the half
+pair list, :attr:`sintercond.sim.mechanics.MechanicalState.neck` with its approach ``neck_overlap = H(a)``, carried
 across rebuilds and reallocations as the tangential springs are (a pair new to the list starts as a point
 contact). The elastic laws act on what the neck does not account for, ``delta - H(a)`` (touching only where that
 is positive; :func:`sintercond.simulate.sintered_geometry`), as a plastic overlap does in MercuryDPM's sinter
@@ -90,7 +90,7 @@ taken as necks). The sintering time scale is seconds to minutes and the mechanic
 Stability
 ---------
 Growing necks raise the conductances, and with them lower the explicit step's limit
-(:func:`sintercond.thermal.explicit_stability_limit`). Every neck update checks ``dt <= C_i / sum_j K_ij`` on the
+(:func:`sintercond.sim.thermal.explicit_stability_limit`). Every neck update checks ``dt <= C_i / sum_j K_ij`` on the
 grown necks (held particles left out; convection and radiation, which the automatic step of a scene linearises,
 are not counted) and sets :attr:`NeckState.unstable` where it fails; :func:`sintercond.rollout.advance` and
 ``sintercond run`` refuse such a state on the host, naming the step and the limit. :func:`sintercond.simulate.rollout`
@@ -110,11 +110,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from sintercond import sintering
+from sintercond.laws import sintering
 from sintercond._validation import all_concrete, require_law_params, shown
-from sintercond.mechanics import MechanicalState, pair_geometry
-from sintercond.neck import neck_radius
-from sintercond.pair_list import pair_sum
+from sintercond.sim.mechanics import MechanicalState, pair_geometry
+from sintercond.laws.neck import neck_radius
+from sintercond.contacts.pair_list import pair_sum
 from sintercond.state import DynamicContacts, LiftedContacts, pytree_dataclass
 
 
@@ -133,7 +133,7 @@ unknown)."""
 
 POINT_CONTACT_GAP = 1e-9
 """With the mechanics, spheres whose surfaces are less than this fraction of ``r_i + r_j`` apart are in contact for
-sintering (:func:`sintercond.mechanics.pair_geometry`'s ``gap``): the point contacts of a touching lattice, at zero
+sintering (:func:`sintercond.sim.mechanics.pair_geometry`'s ``gap``): the point contacts of a touching lattice, at zero
 overlap to round-off, sinter as the static table's do."""
 
 NECK_STARTS = ("point", "overlap")
@@ -151,10 +151,10 @@ class Sintering:
     """The sintering sub-spec of :class:`sintercond.simulate.Physics`: necks that grow with the temperature history.
 
     Attributes:
-      law: a key of :data:`sintercond.sintering.KINETIC_LAWS` (``"grain_boundary"``, ``"power_law"``,
+      law: a key of :data:`sintercond.laws.sintering.KINETIC_LAWS` (``"grain_boundary"``, ``"power_law"``,
         ``"viscous"``); its parameters are ``Params.sintering``.
       every: thermal steps between two neck updates (>= 1); each update grows the necks over those steps.
-      quadrature_nodes, newton_iterations: of :func:`sintercond.sintering.grow_neck` (>= 1). An update
+      quadrature_nodes, newton_iterations: of :func:`sintercond.laws.sintering.grow_neck` (>= 1). An update
         interval grows a neck by a small fraction of itself, so fewer than the law tier's defaults (8, 4)
         reach round-off: 4 and 2 agree with them to 1e-12 on the pulsed chain of ``benchmarks/sintering_step.py``
         (its table gives the error of each choice).
@@ -190,7 +190,7 @@ class Sintering:
 class NeckState:
     """What the sintering step carries besides the necks (which live on the contacts' pairs: the static table's
     :class:`sintercond.state.LiftedContacts`, or with the mechanics the half pair list's
-    :class:`sintercond.mechanics.MechanicalState`).
+    :class:`sintercond.sim.mechanics.MechanicalState`).
 
     Attributes:
       start_overlap: ``[c]`` the approach of each contact at the start of the run (m), for the shrinkage (None
@@ -295,7 +295,7 @@ def validate_sintering(spec: Sintering, params, contacts: LiftedContacts, radii,
                        ) -> None:
     """Raise ``ValueError`` naming the field unless the necks and the kinetic parameters can grow (concrete values).
 
-    Parameters as :func:`sintercond.sintering.validate_growth_inputs` wants them; every neck in
+    Parameters as :func:`sintercond.laws.sintering.validate_growth_inputs` wants them; every neck in
     ``[0, min(r_i, r_j)]`` of its pair. With ``carried`` (the state's :class:`NeckState`): supports given exactly
     when the shrinkage is many-body, and then every contact's centres at the start positions no farther apart than
     its radii (a contact across a periodic boundary cannot shrink by moving its particles).
@@ -507,7 +507,7 @@ def met_necks(geometry, neck, neck_overlap, moved, radii):
     """``(neck, neck_overlap)`` ``[c]`` (m) of a half pair list after a many-body balance moved its particles to
     ``moved`` ``[n, 3]`` (m): a pair that the displacements brought into contact met at the sintering's creeping
     pace, not by an impact, so its overlap is taken as a neck (``a = H^-1(delta)``) and the elastic laws do not
-    see it. ``geometry``: the :class:`sintercond.mechanics.PairGeometry` before the move, with the gap
+    see it. ``geometry``: the :class:`sintercond.sim.mechanics.PairGeometry` before the move, with the gap
     :data:`POINT_CONTACT_GAP`."""
     after = pair_geometry(moved, radii, geometry.pairs, POINT_CONTACT_GAP)
     closed = after.touching & ~geometry.touching
@@ -518,7 +518,7 @@ def met_necks(geometry, neck, neck_overlap, moved, radii):
 
 def pair_necks(contacts: DynamicContacts, positions, radii, start: str = "point"):
     """``(neck, neck_overlap)`` ``[capacity]`` (m) of a half pair list at the start of a sintering run with the
-    mechanics: :attr:`sintercond.mechanics.MechanicalState.neck` and ``neck_overlap``.
+    mechanics: :attr:`sintercond.sim.mechanics.MechanicalState.neck` and ``neck_overlap``.
 
     ``start``: ``"point"``, every contact a point contact (``a = 0``: the overlaps stay elastic, the packing keeps
     its load); ``"overlap"``, every overlap ``delta`` taken as a sintered neck, the volume-conserving neck of it
@@ -537,7 +537,7 @@ def pair_necks(contacts: DynamicContacts, positions, radii, start: str = "point"
 
 def with_pair_necks(motion: MechanicalState, contacts: DynamicContacts, positions, radii, start: str = "point"
                     ) -> MechanicalState:
-    """``motion`` (:func:`sintercond.mechanics.mechanical_state`) with the necks of :func:`pair_necks`."""
+    """``motion`` (:func:`sintercond.sim.mechanics.mechanical_state`) with the necks of :func:`pair_necks`."""
     neck, overlap = pair_necks(contacts, positions, radii, start)
     return dataclasses.replace(motion, neck=neck, neck_overlap=overlap)
 
