@@ -21,7 +21,7 @@ LAYERS = {
     "laws": ["neck", "conductance", "forces", "materials", "heat_sources", "walls", "sintering", "effective",
              "dryden_zok", "tortuosity", "geometry"],
     "space": ["neighbors", "pair_list"],
-    "lifts": ["network", "mechanics", "thermal", "neck_growth"],
+    "lifts": ["network", "sphere_coupling", "mechanics", "thermal", "neck_growth"],
     "drive": ["sim", "sim.physics", "sim.state", "sim.contacts", "sim.terms", "sim.terms.sources", "sim.terms.walls",
               "sim.terms.conduction", "sim.terms.mechanics", "sim.terms.sintering", "sim.step", "sim.stability",
               "sim.validation", "sim.rollout", "simulate", "steady", "rollout", "guards"],
