@@ -245,7 +245,7 @@ def resistance_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
     green = jnp.where(coupled[:, :, None] & coupled[:, None, :], geometry.green, 0.0)
     scale = 1.0 / (4.0 * jnp.pi * kappa * radii)
     diag = jnp.where(coupled, half_resistance, 0.0)
-    count = jnp.sum(coupled, axis=1)
+    count = jnp.sum(coupled, axis=1).astype(diag.dtype)
     filler = jnp.where(count > 0, safe_divide(jnp.sum(diag, axis=1), count), 4.0 * jnp.pi * scale)
     diag = jnp.where(coupled, diag, filler[:, None])
     return green * scale[:, None, None] + diag[:, :, None] * jnp.eye(coupled.shape[1], dtype=diag.dtype)

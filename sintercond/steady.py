@@ -15,8 +15,10 @@ they are not in :mod:`sintercond.thermal`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import typing
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.sparse.linalg import cg
@@ -149,19 +151,15 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
         physics, sim_module.Params(kappa, kappa, law={} if params is None else dict(params)))
     contacts = setup.contacts
     radii = jnp.asarray(setup.radii)
-    conductance = sim_module.conductance_lift(
-        physics, radii, jnp.arange(n, dtype=jnp.int32), contacts.neighbors, contacts.neck, contacts.overlap, kappa,
-        law_params)
     hot = jnp.asarray(setup.hot)
     if coupling == "sphere":
-        geometry = _sphere_geometry(setup, contacts.neighbors, contacts.neck, axis, periodic_box)
-        half = half_resistances(physics.conduction.law, radii, contacts.neighbors, contacts.neck, contacts.overlap,
-                                kappa, law_params, conductance)
-        blocks = conductance_blocks(geometry, resistance_blocks(geometry, half, radii, kappa))
-        temperature, outflow = coupled_steady_state(geometry, blocks, jnp.asarray(setup.hot | setup.cold),
-                                                    jnp.where(hot, 1.0, 0.0), tol=tol)
-        q = jnp.sum(jnp.where(hot, outflow, 0.0))
+        geometry = _sphere_geometry(setup, contacts.neighbors, contacts.neck, axis)
+        solve = _coupled_solve(physics, tol)
+        q, temperature = solve(geometry, radii, contacts, kappa, law_params, jnp.asarray(setup.hot | setup.cold), hot)
     else:
+        conductance = sim_module.conductance_lift(
+            physics, radii, jnp.arange(n, dtype=jnp.int32), contacts.neighbors, contacts.neck, contacts.overlap,
+            kappa, law_params)
         table = ContactTable(contacts.neighbors, conductance)
         temperature = steady_state(table, jnp.asarray(setup.hot | setup.cold), jnp.where(hot, 1.0, 0.0), tol=tol)
         q = -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0))
@@ -175,12 +173,38 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     return k_star, jnp.where(jnp.asarray(reached), temperature, jnp.nan)
 
 
+def _coupled_solve(physics, tol):
+    """The coupled steady solve of :func:`steady_state_conductivity` from the necks, one compiled program
+    (cached per law and tolerance; a law object, unhashable, is compiled afresh): ``(Q_hot, temperature)``."""
+    try:
+        return _compiled_coupled_solve(physics, tol)
+    except TypeError:  # unhashable law object
+        return _compiled_coupled_solve.__wrapped__(physics, tol)
+
+
+@functools.cache
+def _compiled_coupled_solve(physics, tol):
+    law = physics.conduction.law
+
+    def solve(geometry, radii, contacts, kappa, law_params, fixed, hot):
+        n = radii.shape[0]
+        conductance = sim_module.conductance_lift(physics, radii, jnp.arange(n, dtype=jnp.int32), contacts.neighbors,
+                                                  contacts.neck, contacts.overlap, kappa, law_params)
+        half = half_resistances(law, radii, contacts.neighbors, contacts.neck, contacts.overlap, kappa, law_params,
+                                conductance)
+        blocks = conductance_blocks(geometry, resistance_blocks(geometry, half, radii, kappa))
+        temperature, outflow = coupled_steady_state(geometry, blocks, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
+        return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature
+
+    return jax.jit(solve)
+
+
 def _check_coupling(coupling):
     if not isinstance(coupling, str) or coupling not in COUPLINGS:
         raise ValueError(f"coupling must be one of {list(COUPLINGS)}; got {coupling!r}")
 
 
-def _sphere_geometry(setup, neighbors, neck, axis, periodic_box):
+def _sphere_geometry(setup, neighbors, neck, axis):
     """:func:`sintercond.sphere_coupling.sphere_geometry` of a steady setup: hot spheres labelled 1, cold 2."""
     pairs = setup.pairs
     id_neighbors, pair_id = ell_table(pairs.n_particles, pairs.i, pairs.j, np.arange(1, len(pairs.i) + 1))
