@@ -192,11 +192,29 @@ def _compiled_coupled_solve(physics, tol):
                                                   contacts.neck, contacts.overlap, kappa, law_params)
         half = half_resistances(law, radii, contacts.neighbors, contacts.neck, contacts.overlap, kappa, law_params,
                                 conductance)
-        blocks = conductance_blocks(geometry, resistance_blocks(geometry, half, radii, kappa))
-        temperature, outflow = coupled_steady_state(geometry, blocks, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
-        return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature
+        return _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol)
 
     return jax.jit(solve)
+
+
+@functools.cache
+def _compiled_network_coupled_solve(tol):
+    """The coupled solve of :func:`steady_state_network_conductivity` (``K_ij`` given), one compiled program."""
+    def solve(geometry, conductance, neighbors, radii, kappa, fixed, hot):
+        # Rojek's halves on a shared neck (Eq. 43, slope kappa_k pi a): the resistance in the proportion 1/kappa_k
+        kappa_n = kappa[neighbors]
+        half = safe_divide(kappa_n, (kappa[:, None] + kappa_n) * conductance)
+        geometry = dataclasses.replace(geometry, coupled=geometry.coupled & (conductance > 0))
+        return _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol)
+
+    return jax.jit(solve)
+
+
+def _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol):
+    """``(Q, temperature [n])``: the heat leaving the ``hot`` spheres (held at 1, the rest of ``fixed`` at 0)."""
+    blocks = conductance_blocks(geometry, resistance_blocks(geometry, half, radii, kappa))
+    temperature, outflow = coupled_steady_state(geometry, blocks, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
+    return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature
 
 
 def _check_coupling(coupling):
@@ -352,14 +370,9 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
         box_periods = _across_axis(periodic_box, centres, radii, axis, box)
         geometry = sphere_geometry(centres, radii, neighbors, slot, neck, held=held, axis=axis,
                                    periodic_box=box_periods)
-        geometry = dataclasses.replace(geometry, coupled=geometry.coupled & (conductance > 0))
-        # Rojek's halves on a shared neck: the resistance in the proportion 1/kappa_k
-        kappa_n = kappa[jnp.asarray(neighbors)]
-        half = safe_divide(kappa_n, (kappa[:, None] + kappa_n) * conductance)
-        blocks = conductance_blocks(geometry, resistance_blocks(geometry, half, jnp.asarray(radii), kappa))
-        _, outflow = coupled_steady_state(geometry, blocks, jnp.asarray(hot | cold), jnp.where(hot_mask, 1.0, 0.0),
-                                          tol=tol)
-        return jnp.sum(jnp.where(hot_mask, outflow, 0.0)) * length / area
+        q, _ = _compiled_network_coupled_solve(tol)(geometry, conductance, jnp.asarray(neighbors), jnp.asarray(radii),
+                                                    kappa, jnp.asarray(hot | cold), hot_mask)
+        return q * length / area
     table = ContactTable(jnp.asarray(neighbors, dtype=jnp.int32), conductance)
     temperature = steady_state(table, jnp.asarray(hot | cold), jnp.where(hot_mask, 1.0, 0.0), tol=tol)
     q = -jnp.sum(jnp.where(hot_mask, heat_inflow(temperature, table), 0.0))
