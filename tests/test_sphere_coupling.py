@@ -8,12 +8,13 @@ built as real periodic packings and go through the public steady solver.
 
 import csv
 import pathlib
+import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from fullfield import LATTICES, coupled_lattice_kstar, necks, overlap_for_neck, rizza_bcc_geometry
+from fullfield import coupled_lattice_kstar, lattice_block, necks, rizza_block
 
 from sintercond.neck import max_overlap
 from sintercond.network import contact_pairs, pair_conductances
@@ -21,55 +22,28 @@ from sintercond.sphere_coupling import GREEN_OPPOSITE, surface_green, surface_gr
 from sintercond.steady import face_layer_box, steady_state_conductivity, steady_state_network_conductivity
 
 DATA = pathlib.Path(__file__).parent / "data"
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+from fullfield_cells import RIZZA_NECKS, cluster_geometry  # noqa: E402  (the reference geometries' own script)
 ROJEK_SLOPE = 1.064
 
 
 def reference_rows():
     with open(DATA / "fullfield_cells.csv") as f:
-        return {r["structure"] + "@" + r["a_over_r"]: r for r in csv.DictReader(l for l in f if not l.startswith("#"))}
+        return {r["structure"] + "@" + r["a_over_r"]: r for r in csv.DictReader(line for line in f if not line.startswith("#"))}
 
 
 def pair_law_over_fe(a_over_r):
     """Rojek's half (1.064 kappa pi a) over the independent FE half at ``a/r`` (tests/data/fe_neck_conductance.csv,
     linear interpolation): the pair law's own error, which every network built on it carries."""
     with open(DATA / "fe_neck_conductance.csv") as f:
-        rows = list(csv.DictReader(l for l in f if not l.startswith("#")))
+        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
     x = np.array([float(r["a_over_r"]) for r in rows])
     y = np.array([float(r["K_over_Kcyl"]) for r in rows])
     return ROJEK_SLOPE * a_over_r / float(np.interp(a_over_r, x, y))
 
 
 # --------------------------------------------------------------------------
-# packings
-
-
-def lattice_block(kind, a_over_r, cells=2):
-    """Equal spheres (r = 1) of a cubic lattice whose nearest necks have radius ``a_over_r``: ``cells`` conventional
-    cells along x between the held layers x = 0 and x = cells L, two cells across, periodic across x. Returns
-    ``(centres, radii, L, kwargs)`` for :func:`steady_state_conductivity`."""
-    basis, dnn = LATTICES[kind]
-    length = (2.0 - overlap_for_neck(a_over_r)) / dnn
-    return _periodic_block(basis, np.ones(len(basis)), length, cells)
-
-
-def rizza_block(a_corner, a_centre, cells=2):
-    """Rizza & Galati (2024)'s BCC cell (tests/fullfield.py: corner spheres of 40 um, a centre sphere sized for its
-    neck), as :func:`lattice_block`: 14 necks on a corner sphere, 8 on a centre one."""
-    length, r_centre, *_ = rizza_bcc_geometry(a_corner, a_centre)
-    return _periodic_block(LATTICES["BCC"][0], np.array([40.0, r_centre]), length, cells)
-
-
-def _periodic_block(basis, basis_radii, length, cells):
-    sites, radii = [], []
-    for i in range(cells + 1):
-        for j in range(2):
-            for k in range(2):
-                for b, r in zip(basis, basis_radii):
-                    if i + b[0] <= cells + 1e-9:
-                        sites.append((np.array([i, j, k]) + b) * length)
-                        radii.append(r)
-    box = (np.array([-1e-9, 0.0, 0.0]), np.array([cells * length + 1e-9, 2 * length, 2 * length]))
-    return np.array(sites), np.array(radii), length, dict(box=box, periodic_box=[1.0, 2 * length, 2 * length])
+# packings (lattice_block, rizza_block: tests/fullfield.py)
 
 
 def chain(radii, overlap):
@@ -191,9 +165,6 @@ def test_cells_within_two_percent_of_the_full_field(lattice_values, kind, a_over
     assert abs(err_isolated) > abs(err_coupled) + 0.01
 
 
-RIZZA_NECKS = {2.5: (6.31, 5.96), 5.5: (7.48, 7.02), 9.5: (8.62, 8.09)}  # Rizza & Galati (2024) Table 3, um
-
-
 @pytest.fixture(scope="module")
 def rizza_values():
     out = {}
@@ -225,22 +196,11 @@ def test_rizza_cells_within_two_percent_of_the_full_field(rizza_values, time_s):
 # (c) a random cluster
 
 
-def cluster7():
-    """The seven spheres of benchmarks/fullfield_cells.py (cluster_geometry, seed 40): A, B held on the hot plate
-    z = 0 (their centres on it), G on the cold plate, four free spheres, nine necks, a loop."""
-    import sys
-
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
-    from fullfield_cells import cluster_geometry
-
-    return cluster_geometry()
-
-
 def test_cluster_against_its_full_field_heat():
     """The 7-sphere cluster's heat Q/(kappa dT r) within 2 % of the full field after the pair law's error at the
     necks' mean a/r; held spheres by mirror images, the full field's plates being isothermal planes through
     their centres. (Its necks are mostly near-opposite: coupled and isolated differ by 0.03 % here.)"""
-    centres, radii = cluster7()
+    centres, radii = cluster_geometry()  # benchmarks/fullfield_cells.py, seed 40
     lo = np.array([centres[:, 0].min() - 1.15, centres[:, 1].min() - 1.15, 0.0])
     hi = np.array([centres[:, 0].max() + 1.15, centres[:, 1].max() + 1.15, centres[:, 2].max()])
     row = next(r for k, r in reference_rows().items() if k.startswith("cluster7@"))
