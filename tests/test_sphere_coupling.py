@@ -311,12 +311,13 @@ def test_field_is_returned():
 
 
 def test_float32_agrees_with_float64():
-    """With x64 off the coupled k* of an FCC block agrees with float64 to 1e-4 (the docstring's accuracy)."""
+    """With x64 off the coupled k* of an FCC block agrees with float64 to 2e-5 (the docstring's "about 1e-5";
+    measured 5e-6 here, 4e-7 on Rizza & Galati's cell)."""
     centres, radii, _, kw = lattice_block("FCC", 0.22)
     k64 = kstar(centres, radii, "sphere", **kw)
     with jax.enable_x64(False):
         k32 = steady_state_conductivity(centres, radii, 1.0, coupling="sphere", tol=1e-6, **kw)
-    assert k32 == pytest.approx(k64, rel=1e-4)
+    assert k32 == pytest.approx(k64, rel=2e-5)
 
 
 # --------------------------------------------------------------------------
