@@ -39,6 +39,7 @@ LONGEST_FIRST = (
     "test_packing.py",  # (100)
     "test_neighbors.py",  # (95)
     "test_fit_sintering.py",  # (85)
+    "test_sphere_coupling.py",  # (200 on a loaded 2-core machine, Dec 2026) about ten compiled solve shapes
     "test_scene_mechanics.py",  # (85)
     "test_simulate.py",  # (80)
     "test_first_day.py",  # (70)

@@ -396,6 +396,37 @@ def rizza_bcc_geometry(a_corner, a_centre, r_corner=40.0):
     return length, float(r_centre), sites[touch], radii[touch], cylinders
 
 
+def lattice_block(kind, a_over_r, cells=2):
+    """Equal spheres (r = 1) of a cubic lattice whose nearest necks have radius ``a_over_r``: ``cells`` conventional
+    cells along x between the held layers x = 0 and x = cells L, two cells across, periodic across x. Returns
+    ``(centres, radii, L, kwargs)`` for ``sintercond.sim.steady.steady_state_conductivity`` (``box``, ``periodic_box``):
+    the network's k* of the infinite lattice, its held layers being lattice mirror planes."""
+    basis, dnn = LATTICES[kind]
+    length = (2.0 - overlap_for_neck(a_over_r)) / dnn
+    return _periodic_block(basis, np.ones(len(basis)), length, cells)
+
+
+def rizza_block(a_corner, a_centre, cells=2):
+    """Rizza & Galati (2024)'s BCC cell (:func:`rizza_bcc_geometry`: corner spheres of 40 um, a centre sphere sized
+    for its neck), as :func:`lattice_block`: 14 necks on a corner sphere, 8 on a centre one."""
+    length, r_centre, *_ = rizza_bcc_geometry(a_corner, a_centre)
+    return _periodic_block(LATTICES["BCC"][0], np.array([40.0, r_centre]), length, cells)
+
+
+def _periodic_block(basis, basis_radii, length, cells):
+    sites, radii = [], []
+    for i in range(cells + 1):
+        for j in range(2):
+            for k in range(2):
+                for b, r in zip(basis, basis_radii):
+                    if i + b[0] <= cells + 1e-9:
+                        sites.append((np.array([i, j, k]) + b) * length)
+                        radii.append(r)
+    box = (np.array([-1e-9, 0.0, 0.0]), np.array([cells * length + 1e-9, 2 * length, 2 * length]))
+    return np.array(sites), np.array(radii), length, dict(box=box, periodic_box=[1.0, 2 * length, 2 * length])
+
+
+
 def solve_lattice(length, sites, radii, n, cylinders=(), sub=2, tol=1e-10, use_amg=True, split=True) -> FieldResult:
     """k*/kappa along x of a cubic cell of side ``length``: the eighth ``[0, L/2]^3``, ``n`` voxels a side
     (:func:`solve_box_split`, or :func:`solve_box` with ``split=False``)."""

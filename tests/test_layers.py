@@ -21,7 +21,7 @@ LAYERS = {
     "laws": ["laws", "laws.neck", "laws.conductance", "laws.forces", "laws.materials", "laws.heat_sources", "laws.walls",
              "laws.sintering", "laws.effective", "laws.dryden_zok", "laws.tortuosity", "laws.geometry"],
     "space": ["contacts", "contacts.neighbors", "contacts.pair_list"],
-    "lifts": ["contacts.network", "sim.mechanics", "sim.thermal", "sim.neck_growth"],
+    "lifts": ["contacts.network", "contacts.sphere_coupling", "sim.mechanics", "sim.thermal", "sim.neck_growth"],
     "drive": ["sim", "sim.physics", "sim.state", "sim.contacts", "sim.terms", "sim.terms.sources", "sim.terms.walls",
               "sim.terms.conduction", "sim.terms.mechanics", "sim.terms.sintering", "sim.step", "sim.stability",
               "sim.validation", "sim.rollout", "simulate", "sim.steady", "rollout", "sim.guards"],

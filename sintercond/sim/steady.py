@@ -14,16 +14,30 @@ they are not in :mod:`sintercond.sim.thermal`.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import typing
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.sparse.linalg import cg
 
 from sintercond import simulate as sim_module
-from sintercond._validation import all_concrete
+from sintercond._numerics import safe_divide
+from sintercond._validation import all_concrete, require_positive
 from sintercond.laws.conductance import validate_pair_conductance_inputs
+from sintercond.laws.neck import neck_radius
 from sintercond.contacts.network import ContactTable, contact_pairs, ell_table, heat_inflow, laplacian, wall_inflow
+from sintercond.contacts.sphere_coupling import (
+    SphereGeometry,
+    coupled_apply,
+    coupled_diagonal,
+    conductance_blocks,
+    half_resistances,
+    resistance_blocks,
+    sphere_geometry,
+)
 
 
 def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
@@ -36,17 +50,57 @@ def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
     """
     fixed_mask = jnp.asarray(fixed_mask)
     held = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, table.conductance.dtype), 0.0)
+    return _held_solve(lambda x: laplacian(x, table), fixed_mask, held, wall_inflow(table, held.dtype), tol)
 
+
+def coupled_steady_state(geometry: SphereGeometry, conductance, fixed_mask, fixed_temperature, tol=1e-13):
+    """Steady state of the coupled neck network (:mod:`sintercond.contacts.sphere_coupling`) with held spheres.
+
+    The unknowns are the free spheres' and the necks' temperatures (a neck in no sphere's block is left
+    at 0); conjugate gradients with a Jacobi preconditioner, differentiated implicitly.
+
+    Args:
+      geometry: :func:`sintercond.contacts.sphere_coupling.sphere_geometry`.
+      conductance: ``[n, m, m]`` neck conductance blocks ``C_s`` (W/K).
+      fixed_mask: ``[n]`` held spheres. fixed_temperature: their temperatures (K), ``[n]`` or scalar.
+
+    Returns:
+      ``(temperature [n], outflow [n])``: sphere temperatures (K) and the heat leaving each sphere through
+      its necks (W; 0 on free spheres at convergence).
+    """
+    fixed_mask = jnp.asarray(fixed_mask)
+    n = fixed_mask.shape[0]
+    fixed = jnp.concatenate([fixed_mask, geometry.neck_fixed])
+    spheres = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, conductance.dtype), 0.0)
+    held = jnp.concatenate([spheres, jnp.zeros(fixed.shape[0] - n, conductance.dtype)])
+
+    def apply(x):
+        return jnp.concatenate(coupled_apply(geometry, conductance, x[:n], x[n:]))
+
+    diagonal = jnp.concatenate(coupled_diagonal(geometry, conductance))
+    inverse_diagonal = safe_divide(1.0, diagonal, fill=1.0)
+    x = _held_solve(apply, fixed, held, jnp.zeros_like(held), tol, preconditioner=lambda r: inverse_diagonal * r)
+    return x[:n], apply(x)[:n]
+
+
+def _held_solve(apply_fn, fixed_mask, held, inflow, tol, preconditioner=None):
+    """``x`` with ``x = held`` where ``fixed_mask`` and ``(A x) = inflow`` elsewhere, by conjugate gradients
+    (``A`` = ``apply_fn``, symmetric positive semi-definite)."""
     def matvec(x):
-        return jnp.where(fixed_mask, 0.0, laplacian(jnp.where(fixed_mask, 0.0, x), table))
+        return jnp.where(fixed_mask, 0.0, apply_fn(jnp.where(fixed_mask, 0.0, x)))
 
-    rhs = jnp.where(fixed_mask, 0.0, wall_inflow(table, held.dtype) - laplacian(held, table))
-    solution, _ = cg(matvec, rhs, tol=tol, maxiter=10 * fixed_mask.shape[0])
+    rhs = jnp.where(fixed_mask, 0.0, inflow - apply_fn(held))
+    solution, _ = cg(matvec, rhs, tol=tol, maxiter=10 * fixed_mask.shape[0], M=preconditioner)
     return jnp.where(fixed_mask, held, solution)
 
 
+COUPLINGS = ("none", "sphere")
+"""Values of ``coupling=``: the isolated pipe network, or necks coupled through their sphere
+(:mod:`sintercond.contacts.sphere_coupling`)."""
+
+
 def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", params=None, neck_model=None,
-                              box=None, tol=1e-13, field=False):
+                              box=None, tol=1e-13, field=False, coupling="none", periodic_box=None):
     """Effective conductivity ``k*`` (W/(m K)) of a packing along ``axis``, from one steady solve.
 
     Definition: the box (default: the bounding box of the centres, widened on
@@ -59,6 +113,19 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     to ``axis``: ``k* = Q L / (A (T_hot - T_cold))``. For a simple-cubic
     lattice of spacing ``a`` this is ``K_pair / a`` exactly.
 
+    ``coupling``: ``"none"`` (default) sums each contact's pair law as if its neck were alone on its
+    sphere; ``"sphere"`` couples the necks that share a sphere through its surface Green function
+    (:mod:`sintercond.contacts.sphere_coupling`: same pair law, chains and the simple-cubic cell unchanged, within
+    2 % of full-field solves on FCC and BCC cells up to a/r = 0.4 where the isolated network is 2-39 %
+    high; held spheres by mirror images). It refuses (``ValueError``) a packing where two necks of a
+    sphere are closer than their discs' angular half-widths. float64 by default; in float32 (x64 off)
+    the coupled ``k*`` agrees with float64 to about 1e-5 relative (measured 4e-7 to 5e-6 on
+    the FCC and BCC cells), with ``tol`` of 1e-6 or looser.
+
+    ``periodic_box``: ``[3]`` side lengths (m) of a packing periodic across the axis (contacts and neck
+    directions by minimum image); its entry along ``axis`` is ignored (the held faces bound the packing
+    there). Needs ``box``, whose sides across the axis are the periods.
+
     ``field=True`` returns ``(k*, temperature [n])``: the steady field between ``T = 1`` (hot) and ``0`` (cold),
     NaN on particles no chain of contacts joins to a held one (isolated particles and floating clusters: their
     temperature is undefined, not 0).
@@ -70,7 +137,8 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     (``jax.scipy.sparse.linalg.cg``, a ``custom_linear_solve``). Returns a
     float for concrete input, a JAX scalar under a transformation.
     """
-    setup = _conductivity_setup(centres, radii, axis, law, neck_model, box)
+    _check_coupling(coupling)
+    setup = _conductivity_setup(centres, radii, axis, law, neck_model, box, periodic_box)
     concrete = all_concrete(kappa, params)
     if concrete:
         validate_pair_conductance_inputs(law, setup.pairs.r_i, setup.pairs.r_j, setup.pairs.overlap,
@@ -80,14 +148,21 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     physics = setup.physics
     n = len(setup.radii)
     kappa = jnp.broadcast_to(jnp.asarray(kappa, float), (n,))
-    conductance = sim_module.conductance_lift(
-        physics, jnp.asarray(setup.radii), jnp.arange(n, dtype=jnp.int32), setup.contacts, kappa,
-        sim_module.merged_law_params(
-            physics, sim_module.Params(kappa, kappa, law={} if params is None else dict(params))))
-    table = ContactTable(setup.contacts.neighbors, conductance)
+    law_params = sim_module.merged_law_params(
+        physics, sim_module.Params(kappa, kappa, law={} if params is None else dict(params)))
+    contacts = setup.contacts
+    radii = jnp.asarray(setup.radii)
     hot = jnp.asarray(setup.hot)
-    temperature = steady_state(table, jnp.asarray(setup.hot | setup.cold), jnp.where(hot, 1.0, 0.0), tol=tol)
-    q = -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0))
+    if coupling == "sphere":
+        geometry = _sphere_geometry(setup, contacts.neighbors, contacts.table_neck, axis)
+        solve = _coupled_solve(physics, tol)
+        q, temperature = solve(geometry, radii, contacts, kappa, law_params, jnp.asarray(setup.hot | setup.cold), hot)
+    else:
+        conductance = sim_module.conductance_lift(
+            physics, radii, jnp.arange(n, dtype=jnp.int32), contacts, kappa, law_params)
+        table = ContactTable(contacts.neighbors, conductance)
+        temperature = steady_state(table, jnp.asarray(setup.hot | setup.cold), jnp.where(hot, 1.0, 0.0), tol=tol)
+        q = -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0))
     k_star = q * setup.length / setup.area
     k_star = float(k_star) if concrete else k_star
     if not field:
@@ -96,6 +171,66 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     label = connected_components(n, setup.pairs.i, setup.pairs.j)
     reached = np.isin(label, label[held])
     return k_star, jnp.where(jnp.asarray(reached), temperature, jnp.nan)
+
+
+def _coupled_solve(physics, tol):
+    """The coupled steady solve of :func:`steady_state_conductivity` from the necks, one compiled program
+    (cached per law and tolerance; a law object, unhashable, is compiled afresh): ``(Q_hot, temperature)``."""
+    try:
+        return _compiled_coupled_solve(physics, tol)
+    except TypeError:  # unhashable law object
+        return _compiled_coupled_solve.__wrapped__(physics, tol)
+
+
+@functools.cache
+def _compiled_coupled_solve(physics, tol):
+    law = physics.conduction.law
+
+    def solve(geometry, radii, contacts, kappa, law_params, fixed, hot):
+        n = radii.shape[0]
+        conductance = sim_module.conductance_lift(physics, radii, jnp.arange(n, dtype=jnp.int32), contacts, kappa,
+                                                  law_params)
+        half = half_resistances(law, radii, contacts.neighbors, contacts.table_neck, contacts.table_overlap, kappa,
+                                law_params, conductance)
+        return _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol)
+
+    return jax.jit(solve)
+
+
+@functools.cache
+def _compiled_network_coupled_solve(tol):
+    """The coupled solve of :func:`steady_state_network_conductivity` (``K_ij`` given), one compiled program."""
+    def solve(geometry, conductance, neighbors, radii, kappa, fixed, hot):
+        # Rojek's halves on a shared neck (Eq. 43, slope kappa_k pi a): the resistance in the proportion 1/kappa_k
+        kappa_n = kappa[neighbors]
+        half = safe_divide(kappa_n, (kappa[:, None] + kappa_n) * conductance)
+        geometry = dataclasses.replace(geometry, coupled=geometry.coupled & (conductance > 0))
+        return _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol)
+
+    return jax.jit(solve)
+
+
+def _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol):
+    """``(Q, temperature [n])``: the heat leaving the ``hot`` spheres (held at 1, the rest of ``fixed`` at 0)."""
+    blocks = conductance_blocks(geometry, resistance_blocks(geometry, half, radii, kappa))
+    temperature, outflow = coupled_steady_state(geometry, blocks, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
+    return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature
+
+
+def _check_coupling(coupling):
+    if not isinstance(coupling, str) or coupling not in COUPLINGS:
+        raise ValueError(f"coupling must be one of {list(COUPLINGS)}; got {coupling!r}")
+
+
+def _sphere_geometry(setup, neighbors, neck, axis):
+    """:func:`sintercond.contacts.sphere_coupling.sphere_geometry` of a steady setup: hot spheres labelled 1, cold 2."""
+    pairs = setup.pairs
+    id_neighbors, pair_id = ell_table(pairs.n_particles, pairs.i, pairs.j, np.arange(1, len(pairs.i) + 1))
+    if not np.array_equal(id_neighbors, np.asarray(neighbors)):
+        raise AssertionError("the contact table and the pair numbering disagree")
+    held = np.where(setup.hot, 1, np.where(setup.cold, 2, 0))
+    return sphere_geometry(setup.centres, setup.radii, id_neighbors, pair_id, neck, held=held, axis=axis,
+                           periodic_box=setup.periodic_box)
 
 
 def connected_components(n, i, j) -> np.ndarray:
@@ -115,6 +250,7 @@ def connected_components(n, i, j) -> np.ndarray:
 
 class _ConductivitySetup(typing.NamedTuple):
     physics: object
+    centres: np.ndarray
     radii: np.ndarray
     pairs: object
     contacts: object
@@ -122,17 +258,35 @@ class _ConductivitySetup(typing.NamedTuple):
     cold: np.ndarray
     length: float
     area: float
+    periodic_box: np.ndarray | None
 
 
-def _conductivity_setup(centres, radii, axis, law, neck_model, box):
+def _conductivity_setup(centres, radii, axis, law, neck_model, box, periodic_box=None):
     """Host-side geometry of :func:`steady_state_conductivity`: contacts, necks, faces, ``L`` and ``A``."""
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     physics = sim_module.Physics(conduction=sim_module.Conduction(law=law, neck_model=neck_model, conductance="lifted"))
-    pairs = contact_pairs(centres, radii)
+    periodic_box = _across_axis(periodic_box, centres, radii, axis, box)
+    pairs = contact_pairs(centres, radii, periodic_box=periodic_box)
     hot, cold, length, area = _hot_and_cold_faces(centres, radii, pairs, axis, box)
     contacts = sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)
-    return _ConductivitySetup(physics, radii, pairs, contacts, hot, cold, length, area)
+    return _ConductivitySetup(physics, centres, radii, pairs, contacts, hot, cold, length, area, periodic_box)
+
+
+def _across_axis(periodic_box, centres, radii, axis, box):
+    """The periods of a packing periodic across ``axis`` (``[3]``, m), its entry along ``axis`` replaced by
+    one no contact wraps around (four times the packing's extent); None stays None."""
+    if periodic_box is None:
+        return None
+    if box is None:
+        raise ValueError("periodic_box needs box (its sides across the axis are the periods)")
+    periodic_box = np.array(periodic_box, dtype=np.float64)
+    if periodic_box.shape != (3,):
+        raise ValueError(f"periodic_box must be [3] side lengths; got shape {periodic_box.shape}")
+    extent = np.ptp(centres[:, axis]) + 2.0 * float(np.max(radii))
+    periodic_box[axis] = 4.0 * extent
+    require_positive("periodic_box (m)", periodic_box)
+    return periodic_box
 
 
 def _hot_and_cold_faces(centres, radii, pairs, axis, box):
@@ -165,7 +319,8 @@ def face_layer_box(centres, radii, axis):
     return lo, hi
 
 
-def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, axis=0, box=None, tol=1e-13):
+def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, axis=0, box=None, tol=1e-13, *,
+                                      coupling="none", kappa=None, neck_radii=None, periodic_box=None):
     """``k*`` (W/(m K)) of a packing whose contacts' conductances are given, from one steady solve.
 
     As :func:`steady_state_conductivity` (same hot and cold sets, ``L`` and
@@ -177,7 +332,18 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
       pairs: :class:`sintercond.contacts.network.ContactPairs` of the packing.
       pair_conductance: ``[n_pairs]`` ``K_ij`` (W/K) in the order of ``pairs`` (differentiable).
       axis, box, tol: as :func:`steady_state_conductivity`.
+      coupling: ``"none"`` or ``"sphere"``, as :func:`steady_state_conductivity`. With ``"sphere"``, each
+        ``1/K_ij`` is split between the two spheres as the halves of Rojek et al. (2022), Eq. 43 are
+        (``slope kappa_k pi a`` on a shared neck: in the proportion ``1/kappa_k``; equal halves for one
+        material), and a contact with ``K_ij = 0`` carries no neck.
+      kappa: conductivity (W/(m K)), scalar or ``[n]`` (differentiable); needed by ``"sphere"`` (the Green
+        function's scale).
+      neck_radii: ``[n_pairs]`` neck radii ``a`` (m) for the domain check of ``"sphere"``; default the
+        volume-conserving neck of each pair's overlap.
+      periodic_box: ``[3]`` periods for minimum-image neck directions (``pairs`` found with the same box), as
+        :func:`steady_state_conductivity`.
     """
+    _check_coupling(coupling)
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     pair_conductance = jnp.asarray(pair_conductance)
@@ -188,8 +354,26 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
     # the pair's index (+1; 0 on padding) in both rows of the padded table
     neighbors, slot = ell_table(len(radii), pairs.i, pairs.j, np.arange(1, len(pairs.i) + 1))
     conductance = jnp.concatenate([jnp.zeros((1,), pair_conductance.dtype), pair_conductance])[slot]
-    table = ContactTable(jnp.asarray(neighbors, dtype=jnp.int32), conductance)
     hot_mask = jnp.asarray(hot)
+    if coupling == "sphere":
+        if kappa is None:
+            raise ValueError("coupling='sphere' needs kappa (W/(m K)): the surface Green function scales as 1/kappa")
+        if all_concrete(kappa):
+            require_positive("kappa (W/(m K))", np.asarray(kappa, np.float64))
+        kappa = jnp.broadcast_to(jnp.asarray(kappa, pair_conductance.dtype), radii.shape)
+        if neck_radii is None:
+            a = np.where(pairs.overlap > 0, np.asarray(neck_radius(pairs.r_i, pairs.r_j, pairs.overlap)), 0.0)
+        else:
+            a = np.asarray(neck_radii, np.float64)
+        neck = np.concatenate([[0.0], a])[slot]
+        held = np.where(hot, 1, np.where(cold, 2, 0))
+        box_periods = _across_axis(periodic_box, centres, radii, axis, box)
+        geometry = sphere_geometry(centres, radii, neighbors, slot, neck, held=held, axis=axis,
+                                   periodic_box=box_periods)
+        q, _ = _compiled_network_coupled_solve(tol)(geometry, conductance, jnp.asarray(neighbors), jnp.asarray(radii),
+                                                    kappa, jnp.asarray(hot | cold), hot_mask)
+        return q * length / area
+    table = ContactTable(jnp.asarray(neighbors, dtype=jnp.int32), conductance)
     temperature = steady_state(table, jnp.asarray(hot | cold), jnp.where(hot_mask, 1.0, 0.0), tol=tol)
     q = -jnp.sum(jnp.where(hot_mask, heat_inflow(temperature, table), 0.0))
     return q * length / area

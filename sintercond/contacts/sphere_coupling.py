@@ -1,0 +1,285 @@
+"""Necks that share a sphere: the coupling of a particle's necks through its surface Green function.
+
+The pipe network (:mod:`sintercond.contacts.network`) sums each neck's pair law as if the neck were alone on its
+sphere. Heat entering a sphere at one neck spreads through it and warms the surface under its other necks,
+so with more than two necks per sphere the isolated network conducts too well (12-39 % on FCC, 2-14 % on
+BCC at a/r 0.16-0.4 against full-field solves, ``tests/data/fullfield_cells.md``). This module keeps the
+pair law and adds, per sphere, the interaction of its necks as point sources on its surface.
+
+**Surface Green function.** Sphere of radius ``r`` (m), conductivity ``kappa`` (W/(m K)), a point heat flow
+``Q`` (W) entering its surface at the pole. Inside, ``T = sum_l A_l (rho/r)^l P_l(cos theta)``; the surface
+delta function is ``(Q / r^2) sum_l (2l + 1)/(4 pi) P_l`` (completeness of the Legendre polynomials), so the
+Neumann condition ``kappa dT/drho = ...`` gives ``A_l = Q (2l + 1) / (4 pi kappa r l)`` for ``l >= 1``; the
+``l = 0`` part is the sphere's mean temperature, set by its storage or its other necks. The surface
+temperature per watt, less the mean (K/W), is therefore::
+
+    G(theta) = 1/(4 pi kappa r) sum_{l>=1} (2l + 1)/l P_l(cos theta)
+             = [1/sigma - 2 - ln(sigma (1 + sigma))] / (4 pi kappa r),   sigma = sin(theta/2)     (Eq. 1)
+
+from the Legendre generating function ``sum_l P_l t^l = (1 - 2 x t + t^2)^(-1/2)`` (Jackson, Classical
+Electrodynamics, 3rd ed., 1999, Sect. 3.3) at ``t = 1`` (``sum_l P_l = 1/(2 sigma)``) and integrated over
+``t`` from 0 to 1 (``sum_{l>=1} P_l / l = -ln(sigma (1 + sigma))``). Near a neck ``G -> 1/(2 pi kappa s)``
+at the arc distance ``s``: the half-space point source. ``G(pi) = -(1 + ln 2)/(4 pi kappa r)``.
+
+**A sphere's necks.** Neck ``i`` of sphere ``s`` (unit direction ``n_i`` from the centre, outward heat flow
+``q_i``, W) has the temperature ``T_i`` (K)::
+
+    T_s - T_i = q_i / K_self,i + sum_{j != i} q_j G(theta_ij),   cos theta_ij = n_i . n_j         (Eq. 2)
+    1 / K_self,i = 1 / K_half,i + G(pi)                                                           (Eq. 3)
+
+``T_s`` is the mean surface temperature, which for a harmonic field is the centre's and the mean over the
+ball (Gauss's mean-value theorem): the sphere's temperature in the network. The self term (Eq. 3) makes
+two opposite necks (``q_2 = -q_1``, ``theta = pi``) give ``T_s - T_1 = q_1 / K_half``: the pair law's half,
+so chains and the simple-cubic cell along an axis are unchanged and the pair law's calibration (Rojek et al.
+2022, Eq. 40, fitted to FE; Batchelor & O'Brien 1977, ``4 kappa a`` per half for small necks, as Dryden & Zok
+2004, Eq. 37, quote it) is
+kept. Nothing is fitted. In matrix form ``T_s 1 - T_N = R_s q`` with the symmetric resistance block
+``R_s`` (K/W, :func:`resistance_blocks`) and the neck conductance matrix ``C_s = R_s^{-1}`` (W/K,
+:func:`conductance_blocks`): ``q = C_s (T_s 1 - T_N)``.
+
+**Halves.** The pair law's resistance ``1/K_ij`` is split between the two spheres of a contact in the
+proportion of the law's own halves (:func:`half_resistances`): for a law made of halves in series (Rojek
+Eqs. 8-9, 43; the fitted and Feng laws) each sphere gets exactly its half, a contact resistance is shared in
+the same proportion, and the two sides always sum to ``1/K_ij``. Equal spheres: ``K_half = 2 K_ij``.
+
+**Held spheres** (a face layer held at a temperature). Such a sphere has no balance of its own, and
+``l = 0`` would matter. The plane through its centre normal to the flux axis is taken as isothermal (it is
+exactly so for a lattice site under a gradient, a mirror plane of the lattice): each neck gets a mirror
+image across that plane carrying the opposite flow, so ``R_s[i, j]`` gains ``-G(theta*_ij)``, ``theta*_ij``
+between ``n_i`` and the image of ``n_j`` (Eq. 4). The sources and images sum to zero (no ``l = 0`` part),
+and one axial neck gets exactly the pair law's half. A neck between two spheres held at the same temperature
+is left out of both (it carries heat only through the coupling; in a lattice's held layer, none by
+symmetry). Where a neck's disc overlaps an image's disc (a neck close to the held plane, common in the face
+layer of a poured bed) the images are not point-like; such a held sphere keeps the pair law's halves
+(``R_s = diag(1/K_half)``, the other treatment of ``/work/shared/NECK_COUPLING.md``).
+
+**Domain.** The point-source form needs the necks' discs apart: necks ``i, j`` of a sphere of radius ``r``
+with neck radii ``a_i, a_j`` must satisfy ``theta_ij >= alpha_i + alpha_j``, ``alpha = arcsin(a / r)`` (the
+angular half-width of a neck's disc). :func:`sphere_geometry` refuses a packing where two discs overlap,
+naming the particle and both contacts. Measured against full-field solves: within 2 % up to a/r = 0.4 on
+FCC (12 necks) and BCC (8 and 14 necks) once the pair law's own error is divided out (``docs/laws.md``).
+
+**Operator.** The unknowns are the sphere temperatures ``[n]`` and the neck temperatures ``[p]`` (one per
+contact, shared by its two spheres, massless: the two spheres' flows into it sum to zero). The system is
+``A = sum_s B_s^T C_s B_s`` with ``B_s x = x_s 1 - x_N(s)``: symmetric positive semi-definite and
+conservative (:func:`coupled_apply`), solved by conjugate gradients in :mod:`sintercond.sim.steady`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from sintercond._numerics import safe_divide
+from sintercond.laws.conductance import conductance_from_neck
+
+GREEN_OPPOSITE = -(1.0 + math.log(2.0))
+"""``4 pi kappa r G(pi)``: the dimensionless Green function between antipodal points (Eq. 1 at ``sigma = 1``)."""
+
+
+def surface_green_factor(cos_theta):
+    """``4 pi kappa r G(theta) = 1/sigma - 2 - ln(sigma (1 + sigma))``, ``sigma = sin(theta/2)`` (Eq. 1).
+
+    Dimensionless. ``cos_theta`` is clipped to ``[-1, 1]`` (round-off of unit vectors). At ``theta = 0``
+    (coincident points) the value is ``+inf`` with zero gradient; elsewhere value and gradient are finite,
+    ``theta = pi`` included (double ``where``: ``sigma`` is ``sqrt((1 - cos)/2)``, whose derivative is
+    infinite at ``cos = 1``).
+    """
+    c = jnp.clip(jnp.asarray(cos_theta), -1.0, 1.0)
+    s2 = 0.5 * (1.0 - c)
+    apart = s2 > 0
+    sigma = jnp.sqrt(jnp.where(apart, s2, 1.0))
+    value = 1.0 / sigma - 2.0 - jnp.log(sigma * (1.0 + sigma))
+    return jnp.where(apart, value, jnp.inf)
+
+
+def surface_green(cos_theta, radius, kappa):
+    """``G(theta)`` (K/W), Eq. 1: surface temperature less the mean per watt entering at angular distance theta.
+
+    Args:
+      cos_theta: ``cos theta`` between the source and the point.
+      radius: sphere radius ``r`` (m), > 0.
+      kappa: its conductivity (W/(m K)), > 0.
+    """
+    return surface_green_factor(cos_theta) / (4.0 * jnp.pi * kappa * radius)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class SphereGeometry:
+    """The constant (geometric) part of every sphere's resistance block, on the contact table's layout.
+
+    Attributes:
+      green: ``[n, m, m]`` dimensionless ``4 pi kappa r`` times the coupling part of ``R_s``: ``g(theta_ij)``
+        off the diagonal, ``g(pi)`` on it (Eqs. 2-3), less the mirror images' ``g(theta*_ij)`` on held
+        spheres (Eq. 4); 0 on a held sphere that keeps the pair law's halves, and in every slot not coupled.
+      coupled: ``[n, m]`` bool, the slot is a neck of this sphere's block (a contact with a neck, not joining
+        two spheres held at the same temperature).
+      neck_index: ``[n, m]`` int32, the contact (neck unknown) of each slot, 0 on padding.
+      neck_slots: ``[p, 2]`` int32, each contact's two slots as flat indices ``row * m + slot``.
+      neck_fixed: ``[p]`` bool, contacts in no block (no neck, or joining two spheres held alike).
+    """
+
+    green: jax.Array
+    coupled: jax.Array
+    neck_index: jax.Array
+    neck_slots: jax.Array
+    neck_fixed: jax.Array
+
+
+def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis=0, periodic_box=None):
+    """Host-side :class:`SphereGeometry` of a static packing, after checking the domain of point coupling.
+
+    Args:
+      centres: ``[n, 3]`` (m). radii: ``[n]`` (m).
+      neighbors: ``[n, m]`` contact table (:func:`sintercond.contacts.network.ell_table`), padded with the row itself.
+      pair_id: ``[n, m]`` the contact's index + 1 in each slot, 0 on padding (same layout).
+      neck: ``[n, m]`` neck radius ``a`` of each slot (m); slots with ``a <= 0`` carry no neck.
+      held: ``[n]`` int labels, 0 for a free sphere and equal non-zero labels for spheres held at the same
+        temperature (e.g. 1 hot, 2 cold), or None.
+      axis: the flux axis; held spheres get mirror images across the plane through their centre normal to it.
+      periodic_box: ``[3]`` side lengths (m) for minimum-image directions, or None.
+
+    Raises:
+      ValueError: two necks of one sphere closer than their discs' angular half-widths (Domain).
+    """
+    centres = np.asarray(centres, np.float64)
+    radii = np.asarray(radii, np.float64)
+    neighbors = np.asarray(neighbors)
+    pair_id = np.asarray(pair_id)
+    neck = np.asarray(neck, np.float64)
+    n, m = neighbors.shape
+    held = np.zeros(n, np.int64) if held is None else np.asarray(held, np.int64)
+    rows = np.arange(n)[:, None]
+    has_neck = (pair_id > 0) & (neck > 0)
+    coupled = has_neck & ~((held[:, None] != 0) & (held[neighbors] == held[:, None]))
+    delta = centres[neighbors] - centres[:, None, :]
+    if periodic_box is not None:
+        box = np.asarray(periodic_box, np.float64)
+        delta = delta - box * np.round(delta / box)
+    length = np.linalg.norm(delta, axis=-1)
+    direction = delta / np.where(length > 0, length, 1.0)[..., None]
+    cos = np.clip(np.einsum("nik,njk->nij", direction, direction), -1.0, 1.0)
+    alpha = np.arcsin(np.clip(neck / radii[:, None], 0.0, 1.0))
+    pair = coupled[:, :, None] & coupled[:, None, :]
+    off = pair & ~np.eye(m, dtype=bool)
+    _check_discs_apart(np.arccos(cos), alpha, off, neighbors)
+    g = np.asarray(surface_green_factor(np.where(off, cos, -1.0)))
+    green = np.where(pair, g, 0.0)  # the diagonal holds g(pi) (Eq. 3)
+    mirrored = held != 0
+    if mirrored.any():
+        e = direction[..., axis]
+        image_cos = np.clip(cos - 2.0 * e[:, :, None] * e[:, None, :], -1.0, 1.0)
+        # images overlapping a neck's disc: that held sphere keeps the pair law's halves
+        close = pair & (np.arccos(image_cos) < alpha[:, :, None] + alpha[:, None, :])
+        images = mirrored & ~close.any(axis=(1, 2))
+        image_g = np.asarray(surface_green_factor(np.where(pair, image_cos, -1.0)))
+        green = np.where(images[:, None, None], green - np.where(pair, image_g, 0.0), green)
+        green = np.where((mirrored & ~images)[:, None, None], 0.0, green)
+    n_pairs = int(pair_id.max(initial=0))
+    flat = (rows * m + np.arange(m)[None, :])[pair_id > 0]
+    ids = pair_id[pair_id > 0] - 1
+    order = np.argsort(ids, kind="stable")
+    neck_slots = flat[order].reshape(n_pairs, 2)
+    neck_fixed = ~coupled.reshape(-1)[neck_slots].any(axis=1)
+    return SphereGeometry(jnp.asarray(green), jnp.asarray(coupled), jnp.asarray(np.maximum(pair_id - 1, 0), jnp.int32),
+                          jnp.asarray(neck_slots, jnp.int32), jnp.asarray(neck_fixed))
+
+
+def _check_discs_apart(theta, alpha, off, neighbors):
+    """Raise unless every two coupled necks of a sphere are at least their discs' half-widths apart."""
+    reach = alpha[:, :, None] + alpha[:, None, :]
+    bad = off & (theta < reach * (1.0 - 1e-12))
+    if bad.any():
+        s, i, j = (int(v) for v in np.argwhere(bad)[0])
+        raise ValueError(
+            f"coupling='sphere': on particle {s} the necks of contacts ({s}, {int(neighbors[s, i])}) and "
+            f"({s}, {int(neighbors[s, j])}) are {np.degrees(theta[s, i, j]):.4g} deg apart, closer than their "
+            f"discs' angular half-widths arcsin(a/r) sum to ({np.degrees(reach[s, i, j]):.4g} deg): point "
+            f"coupling needs theta_ij >= arcsin(a_i/r) + arcsin(a_j/r); use coupling='none' for this packing")
+
+
+def half_resistances(law, radii, neighbors, neck, overlap, kappa, law_params, conductance):
+    """``[n, m]`` resistance (K/W) of each slot's half of its contact: ``1/K_half`` of Eq. 3.
+
+    The pair law's ``1/K_ij`` (``conductance``, ``[n, m]`` W/K, the table's) split in the proportion of the
+    law's halves: the law evaluated on the symmetric pair of each sphere (``r_s, r_s, kappa_s``, no contact
+    resistance) is half that sphere's own conductance ``K_s`` (halves in series, Rojek et al. 2022, Eqs. 8-9),
+    and sphere ``s`` gets ``(1/K_ij) K_n / (K_s + K_n)``. Both sides sum to ``1/K_ij``; for Rojek's law
+    (Eq. 43) each is exactly ``1/(slope kappa_s pi a)`` and for equal spheres ``1/(2 K_ij)``. 0 where
+    ``K_ij = 0``. Differentiable in ``kappa`` and ``law_params``.
+
+    Args:
+      law: the conductance law (name or :class:`sintercond.laws.conductance.ConductanceLaw`).
+      radii: ``[n]`` (m). neighbors, neck, overlap: ``[n, m]`` table, neck radii and overlaps (m).
+      kappa: ``[n]`` conductivities (W/(m K)). law_params: the law's parameters, merged with its defaults.
+    """
+    params = dict(law_params)
+    if "contact_resistance" in params:
+        params["contact_resistance"] = jnp.zeros_like(jnp.asarray(params["contact_resistance"]))
+    r_s = jnp.broadcast_to(radii[:, None], neighbors.shape)
+    k_s = jnp.broadcast_to(kappa[:, None], neighbors.shape)
+    own = conductance_from_neck(law, neck, r_s, r_s, overlap, k_s, k_s, params)
+    other = conductance_from_neck(law, neck, radii[neighbors], radii[neighbors], overlap, kappa[neighbors],
+                                  kappa[neighbors], params)
+    return safe_divide(other, (own + other) * conductance)
+
+
+def resistance_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
+    """``R_s`` ``[n, m, m]`` (K/W), Eqs. 2-4: ``diag(1/K_half) + G`` on the coupled slots.
+
+    Uncoupled slots get the identity scaled to the row's mean coupled diagonal (or ``1/(kappa r)`` on a
+    sphere with none), so that the block stays invertible and well scaled; :func:`conductance_blocks` masks
+    them out again.
+
+    Args:
+      geometry: :func:`sphere_geometry`.
+      half_resistance: ``[n, m]`` ``1/K_half`` (K/W), :func:`half_resistances`.
+      radii: ``[n]`` (m). kappa: ``[n]`` (W/(m K)).
+    """
+    coupled = geometry.coupled
+    green = jnp.where(coupled[:, :, None] & coupled[:, None, :], geometry.green, 0.0)
+    scale = 1.0 / (4.0 * jnp.pi * kappa * radii)
+    diag = jnp.where(coupled, half_resistance, 0.0)
+    count = jnp.sum(coupled, axis=1).astype(diag.dtype)
+    filler = jnp.where(count > 0, safe_divide(jnp.sum(diag, axis=1), count), 4.0 * jnp.pi * scale)
+    diag = jnp.where(coupled, diag, filler[:, None])
+    return green * scale[:, None, None] + diag[:, :, None] * jnp.eye(coupled.shape[1], dtype=diag.dtype)
+
+
+def conductance_blocks(geometry: SphereGeometry, resistance):
+    """``C_s = R_s^{-1}`` ``[n, m, m]`` (W/K) on the coupled slots, 0 elsewhere; symmetrised (batched inverse).
+
+    Differentiable (through ``jnp.linalg.inv``). ``R_s`` is symmetric positive definite inside the domain
+    (its diagonal dominates: ``1/K_half`` grows as ``1/a`` while ``|G|`` between discs apart stays below it).
+    """
+    c = jnp.linalg.inv(resistance)
+    c = 0.5 * (c + jnp.swapaxes(c, 1, 2))
+    pair = geometry.coupled[:, :, None] & geometry.coupled[:, None, :]
+    return jnp.where(pair, c, 0.0)
+
+
+def coupled_apply(geometry: SphereGeometry, conductance, sphere_x, neck_x):
+    """The coupled network's ``A x`` on ``[sphere temperatures; neck temperatures]``: ``(out [n], out [p])`` (W).
+
+    ``out_s = sum_k q_sk`` is the heat leaving sphere ``s`` through its necks, ``q_s = C_s (x_s 1 - x_N(s))``;
+    ``out_c = -(q_ic + q_jc)`` the net heat leaving neck ``c`` (0 at a massless neck). ``A`` is symmetric
+    positive semi-definite, and ``sum(out_s) + sum(out_c) = 0`` (heat conserved).
+
+    Args:
+      geometry: :func:`sphere_geometry`. conductance: ``[n, m, m]`` :func:`conductance_blocks`.
+      sphere_x: ``[n]``. neck_x: ``[p]``.
+    """
+    drop = sphere_x[:, None] - neck_x[geometry.neck_index]
+    q = jnp.einsum("nij,nj->ni", conductance, drop)
+    return jnp.sum(q, axis=1), -jnp.sum(q.reshape(-1)[geometry.neck_slots], axis=1)
+
+
+def coupled_diagonal(geometry: SphereGeometry, conductance):
+    """The diagonal of :func:`coupled_apply`'s ``A``: ``([n], [p])`` (W/K), for a Jacobi preconditioner."""
+    diag = jnp.diagonal(conductance, axis1=1, axis2=2)
+    return jnp.sum(conductance, axis=(1, 2)), jnp.sum(diag.reshape(-1)[geometry.neck_slots], axis=1)
