@@ -94,11 +94,11 @@ def test_the_spec_classes_validate_and_never_rewrite():
         simulate.Mechanics(walls=(PlaneWall([0.0, 0.0, 0.0], (0.0, 0.0, 1.0)),))
     with pytest.raises(ValueError, match=r"Mechanics\.friction must be True or False"):
         simulate.Mechanics(friction=1)
-    with pytest.raises(ValueError, match=r"Physics\.mechanics must be a sintercond\.mechanics\.Mechanics or None"):
+    with pytest.raises(ValueError, match=r"Physics\.mechanics must be a sintercond\.sim\.mechanics\.Mechanics or None"):
         simulate.Physics(mechanics=True)
     with pytest.raises(ValueError, match=r"Physics\.conduction must be a Conduction"):
         simulate.Physics(conduction="rojek")
-    with pytest.raises(ValueError, match=r"Physics\.sintering must be a sintercond\.neck_growth\.Sintering or None"):
+    with pytest.raises(ValueError, match=r"Physics\.sintering must be a sintercond\.sim\.neck_growth\.Sintering or None"):
         simulate.Physics(sintering="grain_boundary")
     with pytest.raises(ValueError, match=r"Sources\.beam must be one of"):
         simulate.Sources(beam="electron")
