@@ -23,6 +23,7 @@ import numpy as np
 
 from sintercond import simulate
 from sintercond.sim import mechanics
+from sintercond.sim.neck_growth import Sintering
 from sintercond.scene import validate_scene
 from sintercond.scene.build import build_model
 from sintercond.state import ParticleState
@@ -207,6 +208,21 @@ CASES = sorted(SCENES) + sorted(API_CASES)
 def build(name):
     """``(sim, state, params)`` of case ``name``."""
     return _scene_case(SCENES[name]) if name in SCENES else API_CASES[name]()
+
+
+ROUND_OFF = 1e-11
+"""Relative tolerance of a case's pinned arrays (of each array's scale): another machine's or XLA's fusion order
+changes last digits, which a dozen explicit steps amplify by far less."""
+
+
+def tolerance(name) -> float:
+    """Relative tolerance of case ``name``: :data:`ROUND_OFF`, or where the step solves the many-body balance by
+    conjugate gradients, that solve's own relative residual (``Sintering.balance_tol``): a last-digit difference
+    moves where the iterations stop, anywhere within the residual they stop at."""
+    raw = SCENES.get(name, {})
+    if raw.get("sintering", {}).get("shrinkage") == "many_body":
+        return max(ROUND_OFF, raw["sintering"].get("balance_tol", Sintering().balance_tol))
+    return ROUND_OFF
 
 
 def outputs(name) -> dict[str, np.ndarray]:
