@@ -57,6 +57,9 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     radius. Traced leaves are skipped (under ``jit`` they are the caller's).
     """
     sources.validate(sim.physics, params)
+    if sim.physics.conduction.coupling == "sphere" and getattr(state.contacts, "sphere", None) is None:
+        raise ValueError("Conduction.coupling='sphere' needs SimState.contacts built for it: "
+                         "simulate.lifted_contacts(physics, ...) with that physics (the necks' directions)")
     if not all_concrete(state, params):
         return
     dt = np.asarray(state.dt, np.float64)
