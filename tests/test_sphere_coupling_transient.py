@@ -21,6 +21,7 @@ from fullfield import lattice_block, overlap_for_neck, rizza_block
 
 from sintercond import scene, simulate
 from sintercond.laws.neck import max_overlap
+from sintercond.scene.build import build_model, scene_physics
 from sintercond.scene.typed import typed_scene
 from sintercond.sim.physics import Conduction, Physics
 from sintercond.sim.rollout import rollout
@@ -50,7 +51,7 @@ def start(coupling, centres, radii, temperature, *, fixed=None, held=None, axis=
     return sim, simulate.init_state(p, contacts, 0.9 * limit if dt is None else dt), limit
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def compiled(sim, n):
     return jax.jit(lambda state, params: rollout(sim, state, params, n)[0])
 
@@ -133,9 +134,10 @@ def test_simple_cubic_block_heated_along_an_axis_is_the_isolated_one():
     g = np.stack(np.meshgrid(np.arange(4), np.arange(3), np.arange(3), indexing="ij"), -1).reshape(-1, 3)
     centres, radii = g * 1.9, np.ones(len(g))
     temperature = np.array([300.0, 700.0, 350.0, 500.0])[g[:, 0]]
+    dt = 0.9 * min(start(coupling, centres, radii, temperature)[2] for coupling in ("none", "sphere"))
     ends = {}
     for coupling in ("none", "sphere"):
-        sim, state, _ = start(coupling, centres, radii, temperature)
+        sim, state, _ = start(coupling, centres, radii, temperature, dt=dt)
         ends[coupling] = np.asarray(run(sim, state, 20).particles.temperature)
     np.testing.assert_allclose(ends["sphere"], ends["none"], rtol=0, atol=1e-12 * 400.0)
     assert 1.0 < np.ptp(ends["none"]) < 0.9 * 400.0
@@ -304,17 +306,17 @@ def test_scene_key_round_trip_and_refusals():
     checked = scene.validate_scene(copy.deepcopy(SCENE))
     assert checked["conduction"]["coupling"] == "sphere"
     assert typed_scene(checked).as_dict()["conduction"]["coupling"] == "sphere"
-    spec = scene.scene_physics(checked)
+    spec = scene_physics(checked)
     assert (spec.conduction.coupling, spec.conduction.conductance) == ("sphere", "lifted")
     default = copy.deepcopy(SCENE)
     del default["conduction"]["coupling"]
-    assert scene.scene_physics(scene.validate_scene(default)).conduction.coupling == "none"
+    assert scene_physics(scene.validate_scene(default)).conduction.coupling == "none"
     bad = copy.deepcopy(SCENE)
     bad["conduction"]["coupling"] = "spheres"
     with pytest.raises(scene.SceneError, match=r"conduction.coupling"):
         scene.validate_scene(bad)
     for key, section in (("walls", [{"axis": 0, "side": "max", "mode": "conducting", "temperature": 350.0}]),
-                         ("sintering", {"law": "arrhenius"})):
+                         ("sintering", {"law": "grain_boundary"})):
         bad = copy.deepcopy(SCENE)
         bad[key] = section
         with pytest.raises(scene.SceneError, match=r"conduction.coupling = \"sphere\" is not supported"):
@@ -325,14 +327,14 @@ def test_scene_key_round_trip_and_refusals():
 def test_scene_builds_with_the_coupled_bound():
     """The scene builds the coupled step (held face mirrored across x), its thermal bound the coupled one, and a
     run.dt 1.1 times that bound is refused as the isolated bound's is."""
-    model = scene.build_model(scene.validate_scene(copy.deepcopy(SCENE)))
+    model = build_model(scene.validate_scene(copy.deepcopy(SCENE)))
     assert model.physics.conduction.coupling == "sphere"
     assert model.state.contacts.sphere is not None
     bound = model.limits["thermal"]
     too_long = copy.deepcopy(SCENE)
     too_long["run"]["dt"] = 1.1 * bound
     with pytest.raises(scene.SceneError, match=r"run.dt: dt = .* exceeds the explicit stability limit"):
-        scene.build_model(scene.validate_scene(too_long))
+        build_model(scene.validate_scene(too_long))
 
 
 # --------------------------------------------------------------------------
