@@ -24,7 +24,7 @@ from sintercond.laws.neck import max_overlap
 from sintercond.scene.build import build_model, scene_physics
 from sintercond.scene.typed import typed_scene
 from sintercond.sim.physics import Conduction, Physics
-from sintercond.sim.rollout import rollout
+from sintercond.sim.rollout import finite_temperatures, rollout
 from sintercond.sim.stability import thermal_time_step
 from sintercond.sim.state import Params, PulseParams
 from sintercond.sim.steady import steady_state_conductivity
@@ -309,6 +309,16 @@ def test_contacts_built_without_the_coupling_are_refused():
     state = simulate.init_state(particle_state(centres, radii, 300.0, 1.0), contacts, 1.0)
     with pytest.raises(ValueError, match=r"coupling='sphere' needs SimState.contacts built for it"):
         rollout(simulate.simulator(physics("sphere")), state, PARAMS, 2)
+
+
+def test_an_unconverged_neck_solve_is_refused_on_the_host():
+    """A state whose neck solve ended above its tolerance (LiftedContacts.neck_residual > 0) fails the run's check."""
+    centres, radii = chain([1.0, 1.0, 1.0], 0.05)
+    sim, state, _ = start("sphere", centres, radii, 300.0)
+    finite_temperatures(state)
+    flagged = dataclasses.replace(state, contacts=dataclasses.replace(state.contacts, neck_residual=jnp.asarray(1e-3)))
+    with pytest.raises(FloatingPointError, match=r"coupled neck solve ended at relative residual 0.001"):
+        finite_temperatures(flagged)
 
 
 # --------------------------------------------------------------------------

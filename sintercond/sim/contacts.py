@@ -193,7 +193,8 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
     (:func:`sintercond.contacts.sphere_coupling.sphere_geometry` with the transient's net-flow term, Eq. 5, after
     its domain check, which raises ``ValueError`` on necks too large or too close): ``held`` ``[n]`` int labels
     (0 free, equal non-zero labels for particles held at the same temperature) and ``held_axis``, the axis
-    normal to the held faces, give the held spheres their mirror images as in the steady solver.
+    normal to the held faces, give the held spheres their mirror images as in the steady solver (``held=None``:
+    every sphere's block is a free sphere's, held or not).
     """
     from sintercond.contacts.network import contact_pairs, ell_table
 
