@@ -21,6 +21,7 @@ from fullfield import lattice_block, overlap_for_neck, rizza_block
 
 from sintercond import scene, simulate
 from sintercond.laws.neck import max_overlap
+from sintercond.sim import neck_growth
 from sintercond.scene.build import build_model, scene_physics
 from sintercond.scene.typed import typed_scene
 from sintercond.sim.physics import Conduction, Physics
@@ -202,8 +203,8 @@ def test_neck_solve_equals_a_dense_solve(cluster):
     2.5e-14)."""
     centres, radii, temperature = cluster
     sim, state, _ = start("sphere", centres, radii, temperature)
-    blocks = sim.prepare_fn(state, PARAMS).neck_blocks
-    c, g = np.asarray(blocks), state.contacts.sphere
+    g, blocks = sim.prepare_fn(state, PARAMS).neck_blocks
+    c = np.asarray(blocks)
     index, coupled = np.asarray(g.neck_index), np.asarray(g.coupled)
     n, p = len(radii), state.contacts.pairs.shape[0]
     a_nn, a_ns = np.zeros((p, p)), np.zeros((p, n))
@@ -294,6 +295,9 @@ def test_bad_coupling_and_unsupported_combinations_are_refused():
         Physics.create(conductance="lifted", contacts="dynamic", coupling="sphere")
     with pytest.raises(ValueError, match=r"coupling='sphere'.*Physics.contacts='dynamic' is not supported"):
         Physics.create(conductance="lifted", contacts="dynamic", coupling="sphere", mechanics=True)
+    with pytest.raises(ValueError, match=r"coupling='sphere'.*Physics.sintering=.*many_body.*is not supported"):
+        Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted", coupling="sphere",
+                       sintering=neck_growth.Sintering(shrinkage="many_body"))
 
 
 def test_necks_too_close_are_refused_when_the_contacts_are_built():
@@ -349,7 +353,7 @@ def test_scene_key_round_trip_and_refusals():
     with pytest.raises(scene.SceneError, match=r"conduction.coupling"):
         scene.validate_scene(bad)
     for key, section in (("walls", [{"axis": 0, "side": "max", "mode": "conducting", "temperature": 350.0}]),
-                         ("sintering", {"law": "grain_boundary"})):
+                         ("sintering", {"law": "grain_boundary", "shrinkage": "many_body"})):
         bad = copy.deepcopy(SCENE)
         bad[key] = section
         with pytest.raises(scene.SceneError, match=r"conduction.coupling = \"sphere\" is not supported"):
@@ -456,3 +460,57 @@ def test_no_nan_at_the_neck_cap():
     assert np.isfinite(float(ends[1][1]))
     assert float(ends[1][0]) == pytest.approx(float(ends[0][0]), rel=1e-13)
     assert float(ends[1][1]) == pytest.approx(float(ends[0][1]), rel=1e-9)
+
+
+# --------------------------------------------------------------------------
+# sintering: necks that grow (independent contacts)
+
+KINETICS = {"A": 1e-16, "activation_energy": 100.0}  # necks of a few um in a second at 1000-1200 K (Ti6Al4V)
+
+
+def sintering_chain(coupling, rebuild_at_cap=True):
+    """Four unequal spheres in a row touching at points (no neck yet), 1000-1200 K: ``(sim, state, params)``."""
+    radii = np.array([40e-6, 30e-6, 35e-6, 38e-6])
+    x = np.zeros((4, 3))
+    x[1:, 0] = np.cumsum(radii[:-1] + radii[1:])
+    spec = Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted", coupling=coupling,
+                          sintering=neck_growth.Sintering("grain_boundary"))
+    params = Params(conductivity=[7.0], specific_heat=[560.0], sintering=dict(KINETICS))
+    particles = particle_state(x, radii, np.array([1200.0, 1000.0, 1150.0, 1050.0]), 4430.0)
+    contacts = simulate.lifted_contacts(spec, x, radii)
+    if coupling == "sphere" and rebuild_at_cap:
+        cap = neck_growth.necks_at_cap(spec.sintering, params.sintering, contacts, radii)
+        contacts = simulate.coupled_contacts(contacts, x, radii, np.asarray(cap.neck))
+    state = simulate.init_state(particles, contacts, 2e-4,  # half the limit on the necks at the cap
+                                sintering=neck_growth.neck_state(contacts, particles.temperature))
+    return simulate.simulator(spec), state, params
+
+
+def test_growing_necks_of_a_chain_are_the_isolated_ones():
+    """Necks grown from point contacts (coupled once they conduct, the blocks recomputed every step): the coupled
+    chain's temperatures and necks are the isolated chain's to round-off."""
+    ends = {}
+    for coupling in ("none", "sphere"):
+        sim, state, params = sintering_chain(coupling)
+        ends[coupling] = run(sim, state, 300, params)
+    assert not bool(ends["none"].sintering.unstable)
+    np.testing.assert_allclose(np.asarray(ends["sphere"].contacts.neck), np.asarray(ends["none"].contacts.neck),
+                               rtol=1e-12)
+    assert float(np.min(ends["none"].contacts.neck)) > 1e-7  # they grew
+    np.testing.assert_allclose(np.asarray(ends["sphere"].particles.temperature),
+                               np.asarray(ends["none"].particles.temperature), rtol=1e-13)
+
+
+def test_growing_necks_need_the_geometry_at_the_cap():
+    """Built on the necks now (point contacts: none coupled) the run is refused before it compiles; an FCC block
+    whose necks at the kinetic law's cap overlap is refused by the domain check at the cap."""
+    sim, state, params = sintering_chain("sphere", rebuild_at_cap=False)
+    with pytest.raises(ValueError, match=r"contact \(0, 1\) is not in the coupled geometry.*necks_at_cap"):
+        rollout(sim, state, params, 2)
+    centres, radii, _, _ = lattice_block("FCC", 0.22, cells=1)
+    spec = Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted", coupling="sphere",
+                          sintering=neck_growth.Sintering("grain_boundary"))
+    contacts = simulate.lifted_contacts(spec, centres, radii)
+    cap = neck_growth.necks_at_cap(spec.sintering, dict(KINETICS), contacts, radii)
+    with pytest.raises(ValueError, match=r"closer than their discs' angular half-widths"):
+        simulate.coupled_contacts(contacts, centres, radii, np.asarray(cap.neck))

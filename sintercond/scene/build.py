@@ -423,13 +423,13 @@ def _static_model(scene, physics, planes, particles, params, conducting, log) ->
     physics = dataclasses.replace(physics, conduction=dataclasses.replace(
         physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
     pairs = _scene_pairs(scene, centres, radii, log)
+    held = held_axis = None
     if not lifted:
         c = scene.conduction
         table = network.contact_table(centres, radii, 1.0, c.law, c.params, c.neck_model)
         k_wall, t_wall = _merged_wall_conductance(scene, radii, conducting)
         contacts = simulate.table_contacts(table, k_wall, t_wall)
     else:
-        held = held_axis = None
         if physics.conduction.coupling == "sphere":  # held spheres at one temperature share a mirror plane's label
             fixed = np.asarray(particles.fixed, bool)
             levels = np.asarray(particles.fixed_temperature, np.float64)
@@ -451,6 +451,13 @@ def _static_model(scene, physics, planes, particles, params, conducting, log) ->
                                        positions=particles.positions if many_body else None)
         # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
         limiting = neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts, particles.radii)
+        if physics.conduction.coupling == "sphere":  # the domain of point coupling at the cap, all run long
+            try:
+                contacts = simulate.coupled_contacts(contacts, centres, radii, np.asarray(limiting.neck), held=held,
+                                                     held_axis=held_axis or 0)
+            except ValueError as err:
+                raise SceneError(f"conduction.coupling: at the kinetic law's cap: {err}") from None
+            limiting = dataclasses.replace(limiting, sphere=contacts.sphere)
     return _Built(physics, simulate.simulator(physics), contacts, None, necks,
                   simulate.init_state(particles, limiting, 1.0, sintering=necks), len(pairs.i), {})
 

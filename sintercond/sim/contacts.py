@@ -208,18 +208,34 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
                               slot_pair=jnp.asarray(np.where(slot > 0, slot - 1, count), jnp.int32),
                               neck=jnp.asarray(a), overlap=jnp.asarray(np.asarray(p.overlap, np.float64)))
     if physics.conduction.coupling == "sphere":
-        pair_id = np.where(slot > 0, slot, 0)
-        geometry = sphere_geometry(centres, radii, neighbors, pair_id, np.concatenate([a, [0.0]])[
-            np.where(slot > 0, slot - 1, count)], held=held, axis=held_axis, periodic_box=periodic_box,
-            net_flow=True)
-        contacts = dataclasses.replace(contacts, sphere=geometry, neck_temperature=jnp.zeros(count, float),
-                                       neck_residual=jnp.zeros((), float))
+        contacts = coupled_contacts(contacts, centres, radii, a, held=held, held_axis=held_axis,
+                                    periodic_box=periodic_box)
     if walls:
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
         a = np.asarray(wall_neck_radius(physics.neck, radii, h))
         contacts = dataclasses.replace(contacts, wall_neck=jnp.asarray(a), wall_overlap=jnp.asarray(h),
                                        wall_temperature=jnp.asarray([float(t) for _, t in walls]))
     return contacts
+
+
+def coupled_contacts(contacts: LiftedContacts, centres, radii, necks, *, held=None, held_axis=0,
+                     periodic_box=None) -> LiftedContacts:
+    """``contacts`` with the necks' directions on their spheres for ``Conduction.coupling="sphere"`` (host, once).
+
+    :func:`sintercond.contacts.sphere_coupling.sphere_geometry` (with the transient's net-flow term, Eq. 5) on the
+    necks ``necks`` ``[c]`` (m): the contacts with a neck there are the ones coupled, and its domain check (raises
+    ``ValueError`` on two necks of a sphere closer than their discs' half-widths) is made on them. For necks that
+    stay, the contacts' own (:func:`lifted_contacts` does this); with ``Physics.sintering``, the largest necks the
+    run can reach (:func:`sintercond.sim.neck_growth.necks_at_cap`): the domain then holds all run long, and a
+    neck that grows from zero is coupled once it conducts. ``held``, ``held_axis``: as :func:`lifted_contacts`.
+    """
+    count = int(contacts.pairs.shape[0])
+    slot = np.asarray(contacts.slot_pair)
+    padded = np.concatenate([np.asarray(necks, np.float64), [0.0]])[slot]
+    geometry = sphere_geometry(centres, radii, np.asarray(contacts.neighbors), np.where(slot < count, slot + 1, 0),
+                               padded, held=held, axis=held_axis, periodic_box=periodic_box, net_flow=True)
+    return dataclasses.replace(contacts, sphere=geometry, neck_temperature=jnp.zeros(count, float),
+                               neck_residual=jnp.zeros((), float))
 
 
 def list_region(positions, radii, margin=None):

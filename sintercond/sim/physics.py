@@ -60,8 +60,9 @@ class Conduction:
       coupling: ``"none"`` (each neck's pair law as if it were alone on its sphere) or ``"sphere"`` (the necks
         that share a sphere coupled through its surface Green function, :mod:`sintercond.contacts.sphere_coupling`,
         neck temperatures massless, :mod:`sintercond.sim.terms.coupling`). ``"sphere"`` needs
-        ``conductance="lifted"`` and the explicit integrator, on static contacts without conducting walls,
-        sintering, mechanics or temperature tables (not supported yet).
+        ``conductance="lifted"`` and the explicit integrator, on static contacts (necks that stay, or grow by
+        ``Sintering(shrinkage="independent")``) without conducting walls, mechanics or temperature tables (not
+        supported yet).
     """
 
     law: str = "rojek"
@@ -221,11 +222,14 @@ class Physics:
                 raise ValueError("Physics.mechanics takes its walls as Mechanics.walls (PlaneWall, mode 'conducting' "
                                  "for heat); conduction.conducting_walls must be 0")
         if c.coupling == "sphere":
+            many_body = self.sintering if self.sintering is not None and self.sintering.shrinkage != "independent" \
+                else None
             for name, value in (("contacts", self.contacts if self.contacts != "static" else None),
-                                ("mechanics", self.mechanics), ("sintering", self.sintering), ("motion", self.motion)):
+                                ("mechanics", self.mechanics), ("sintering", many_body), ("motion", self.motion)):
                 if value is not None:
-                    raise ValueError(f"Conduction.coupling='sphere' runs on static contacts whose necks stay; "
-                                     f"Physics.{name}={value!r} is not supported with it yet (use coupling='none')")
+                    raise ValueError(f"Conduction.coupling='sphere' runs on static contacts (necks growing by "
+                                     f"independent shrinkage at most); Physics.{name}={value!r} is not supported with "
+                                     f"it yet (use coupling='none')")
         if self.contacts == "dynamic" and c.conductance != "lifted":
             raise ValueError("Physics.contacts='dynamic' needs conduction.conductance='lifted' (conductances follow "
                              "the motion)")

@@ -73,7 +73,9 @@ def prepare(physics: Physics, state: SimState, params: Params) -> Prepared:
     if fast_static_step(physics) and physics.mechanics is None:
         # computed once per rollout: reverse mode then accumulates their cotangents per particle
         rates = thermal.conduction_rates(scale, capacity)
-    blocks = coupling.neck_blocks(physics, state, params) if coupling.on(physics) else None
+    blocks = None
+    if coupling.on(physics) and physics.sintering is None:
+        blocks = coupling.neck_blocks(physics, state, params)
     return Prepared(params, capacity, conductance, scale, wall_k, wall_t, rates, blocks)
 
 
@@ -84,7 +86,7 @@ def conduction_power(physics: Physics, state: SimState, prep: Prepared, temperat
     """
     power = jnp.zeros_like(temperature)
     if coupling.on(physics):
-        power = coupling.contact_power(physics, state, prep.neck_blocks)[0]
+        power = coupling.contact_power(physics, state, coupling.current_blocks(physics, state, prep))[0]
     elif conductance is not None and physics.contacts == "dynamic":
         power = pair_heat_power(conductance, neighbors, temperature)
     elif conductance is not None:
@@ -131,7 +133,7 @@ def total_conductance(physics: Physics, state: SimState, prep: Prepared):
     conducting walls of ``Mechanics.walls`` the particles touch now."""
     particles = state.particles
     if coupling.on(physics):
-        return coupling.stability_conductance(prep.neck_blocks)
+        return coupling.stability_conductance(coupling.current_blocks(physics, state, prep))
     if physics.contacts == "static":
         conductance = neck_conductance(physics, state, prep.params) if conductances_change(physics) else prep.conductance
         total = prep.scale * jnp.sum(conductance, axis=1)
@@ -201,7 +203,7 @@ def advance(physics: Physics, neighbor_fn, state: SimState, prep: Prepared) -> S
                                               network=(prep.scale, conductance, neighbors), pulse=pulse,
                                               rates=prep.rates)
     elif coupling.on(physics):
-        power, necks, residual = coupling.contact_power(physics, state, prep.neck_blocks)
+        power, necks, residual = coupling.contact_power(physics, state, coupling.current_blocks(physics, state, prep))
         temperature = explicit_heat(physics, state, prep, power + sources.power(physics, state, prep.params))
         state = coupling.with_necks(state, necks, residual)
     elif c.integrator == "explicit":

@@ -16,10 +16,10 @@ The network of :mod:`sintercond.contacts.sphere_coupling`: per sphere ``s`` the 
 Why an iterative neck solve and not a per-sphere elimination: every neck belongs to two spheres, so ``A_nn``
 couples the necks of neighbouring spheres and its inverse is dense over a connected packing; the neck
 temperatures cannot be eliminated sphere by sphere exactly (only the blocks ``C_s`` are per sphere, computed once
-per rollout in :func:`neck_blocks`). The solve is ``jax.scipy.sparse.linalg.cg``, a ``custom_linear_solve``:
-gradients are those of the exact solve, with no derivative through the warm start. A step whose solve ends
-above ten times the tolerance (it ran out of iterations) is recorded in ``LiftedContacts.neck_residual``, which
-the rollout's host check refuses (:func:`check_neck_solve`).
+per rollout in :func:`neck_blocks`, or at every step while necks grow). The solve is ``jax.scipy.sparse.linalg.cg``,
+a ``custom_linear_solve``: gradients are those of the exact solve, with no derivative through the warm start. A
+step whose solve ends above ten times the tolerance (it ran out of iterations) is recorded in
+``LiftedContacts.neck_residual``, which the rollout's host check refuses (:func:`check_neck_solve`).
 
 Stability: :func:`stability_conductance`, half of ``1^T C_s 1``, in the place of the isolated ``sum_j K_ij``:
 ``dt <= 2 C_s / (1^T C_s 1)`` (:func:`sintercond.contacts.sphere_coupling.block_total`).
@@ -51,15 +51,27 @@ def on(physics: Physics) -> bool:
 
 
 def neck_blocks(physics: Physics, state: SimState, params: Params):
-    """``C_s`` ``[n, m, m]`` (W/K) of a static lifted state: the pair law on each neck, its resistance split between
-    the two spheres (:func:`sintercond.contacts.sphere_coupling.half_resistances`), the blocks inverted."""
+    """``(geometry, C_s [n, m, m])`` (W/K) of a static lifted state at its necks now: the pair law on each neck, its
+    resistance split between the two spheres (:func:`sintercond.contacts.sphere_coupling.half_resistances`), the
+    blocks inverted; ``geometry`` the contacts' with only the necks that conduct now coupled (a neck grows from
+    zero under sintering)."""
     contacts, p = state.contacts, state.particles
     index, kappa = conductivity_lookup(physics, params, p)
     kappa = kappa[index]
     law_params = merged_law_params(physics, params)
+    conductance = neck_conductance(physics, state, params)
+    geometry = contacts.sphere
+    coupled = geometry.coupled & (conductance > 0)
+    geometry = dataclasses.replace(geometry, coupled=coupled,
+                                   neck_fixed=~jnp.any(coupled.reshape(-1)[geometry.neck_slots], axis=1))
     half = half_resistances(physics.conduction.law, p.radii, contacts.neighbors, contacts.table_neck,
-                            contacts.table_overlap, kappa, law_params, neck_conductance(physics, state, params))
-    return coupled_blocks(contacts.sphere, half, p.radii, kappa)
+                            contacts.table_overlap, kappa, law_params, conductance)
+    return geometry, coupled_blocks(geometry, half, p.radii, kappa)
+
+
+def current_blocks(physics: Physics, state: SimState, prep):
+    """:func:`neck_blocks` at this step: the rollout's, or with growing necks the state's now."""
+    return neck_blocks(physics, state, prep.params) if physics.sintering is not None else prep.neck_blocks
 
 
 def neck_temperatures(geometry, blocks, temperature, guess):
@@ -84,11 +96,13 @@ def neck_temperatures(geometry, blocks, temperature, guess):
     return x + level, residual
 
 
-def contact_power(physics: Physics, state: SimState, blocks):
-    """``(power [n], neck temperatures [p], residual)``: heat into each sphere (W) through its coupled necks."""
+def contact_power(physics: Physics, state: SimState, network):
+    """``(power [n], neck temperatures [p], residual)``: heat into each sphere (W) through its coupled necks;
+    ``network``: ``(geometry, blocks)`` of :func:`neck_blocks`."""
     contacts, temperature = state.contacts, state.particles.temperature
-    x, residual = neck_temperatures(contacts.sphere, blocks, temperature, contacts.neck_temperature)
-    flow = contact_flows(contacts.sphere, blocks, temperature, x)
+    geometry, blocks = network
+    x, residual = neck_temperatures(geometry, blocks, temperature, contacts.neck_temperature)
+    flow = contact_flows(geometry, blocks, temperature, x)
     return pair_exchange(-flow, contacts.pairs, temperature.shape[0]), x, residual
 
 
@@ -103,9 +117,10 @@ def with_necks(state: SimState, neck_temperature, residual) -> SimState:
         neck_residual=worst))
 
 
-def stability_conductance(blocks):
-    """``[n]`` (W/K): the denominator of the explicit limit ``C_s / (1^T C_s 1 / 2)`` in place of ``sum_j K_ij``."""
-    return 0.5 * block_total(blocks)
+def stability_conductance(network):
+    """``[n]`` (W/K): the denominator of the explicit limit ``C_s / (1^T C_s 1 / 2)`` in place of ``sum_j K_ij``;
+    ``network``: ``(geometry, blocks)`` of :func:`neck_blocks`."""
+    return 0.5 * block_total(network[1])
 
 
 def check_neck_solve(state: SimState) -> None:
