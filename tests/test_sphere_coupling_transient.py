@@ -372,6 +372,11 @@ def test_scene_builds_with_the_coupled_bound():
     too_long["run"]["dt"] = 1.1 * bound
     with pytest.raises(scene.SceneError, match=r"run.dt: dt = .* exceeds the explicit stability limit"):
         build_model(scene.validate_scene(too_long))
+    sintered = copy.deepcopy(SCENE)  # SC necks 90 deg apart: at the cap their discs overlap
+    sintered["sintering"] = {"law": "grain_boundary"}
+    with pytest.raises(scene.SceneError,
+                       match=r"conduction.coupling: at the kinetic law's cap: .* on particle \d+ .* 90 deg apart"):
+        build_model(scene.validate_scene(sintered))
 
 
 # --------------------------------------------------------------------------
