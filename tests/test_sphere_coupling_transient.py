@@ -115,6 +115,7 @@ def cluster():
 # (b) where the coupling is exact: the isolated network
 
 
+@pytest.mark.slow
 def test_chain_transient_is_the_isolated_one():
     """A chain of unequal spheres with one end held: two opposite necks a sphere carry any flows, the net flow's
     term (Eq. 5) keeps the pair law, and the coupled run is the isolated one to round-off (its stable step too)."""
@@ -130,6 +131,7 @@ def test_chain_transient_is_the_isolated_one():
     assert np.ptp(ends["none"][1]) < 0.5 * np.ptp(temperature)  # it moved
 
 
+@pytest.mark.slow
 def test_simple_cubic_block_heated_along_an_axis_is_the_isolated_one():
     """A 4 x 3 x 3 simple-cubic block, insulated, each layer across x at its own temperature: the side necks carry
     nothing, the axial ones are opposite (or alone on an end sphere), so the coupled run equals the isolated one."""
@@ -177,6 +179,7 @@ def test_fcc_block_runs_to_the_steady_coupled_field():
 # (d) heat conserved; sources unchanged
 
 
+@pytest.mark.slow
 def test_heat_is_conserved_on_an_insulated_cluster_with_a_pulse(cluster):
     """A random cluster of unequal spheres (loops included), insulated, one sphere given a pulse: sum_i C_i T_i
     grows by exactly the pulse's energy, to round-off, and the run is not the isolated one."""
@@ -197,6 +200,7 @@ def test_heat_is_conserved_on_an_insulated_cluster_with_a_pulse(cluster):
     assert np.max(np.abs(ends["sphere"] - ends["none"])) > 1e-3
 
 
+@pytest.mark.slow
 def test_neck_solve_equals_a_dense_solve(cluster):
     """The neck temperatures of one step (CG to 1e-12, from a cold start and from a guess 0.01 K off) against a dense
     solve of the neck balance assembled here from the blocks C_s: within 1e-12 of the temperature span (measured
@@ -257,6 +261,7 @@ def test_gradients_equal_central_differences(cluster):
 # (f) float32
 
 
+@pytest.mark.slow
 def test_float32_agrees_with_float64(cluster):
     """With x64 off the cluster heated from a held sphere agrees with float64 to 1e-5 of the temperature span
     (measured 3.5e-7), and no neck solve is flagged."""
@@ -300,6 +305,7 @@ def test_bad_coupling_and_unsupported_combinations_are_refused():
                        sintering=neck_growth.Sintering(shrinkage="many_body"))
 
 
+@pytest.mark.slow
 def test_necks_too_close_are_refused_when_the_contacts_are_built():
     """FCC at a/r = 0.55: neighbouring necks 60 deg apart, their discs 66.7 deg wide."""
     centres, radii, _, _ = lattice_block("FCC", 0.55, cells=1)
@@ -315,6 +321,7 @@ def test_contacts_built_without_the_coupling_are_refused():
         rollout(simulate.simulator(physics("sphere")), state, PARAMS, 2)
 
 
+@pytest.mark.slow
 def test_an_unconverged_neck_solve_is_refused_on_the_host():
     """A state whose neck solve ended above its tolerance (LiftedContacts.neck_residual > 0) fails the run's check."""
     centres, radii = chain([1.0, 1.0, 1.0], 0.05)
@@ -392,6 +399,7 @@ def periodic_bcc(a_over_r=0.22, cells=2):
     return centres, np.ones(len(centres)), np.full(3, cells * length), sign
 
 
+@pytest.mark.slow
 def test_stable_step_is_attained_on_the_bipartite_bcc_lattice():
     """Periodic BCC: the alternating mode (corners +1, centres -1, every neck at 0 by symmetry) has the largest
     rate, 1^T C_s 1 / C_s, so at the bound 2 C_s / (1^T C_s 1) it neither grows nor decays (stable) and at 1.1 times
@@ -453,6 +461,7 @@ def test_no_nan_at_fourteen_necks():
     assert np.isfinite(float(value)) and np.isfinite(float(grad)) and float(grad) > 0
 
 
+@pytest.mark.slow
 def test_no_nan_at_the_neck_cap():
     """A chain at the neck model's cap (a = r): finite temperatures and gradient, still the isolated chain."""
     centres, radii = chain([1.0] * 5, float(max_overlap(1.0, 1.0)))
@@ -491,6 +500,7 @@ def sintering_chain(coupling, rebuild_at_cap=True):
     return simulate.simulator(spec), state, params
 
 
+@pytest.mark.slow
 def test_growing_necks_of_a_chain_are_the_isolated_ones():
     """Necks grown from point contacts (coupled once they conduct, the blocks recomputed every step): the coupled
     chain's temperatures and necks are the isolated chain's to round-off."""
@@ -506,6 +516,7 @@ def test_growing_necks_of_a_chain_are_the_isolated_ones():
                                np.asarray(ends["none"].particles.temperature), rtol=1e-13)
 
 
+@pytest.mark.slow
 def test_growing_necks_need_the_geometry_at_the_cap():
     """Built on the necks now (point contacts: none coupled) the run is refused before it compiles; an FCC block
     whose necks at the kinetic law's cap overlap is refused by the domain check at the cap."""
