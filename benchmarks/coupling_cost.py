@@ -2,6 +2,7 @@
 
 Usage: PYTHONPATH=. python benchmarks/coupling_cost.py [--sizes 1000 10000]
        PYTHONPATH=. python benchmarks/coupling_cost.py --cells     (the docs/laws.md table: cells vs full field)
+       PYTHONPATH=. python benchmarks/coupling_cost.py --transient [--sizes 10000]   (the explicit step)
 
 Beds: rolled random beds (``sintercond.beds.packing.powder_bed``, diameters 60-120, seed 0) of about the given
 number of spheres, densified by 4 % about the origin (sintered necks, 5-6 contacts a sphere), k* along z
@@ -9,6 +10,11 @@ between the face layers (``face_layer_box``). Per coupling: the first call (host
 second (host setup and solve on the compiled program), the conjugate-gradient iterations (counted through a
 callback in the mat-vec), and for ``"sphere"`` the memory of the per-sphere blocks (the constant geometric
 ``[n, m, m]`` block and ``C_s``, float64). Prints a table; writes nothing.
+
+``--transient``: the explicit step on the same beds, insulated, from a random field (300-400 K), at 0.9 of each
+network's stable step: the milliseconds a step of a compiled 200-step rollout takes (after a warm-up call, best of
+3), the stable steps, and for ``"sphere"`` the neck solve's conjugate-gradient iterations a step (counted in a
+separate run through a callback in its mat-vec).
 """
 
 from __future__ import annotations
@@ -101,11 +107,60 @@ def cells_table():
               f"{cpl / full:.3f} | |")
 
 
+def time_transient(n_target, steps=200):
+    """Rows ``(n, coupling, ms per step, stable step (s), CG iterations a step)`` of the explicit step on a bed."""
+    from sintercond import simulate
+    from sintercond.sim import rollout as rollouts
+    from sintercond.sim.stability import thermal_time_step
+    from sintercond.sim.terms import coupling as coupling_term
+    from sintercond.state import particle_state
+
+    centres, radii = bed(n_target)
+    temperature = 300.0 + 100.0 * np.random.default_rng(0).random(len(radii))
+    params = simulate.Params(jax.numpy.array([1.0]), jax.numpy.array([1.0]))
+    rows = []
+    for coupling in ("none", "sphere"):
+        physics = simulate.Physics.create(conductance="lifted", coupling=coupling)
+        contacts = simulate.lifted_contacts(physics, centres, radii)
+        sim = simulate.simulator(physics)
+        state = simulate.init_state(particle_state(centres, radii, temperature, 1.0), contacts, 1.0)
+        limit = float(thermal_time_step(sim, state, params))
+        state = simulate.init_state(particle_state(centres, radii, temperature, 1.0), contacts, 0.9 * limit)
+        run = jax.jit(lambda st, p, sim=sim: rollouts.rollout(sim, st, p, steps)[0])
+        jax.block_until_ready(run(state, params))
+        best = np.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            jax.block_until_ready(run(state, params))
+            best = min(best, time.perf_counter() - t0)
+        iterations = float("nan")
+        if coupling == "sphere":
+            plain = coupling_term.cg
+            coupling_term.cg = _counting_cg(plain)
+            try:
+                MATVECS[0] = 0
+                jax.block_until_ready(jax.jit(lambda st, p, sim=sim: rollouts.rollout(sim, st, p, steps)[0])(
+                    state, params))
+                iterations = (MATVECS[0] - steps) / steps  # one mat-vec a step for the initial residual
+            finally:
+                coupling_term.cg = plain
+        rows.append((len(radii), coupling, 1e3 * best / steps, limit, iterations))
+    return rows
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000])
     parser.add_argument("--cells", action="store_true")
+    parser.add_argument("--transient", action="store_true")
     args = parser.parse_args()
+    if args.transient:
+        print("| n | coupling | ms per step | stable step (s) | neck CG iterations a step |")
+        print("|---|---|---|---|---|")
+        for n in args.sizes:
+            for r in time_transient(n):
+                print(f"| {r[0]} | {r[1]} | {r[2]:.3f} | {r[3]:.4g} | {r[4]:.1f} |", flush=True)
+        return
     if args.cells:
         sys.path.insert(0, str(ROOT / "benchmarks"))
         cells_table()

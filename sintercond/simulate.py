@@ -80,7 +80,8 @@ from sintercond.sim.mechanics import MechanicalParams, MechanicalState, Mechanic
 from sintercond.sim.neck_growth import NeckState, Sintering  # noqa: F401
 from sintercond.contacts.network import ContactTable
 from sintercond.sim.contacts import (affine_shrinkage, conducting_geometry, conductance_lift,  # noqa: F401
-                                     conductivity_lookup, dynamic_contacts, follow_contacts, lifted_contacts,
+                                     conductivity_lookup, coupled_contacts, dynamic_contacts, follow_contacts,
+                                     lifted_contacts,
                                      lifted_pair_conductance, list_region, merged_law_params, neck_conductance,
                                      pair_conductance, pair_heat_flow, pair_heat_power, pair_neck_conductance,
                                      reallocate_neighbors, sintered_geometry,

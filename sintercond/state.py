@@ -143,6 +143,12 @@ class LiftedContacts:
       wall_neck, wall_overlap: ``[n_walls, n]`` neck radius and penetration (m) of each particle on each
         conducting wall, or None.
       wall_temperature: ``[n_walls]`` conducting wall temperatures (K), or None.
+      sphere: with ``Conduction.coupling="sphere"``, the necks' directions on their spheres
+        (:class:`sintercond.contacts.sphere_coupling.SphereGeometry`, on this table's layout, the neck unknowns
+        in the order of ``pairs``); else None.
+      neck_temperature: with ``"sphere"``, ``[c]`` the temperature of each neck (K) at the last step, the
+        starting guess of the next step's neck solve; else None.
+      neck_residual: with ``"sphere"``, the largest relative residual of a neck solve so far (scalar); else None.
     """
 
     neighbors: jax.Array
@@ -153,6 +159,9 @@ class LiftedContacts:
     wall_neck: jax.Array | None = None
     wall_overlap: jax.Array | None = None
     wall_temperature: jax.Array | None = None
+    sphere: object = None
+    neck_temperature: jax.Array | None = None
+    neck_residual: jax.Array | None = None
 
     def on_table(self, per_pair) -> jax.Array:
         """A ``[c]`` per-pair value in both slots of the padded table ``[n, m]``, 0 in padding."""

@@ -53,6 +53,22 @@ symmetry). Where a neck's disc overlaps an image's disc (a neck close to the hel
 layer of a poured bed) the images are not point-like; such a held sphere keeps the pair law's halves
 (``R_s = diag(1/K_half)``, the other treatment of ``/work/shared/NECK_COUPLING.md``).
 
+**Net flow (the transient).** In a steady state a free sphere's necks carry no net flow, ``sum_i q_i = 0``,
+and Eqs. 2-3 need nothing more. In a transient a sphere stores heat and ``Q = sum_i q_i`` is not zero; its
+``l = 0`` part is a uniform shift of every neck against ``T_s`` that Eqs. 2-3 leave open (the surface Green
+function has no ``l = 0`` term). The transient network takes the shift that keeps the pair law wherever the
+pipe network is calibrated, two opposite necks carrying any flows ``(q_1, q_2)``::
+
+    R_s <- R_s - G(pi) 1 1^T   (free spheres),                                                     (Eq. 5)
+
+so that Eq. 2 reads ``T_s - T_i = q_i / K_half,i + sum_j q_j (G(theta_ij) - G(pi))`` (the kernel measured
+from the antipode, the self term ``G(pi)`` of Eq. 3 cancelled): a chain and the simple-cubic lattice heated
+along an axis are the isolated network's in the transient too, and a steady state (``1^T q = 0``) is Eqs. 2-3
+exactly, the sphere temperatures included. ``-G(pi) 1 1^T`` is positive semi-definite: ``R_s`` stays positive
+definite. It is a modelling choice, not derived: a sphere cooling uniformly inside (the lumped capacity) gives a
+shift of ``+Q/(20 pi kappa r)`` instead (its surface mean below its volume mean), ``1.49 Q/(4 pi kappa r)`` less;
+the two differ only while the spheres store heat.
+
 **Domain.** The point-source form needs the necks' discs apart: necks ``i, j`` of a sphere of radius ``r``
 with neck radii ``a_i, a_j`` must satisfy ``theta_ij >= alpha_i + alpha_j``, ``alpha = arcsin(a / r)`` (the
 angular half-width of a neck's disc). :func:`sphere_geometry` refuses a packing where two discs overlap,
@@ -131,7 +147,8 @@ class SphereGeometry:
     neck_fixed: jax.Array
 
 
-def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis=0, periodic_box=None):
+def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis=0, periodic_box=None,
+                    net_flow=False):
     """Host-side :class:`SphereGeometry` of a static packing, after checking the domain of point coupling.
 
     Args:
@@ -143,6 +160,7 @@ def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis
         temperature (e.g. 1 hot, 2 cold), or None.
       axis: the flux axis; held spheres get mirror images across the plane through their centre normal to it.
       periodic_box: ``[3]`` side lengths (m) for minimum-image directions, or None.
+      net_flow: the transient's blocks: free spheres get the net-flow term ``-G(pi) 1 1^T`` (Eq. 5).
 
     Raises:
       ValueError: two necks of one sphere closer than their discs' angular half-widths (Domain).
@@ -180,6 +198,8 @@ def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis
         image_g = np.asarray(surface_green_factor(np.where(pair, image_cos, -1.0)))
         green = np.where(images[:, None, None], green - np.where(pair, image_g, 0.0), green)
         green = np.where((mirrored & ~images)[:, None, None], 0.0, green)
+    if net_flow:
+        green = np.where(pair & (held == 0)[:, None, None], green - GREEN_OPPOSITE, green)
     n_pairs = int(pair_id.max(initial=0))
     flat = (rows * m + np.arange(m)[None, :])[pair_id > 0]
     ids = pair_id[pair_id > 0] - 1
@@ -283,3 +303,38 @@ def coupled_diagonal(geometry: SphereGeometry, conductance):
     """The diagonal of :func:`coupled_apply`'s ``A``: ``([n], [p])`` (W/K), for a Jacobi preconditioner."""
     diag = jnp.diagonal(conductance, axis1=1, axis2=2)
     return jnp.sum(conductance, axis=(1, 2)), jnp.sum(diag.reshape(-1)[geometry.neck_slots], axis=1)
+
+
+def coupled_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
+    """``C_s`` ``[n, m, m]`` (W/K) from the halves: :func:`conductance_blocks` of :func:`resistance_blocks`."""
+    return conductance_blocks(geometry, resistance_blocks(geometry, half_resistance, radii, kappa))
+
+
+def neck_balance(geometry: SphereGeometry, conductance, sphere_x, neck_x):
+    """The neck rows of :func:`coupled_apply`, ``[p]`` (W): the net heat leaving each neck; 1 x on a neck in no
+    block (``neck_fixed``, kept at its value), so that the neck system is positive definite."""
+    return jnp.where(geometry.neck_fixed, neck_x, coupled_apply(geometry, conductance, sphere_x, neck_x)[1])
+
+
+def contact_flows(geometry: SphereGeometry, conductance, sphere_t, neck_t):
+    """``[p]`` heat flow (W) through each contact from its first sphere (``neck_slots[:, 0]``) to its second.
+
+    The mean of the two spheres' outflows into the neck, ``(q_ic - q_jc) / 2`` with ``q_s = C_s (T_s 1 - T_N)``:
+    equal to each of them when the neck temperatures balance (a massless neck), and antisymmetric by
+    construction, so the network conserves heat to round-off whatever the neck solve's residual.
+    """
+    drop = sphere_t[:, None] - neck_t[geometry.neck_index]
+    q = jnp.einsum("nij,nj->ni", conductance, drop).reshape(-1)[geometry.neck_slots]
+    return 0.5 * (q[:, 0] - q[:, 1])
+
+
+def block_total(conductance):
+    """``[n]`` ``1^T C_s 1`` (W/K): the heat leaving sphere ``s`` per kelvin above all its necks.
+
+    ``x^T S x <= sum_s 1^T C_s 1 x_s^2`` for the sphere operator ``S`` left once the necks are eliminated (it is
+    the minimum of the coupled operator's form over the neck temperatures, here taken at 0), so
+    ``dt <= 2 min_s C_s / (1^T C_s 1)`` keeps explicit Euler stable. For isolated necks (``C_s`` diagonal, the
+    halves) it is the pipe network's ``C_i / sum_j K_ij``; it is attained by the alternating mode of a bipartite
+    lattice (neighbours at ``+1`` and ``-1``, every neck at 0 by symmetry).
+    """
+    return jnp.sum(conductance, axis=(1, 2))

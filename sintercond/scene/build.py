@@ -171,12 +171,13 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
     held = any(w.mode == "held" for w in _walls(scene)) or (ramp is not None and ramp.hold == "all")
     # a contact resistance makes the law nonlinear in the conductivity, growing necks and kappa(T) change it: lift it
     table = m.conductivity_table is not None
-    lifted = (c.params or {}).get("contact_resistance", 0.0) or s is not None or table
+    coupling = c.coupling or "none"
+    lifted = (c.params or {}).get("contact_resistance", 0.0) or s is not None or table or coupling == "sphere"
     return simulate.Physics(
         conduction=simulate.Conduction(
             law=c.law, neck_model=c.neck_model, conductance="lifted" if lifted else "table",
             held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table,
-            specific_heat_table=m.specific_heat_table is not None),
+            specific_heat_table=m.specific_heat_table is not None, coupling=coupling),
         sources=simulate.Sources(beam=None if scene.beam is None else scene.beam.kind,
                                  convection=scene.convection is not None, radiation=scene.radiation is not None),
         sintering=None if s is None else neck_growth.Sintering(law=s.law, every=s.every, shrinkage=s.shrinkage))
@@ -422,15 +423,26 @@ def _static_model(scene, physics, planes, particles, params, conducting, log) ->
     physics = dataclasses.replace(physics, conduction=dataclasses.replace(
         physics.conduction, conducting_walls=len(conducting) if lifted else int(bool(conducting))))
     pairs = _scene_pairs(scene, centres, radii, log)
+    held = held_axis = None
     if not lifted:
         c = scene.conduction
         table = network.contact_table(centres, radii, 1.0, c.law, c.params, c.neck_model)
         k_wall, t_wall = _merged_wall_conductance(scene, radii, conducting)
         contacts = simulate.table_contacts(table, k_wall, t_wall)
     else:
-        contacts = simulate.lifted_contacts(physics, centres, radii,
-                                            [(penetration, wall.temperature) for _, wall, penetration in conducting],
-                                            pairs=pairs)
+        if physics.conduction.coupling == "sphere":  # held spheres at one temperature share a mirror plane's label
+            fixed = np.asarray(particles.fixed, bool)
+            levels = np.asarray(particles.fixed_temperature, np.float64)
+            held = np.zeros(len(radii), np.int64)
+            held[fixed] = np.unique(levels[fixed], return_inverse=True)[1].reshape(-1) + 1
+            held_axis = next((w.axis for w in _walls(scene) if w.mode == "held"), 0)
+        try:
+            contacts = simulate.lifted_contacts(physics, centres, radii,
+                                                [(penetration, wall.temperature)
+                                                 for _, wall, penetration in conducting], pairs=pairs,
+                                                held=held, held_axis=held_axis or 0)
+        except ValueError as err:
+            raise SceneError(f"conduction.coupling: {err}") from None
     necks, limiting = None, contacts
     if physics.sintering is not None:
         many_body = physics.sintering.shrinkage == "many_body"
@@ -439,6 +451,13 @@ def _static_model(scene, physics, planes, particles, params, conducting, log) ->
                                        positions=particles.positions if many_body else None)
         # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
         limiting = neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts, particles.radii)
+        if physics.conduction.coupling == "sphere":  # the domain of point coupling at the cap, all run long
+            try:
+                contacts = simulate.coupled_contacts(contacts, centres, radii, np.asarray(limiting.neck), held=held,
+                                                     held_axis=held_axis or 0)
+            except ValueError as err:
+                raise SceneError(f"conduction.coupling: at the kinetic law's cap: {err}") from None
+            limiting = dataclasses.replace(limiting, sphere=contacts.sphere)
     return _Built(physics, simulate.simulator(physics), contacts, None, necks,
                   simulate.init_state(particles, limiting, 1.0, sintering=necks), len(pairs.i), {})
 

@@ -361,9 +361,33 @@ def _check_property_table(material, key, symbol, low, high):
     material[key] = [list(r) for r in rows]
 
 
+def _check_coupling(scene):
+    """``conduction.coupling = "sphere"``: only what the coupled transient supports (static packing, necks that
+    stay or grow independently, no conducting walls or property tables, held walls on one axis: their spheres'
+    mirror plane)."""
+    if scene["conduction"].get("coupling", "none") != "sphere":
+        return
+    walls = scene.get("walls", [])
+    refused = {"physics.mechanics = true": scene["physics"].get("mechanics", False),
+               "sintering.shrinkage = \"many_body\"": scene.get("sintering", {}).get("shrinkage") == "many_body",
+               "material.conductivity_table": "conductivity_table" in scene["material"],
+               "material.specific_heat_table": "specific_heat_table" in scene["material"],
+               "a conducting wall": any(w["mode"] == "conducting" for w in walls)}
+    for what, present in refused.items():
+        if present:
+            raise SceneError(f"conduction.coupling = \"sphere\" is not supported with {what} yet; use "
+                             "conduction.coupling = \"none\"")
+    axes = {w["axis"] for w in walls if w["mode"] == "held"} | ({2} if "floor_temperature" in scene.get(
+        "boundary", {}) else set())
+    if len(axes) > 1:
+        raise SceneError(f"conduction.coupling = \"sphere\" mirrors held spheres across the plane normal to their "
+                         f"walls' axis: held walls on one axis only; got axes {sorted(axes)}")
+
+
 def _check_details(scene):
     _check_property_table(scene["material"], "conductivity_table", "kappa", 1e-6, 1e4)
     _check_property_table(scene["material"], "specific_heat_table", "c", 1.0, 1e5)
+    _check_coupling(scene)
     conduction = scene["conduction"]
     _check_law_params("conduction.params", conduction.get("params", {}), CONDUCTANCE_LAWS[conduction["law"]],
                       _LAW_PARAMS, "law")

@@ -23,6 +23,7 @@ from sintercond.sim import mechanics, neck_growth
 from sintercond.laws.conductance import CONDUCTANCE_LAWS, conductance_from_neck
 from sintercond.laws.neck import NECK_MODELS
 from sintercond.contacts.neighbors import did_buffer_overflow, did_rebuild
+from sintercond.contacts.sphere_coupling import sphere_geometry
 from sintercond.contacts.pair_list import (allocate_half_pairs, half_pair_capacity, half_pair_count, half_pairs,
                                            half_pairs_overflowed, padded_half_pairs, pair_exchange)
 from sintercond.sim.physics import Physics
@@ -179,7 +180,7 @@ def table_contacts(table, wall_conductance=None, wall_temperature=None) -> Table
 
 
 def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=None, tolerance=1e-9,
-                    pairs=None) -> LiftedContacts:
+                    pairs=None, *, held=None, held_axis=0) -> LiftedContacts:
     """Contacts of ``conductance="lifted"``: the neck of every pair and of every conducting wall (host, once).
 
     Pairs as :func:`sintercond.contacts.network.contact_pairs` finds them, necks by
@@ -187,6 +188,13 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
     ``walls``: ``(penetration [n], temperature)`` per conducting wall (m, K),
     penetration <= 0 where a particle does not touch it. ``pairs``: the
     :class:`~sintercond.contacts.network.ContactPairs` if the caller already searched.
+
+    With ``Conduction.coupling="sphere"`` the necks' directions on their spheres too
+    (:func:`sintercond.contacts.sphere_coupling.sphere_geometry` with the transient's net-flow term, Eq. 5, after
+    its domain check, which raises ``ValueError`` on necks too large or too close): ``held`` ``[n]`` int labels
+    (0 free, equal non-zero labels for particles held at the same temperature) and ``held_axis``, the axis
+    normal to the held faces, give the held spheres their mirror images as in the steady solver (``held=None``:
+    every sphere's block is a free sphere's, held or not).
     """
     from sintercond.contacts.network import contact_pairs, ell_table
 
@@ -199,12 +207,35 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
                               pairs=jnp.asarray(np.stack([p.i, p.j], axis=1).reshape(-1, 2), jnp.int32),
                               slot_pair=jnp.asarray(np.where(slot > 0, slot - 1, count), jnp.int32),
                               neck=jnp.asarray(a), overlap=jnp.asarray(np.asarray(p.overlap, np.float64)))
+    if physics.conduction.coupling == "sphere":
+        contacts = coupled_contacts(contacts, centres, radii, a, held=held, held_axis=held_axis,
+                                    periodic_box=periodic_box)
     if walls:
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
         a = np.asarray(wall_neck_radius(physics.neck, radii, h))
         contacts = dataclasses.replace(contacts, wall_neck=jnp.asarray(a), wall_overlap=jnp.asarray(h),
                                        wall_temperature=jnp.asarray([float(t) for _, t in walls]))
     return contacts
+
+
+def coupled_contacts(contacts: LiftedContacts, centres, radii, necks, *, held=None, held_axis=0,
+                     periodic_box=None) -> LiftedContacts:
+    """``contacts`` with the necks' directions on their spheres for ``Conduction.coupling="sphere"`` (host, once).
+
+    :func:`sintercond.contacts.sphere_coupling.sphere_geometry` (with the transient's net-flow term, Eq. 5) on the
+    necks ``necks`` ``[c]`` (m): the contacts with a neck there are the ones coupled, and its domain check (raises
+    ``ValueError`` on two necks of a sphere closer than their discs' half-widths) is made on them. For necks that
+    stay, the contacts' own (:func:`lifted_contacts` does this); with ``Physics.sintering``, the largest necks the
+    run can reach (:func:`sintercond.sim.neck_growth.necks_at_cap`): the domain then holds all run long, and a
+    neck that grows from zero is coupled once it conducts. ``held``, ``held_axis``: as :func:`lifted_contacts`.
+    """
+    count = int(contacts.pairs.shape[0])
+    slot = np.asarray(contacts.slot_pair)
+    padded = np.concatenate([np.asarray(necks, np.float64), [0.0]])[slot]
+    geometry = sphere_geometry(centres, radii, np.asarray(contacts.neighbors), np.where(slot < count, slot + 1, 0),
+                               padded, held=held, axis=held_axis, periodic_box=periodic_box, net_flow=True)
+    return dataclasses.replace(contacts, sphere=geometry, neck_temperature=jnp.zeros(count, float),
+                               neck_residual=jnp.zeros((), float))
 
 
 def list_region(positions, radii, margin=None):

@@ -23,6 +23,8 @@ _INTEGRATORS = ("explicit", "implicit")
 _CONDUCTANCE_MODES = ("table", "lifted")
 _CONTACT_MODES = ("static", "dynamic")
 _BEAMS = (None, "laser", "nozzle")
+COUPLINGS = ("none", "sphere")
+"""Values of ``Conduction.coupling``: the isolated pipe network, or necks coupled through their sphere."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,6 +57,12 @@ class Conduction:
         ``fixed_temperature``; needs ``held``.
       conducting_walls: number of conducting plane walls of a thermal step
         (0: none traced); a mechanical step takes its walls as ``Mechanics.walls``.
+      coupling: ``"none"`` (each neck's pair law as if it were alone on its sphere) or ``"sphere"`` (the necks
+        that share a sphere coupled through its surface Green function, :mod:`sintercond.contacts.sphere_coupling`,
+        neck temperatures massless, :mod:`sintercond.sim.terms.coupling`). ``"sphere"`` needs
+        ``conductance="lifted"`` and the explicit integrator, on static contacts (necks that stay, or grow by
+        ``Sintering(shrinkage="independent")``) without conducting walls, mechanics or temperature tables (not
+        supported yet).
     """
 
     law: str = "rojek"
@@ -67,10 +75,11 @@ class Conduction:
     held_ramp: bool = False
     conductivity_table: bool = False
     specific_heat_table: bool = False
+    coupling: str = "none"
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
-                  ("integrator", self.integrator, _INTEGRATORS))
+                  ("integrator", self.integrator, _INTEGRATORS), ("coupling", self.coupling, COUPLINGS))
         for name, value, allowed in checks:
             if value not in allowed:
                 raise ValueError(f"Conduction.{name} must be one of {list(allowed)}; got {value!r}")
@@ -87,6 +96,16 @@ class Conduction:
                              "explicit integrator")
         if self.held_ramp and not self.held:
             raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
+        if self.coupling == "sphere":
+            needs = {"conductance": ("lifted", self.conductance), "integrator": ("explicit", self.integrator),
+                     "conducting_walls": (0, self.conducting_walls),
+                     "conductivity_table": (False, self.conductivity_table),
+                     "specific_heat_table": (False, self.specific_heat_table)}
+            for name, (want, got) in needs.items():
+                if got != want:
+                    raise ValueError(f"Conduction.coupling='sphere' needs Conduction.{name}={want!r} (the coupled "
+                                     f"neck network runs on lifted static necks with the explicit step; the rest is "
+                                     f"not supported yet, use coupling='none'); got {got!r}")
 
     @property
     def neck(self) -> str:
@@ -202,6 +221,15 @@ class Physics:
             if c.conducting_walls:
                 raise ValueError("Physics.mechanics takes its walls as Mechanics.walls (PlaneWall, mode 'conducting' "
                                  "for heat); conduction.conducting_walls must be 0")
+        if c.coupling == "sphere":
+            many_body = self.sintering if self.sintering is not None and self.sintering.shrinkage != "independent" \
+                else None
+            for name, value in (("contacts", self.contacts if self.contacts != "static" else None),
+                                ("mechanics", self.mechanics), ("sintering", many_body), ("motion", self.motion)):
+                if value is not None:
+                    raise ValueError(f"Conduction.coupling='sphere' runs on static contacts (necks growing by "
+                                     f"independent shrinkage at most); Physics.{name}={value!r} is not supported with "
+                                     f"it yet (use coupling='none')")
         if self.contacts == "dynamic" and c.conductance != "lifted":
             raise ValueError("Physics.contacts='dynamic' needs conduction.conductance='lifted' (conductances follow "
                              "the motion)")
@@ -213,7 +241,7 @@ class Physics:
     def create(cls, law="rojek", *, neck_model=None, conductance="table", contacts="static", integrator="explicit",
                held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
                motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None, held_ramp=False,
-               conductivity_table=False, specific_heat_table=False, **mechanical) -> Physics:
+               conductivity_table=False, specific_heat_table=False, coupling="none", **mechanical) -> Physics:
         """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
 
         ``mechanics=True`` turns the coupled step on, with ``walls`` and the
@@ -221,7 +249,7 @@ class Physics:
         (``gravity``, ``friction``, ``rolling``, ``wall_friction``, ...),
         normalised by :meth:`sintercond.sim.mechanics.Mechanics.create`; without it
         those keywords are refused (nothing would move). ``sintering``: a
-        :class:`sintercond.sim.neck_growth.Sintering` or None.
+        :class:`sintercond.sim.neck_growth.Sintering` or None. ``coupling``: ``Conduction.coupling``.
         """
         if not isinstance(mechanics, (bool, np.bool_)):
             raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
@@ -237,7 +265,7 @@ class Physics:
                                          integrator=integrator, implicit_tol=implicit_tol, held=bool(held),
                                          conducting_walls=conducting_walls, held_ramp=bool(held_ramp),
                                          conductivity_table=bool(conductivity_table),
-                                         specific_heat_table=bool(specific_heat_table)),
+                                         specific_heat_table=bool(specific_heat_table), coupling=coupling),
                    contacts=contacts, motion=motion,
                    sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
                                    pulse=bool(pulse), source=source),

@@ -32,10 +32,9 @@ from sintercond.contacts.network import ContactTable, contact_pairs, ell_table, 
 from sintercond.contacts.sphere_coupling import (
     SphereGeometry,
     coupled_apply,
+    coupled_blocks,
     coupled_diagonal,
-    conductance_blocks,
     half_resistances,
-    resistance_blocks,
     sphere_geometry,
 )
 
@@ -212,7 +211,7 @@ def _compiled_network_coupled_solve(tol):
 
 def _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol):
     """``(Q, temperature [n])``: the heat leaving the ``hot`` spheres (held at 1, the rest of ``fixed`` at 0)."""
-    blocks = conductance_blocks(geometry, resistance_blocks(geometry, half, radii, kappa))
+    blocks = coupled_blocks(geometry, half, radii, kappa)
     temperature, outflow = coupled_steady_state(geometry, blocks, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
     return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature
 

@@ -57,8 +57,13 @@ def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     radius. Traced leaves are skipped (under ``jit`` they are the caller's).
     """
     sources.validate(sim.physics, params)
+    if sim.physics.conduction.coupling == "sphere" and getattr(state.contacts, "sphere", None) is None:
+        raise ValueError("Conduction.coupling='sphere' needs SimState.contacts built for it: "
+                         "simulate.lifted_contacts(physics, ...) with that physics (the necks' directions)")
     if not all_concrete(state, params):
         return
+    if sim.physics.conduction.coupling == "sphere" and sim.physics.sintering is not None:
+        _check_coupled_at_cap(state)
     dt = np.asarray(state.dt, np.float64)
     if not (dt.shape == () and np.isfinite(dt) and dt > 0):
         raise ValueError(f"SimState.dt (the time step) must be finite and > 0 s; got {state.dt!r}")
@@ -133,6 +138,20 @@ class PrecisionWarning(UserWarning):
 
 FLOAT32_OVERLAP_STEPS = 64
 """Fewest float32 steps of the positions a touching pair's overlap should span before :class:`PrecisionWarning`."""
+
+
+def _check_coupled_at_cap(state: SimState) -> None:
+    """With growing necks every contact must be in the coupled geometry (built on the necks at the cap), except
+    those joining two held particles."""
+    g, p = state.contacts.sphere, state.particles
+    coupled = np.asarray(g.coupled).reshape(-1)[np.asarray(g.neck_slots)].any(axis=1)
+    pairs, fixed = np.asarray(state.contacts.pairs), np.asarray(p.fixed)
+    missing = ~coupled & ~(fixed[pairs[:, 0]] & fixed[pairs[:, 1]])
+    if missing.any():
+        i, j = (int(v) for v in pairs[np.argmax(missing)])
+        raise ValueError(f"Conduction.coupling='sphere' with Physics.sintering: contact ({i}, {j}) is not in the "
+                         "coupled geometry; build it on the necks at the kinetic law's cap: "
+                         "simulate.coupled_contacts(contacts, centres, radii, neck_growth.necks_at_cap(...).neck)")
 
 
 def _warn_float32_positions(positions, overlaps):

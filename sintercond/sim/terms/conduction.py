@@ -25,7 +25,7 @@ from sintercond.sim.contacts import (conductivity_lookup, follow_contacts, merge
                                      pair_conductance, pair_heat_power, sintered_pair_conductance)
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, Prepared, SimState, held_ramp_temperature, params_in_precision
-from sintercond.sim.terms import sources, walls
+from sintercond.sim.terms import coupling, sources, walls
 from sintercond.state import ParticleState, heat_capacity
 
 
@@ -46,7 +46,8 @@ def fast_static_step(physics: Physics) -> bool:
     """Whether the step is the static explicit update with the network inside it (its reverse mode written for the
     CPU, the conduction rates computed once per rollout)."""
     c = physics.conduction
-    return c.integrator == "explicit" and physics.contacts == "static" and not c.specific_heat_table
+    return (c.integrator == "explicit" and physics.contacts == "static" and not c.specific_heat_table
+            and not coupling.on(physics))
 
 
 def prepare(physics: Physics, state: SimState, params: Params) -> Prepared:
@@ -72,7 +73,10 @@ def prepare(physics: Physics, state: SimState, params: Params) -> Prepared:
     if fast_static_step(physics) and physics.mechanics is None:
         # computed once per rollout: reverse mode then accumulates their cotangents per particle
         rates = thermal.conduction_rates(scale, capacity)
-    return Prepared(params, capacity, conductance, scale, wall_k, wall_t, rates)
+    blocks = None
+    if coupling.on(physics) and physics.sintering is None:
+        blocks = coupling.neck_blocks(physics, state, params)
+    return Prepared(params, capacity, conductance, scale, wall_k, wall_t, rates, blocks)
 
 
 def conduction_power(physics: Physics, state: SimState, prep: Prepared, temperature, conductance, neighbors):
@@ -81,7 +85,9 @@ def conduction_power(physics: Physics, state: SimState, prep: Prepared, temperat
     Dynamic contacts: a half pair list ``[c, 2]`` and its conductances ``[c]``; static: the table.
     """
     power = jnp.zeros_like(temperature)
-    if conductance is not None and physics.contacts == "dynamic":
+    if coupling.on(physics):
+        power = coupling.contact_power(physics, state, coupling.current_blocks(physics, state, prep))[0]
+    elif conductance is not None and physics.contacts == "dynamic":
         power = pair_heat_power(conductance, neighbors, temperature)
     elif conductance is not None:
         power = -prep.scale * network_laplacian(conductance, neighbors, temperature)
@@ -126,6 +132,8 @@ def total_conductance(physics: Physics, state: SimState, prep: Prepared):
     geometry they conduct through, :func:`sintercond.sim.contacts.sintered_pair_conductance`) and the
     conducting walls of ``Mechanics.walls`` the particles touch now."""
     particles = state.particles
+    if coupling.on(physics):
+        return coupling.stability_conductance(coupling.current_blocks(physics, state, prep))
     if physics.contacts == "static":
         conductance = neck_conductance(physics, state, prep.params) if conductances_change(physics) else prep.conductance
         total = prep.scale * jnp.sum(conductance, axis=1)
@@ -194,6 +202,10 @@ def advance(physics: Physics, neighbor_fn, state: SimState, prep: Prepared) -> S
                                               held_temperature(physics, state, prep),
                                               network=(prep.scale, conductance, neighbors), pulse=pulse,
                                               rates=prep.rates)
+    elif coupling.on(physics):
+        power, necks, residual = coupling.contact_power(physics, state, coupling.current_blocks(physics, state, prep))
+        temperature = explicit_heat(physics, state, prep, power + sources.power(physics, state, prep.params))
+        state = coupling.with_necks(state, necks, residual)
     elif c.integrator == "explicit":
         power = heat_power(physics, neighbor_fn, state, prep, conductance, neighbors)
         temperature = explicit_heat(physics, state, prep, power)
