@@ -222,8 +222,8 @@ class Physics:
                 raise ValueError("Physics.mechanics takes its walls as Mechanics.walls (PlaneWall, mode 'conducting' "
                                  "for heat); conduction.conducting_walls must be 0")
         if c.coupling == "sphere":
-            many_body = self.sintering if self.sintering is not None and self.sintering.shrinkage != "independent" \
-                else None
+            moves = self.sintering is not None and self.sintering.shrinkage != "independent"
+            many_body = self.sintering if moves else None
             for name, value in (("contacts", self.contacts if self.contacts != "static" else None),
                                 ("mechanics", self.mechanics), ("sintering", many_body), ("motion", self.motion)):
                 if value is not None:

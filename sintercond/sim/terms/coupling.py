@@ -35,8 +35,8 @@ from jax.scipy.sparse.linalg import cg
 
 from sintercond._numerics import safe_divide
 from sintercond.contacts.pair_list import pair_exchange
-from sintercond.contacts.sphere_coupling import block_total, contact_flows, coupled_blocks, half_resistances, \
-    neck_balance
+from sintercond.contacts.sphere_coupling import (block_total, contact_flows, coupled_blocks, half_resistances,
+                                                 neck_balance)
 from sintercond.sim.contacts import conductivity_lookup, merged_law_params, neck_conductance
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, SimState
