@@ -210,7 +210,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     wall = time.perf_counter()
     bar = tqdm(total=model.n_steps, initial=int(state.step), unit="step", disable=not progress, desc="sintercond run")
     try:
-        state, _ = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
+        state, report = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
                            reallocate=model.reallocate, progress=bar.update, check=run_check(scene, model, state))
     finally:
         bar.close()
@@ -222,8 +222,10 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         "particles": len(model.radii), "contacts": model.contacts, **model.bed, "steps": int(state.step),
         "dt_s": model.dt, "stable_step_s": model.stable_step, "simulated_s": int(state.step) * model.dt,
         "wall_s": elapsed, "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()),
-        "T_max_K": float(temperature.max()),
+        "T_max_K": float(temperature.max()), "integrator": model.physics.conduction.integrator,
     }
+    if model.physics.conduction.integrator == "implicit":  # this call's adaptive steps (a resume counts its own)
+        summary.update({"implicit_steps": report.accepted, "rejected_steps": report.rejected})
     if model.physics.mechanics is not None:
         history = read_history(out)
         summary.update({"thermal_step_s": model.limits["thermal"], "mechanical_step_s": model.limits["mechanical"],
