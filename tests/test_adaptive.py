@@ -140,12 +140,13 @@ def test_a_cell_on_the_ramp_with_growing_necks_matches_a_fine_explicit_run():
     implicit, stats = run(sim_i, dataclasses.replace(state_i, dt=jnp.asarray(t_end / 10)), params, 10)
     assert not bool(stats.failed) and int(stats.accepted) < n / 100
     t_e, t_i = (np.asarray(s.particles.temperature) for s in (explicit, implicit))
-    assert np.max(np.abs(t_e - t_i)) < 0.05  # K; the explicit run's own error is of this order (first order)
+    # measured: 2.5e-7 K and 1.3e-7 (necks), 2.7e-7 (approaches); the explicit run moves by 7e-12 K and 4e-8 when
+    # its step is halved
+    assert np.max(np.abs(t_e - t_i)) < 1e-5  # K
     a_e, a_i = np.asarray(explicit.contacts.neck), np.asarray(implicit.contacts.neck)
-    a_0 = np.asarray(state.contacts.neck)
-    assert np.min(a_e - a_0) > 0.5 * np.max(a_e)  # the necks did grow
-    np.testing.assert_allclose(a_i, a_e, rtol=1e-3)
-    np.testing.assert_allclose(np.asarray(implicit.contacts.overlap), np.asarray(explicit.contacts.overlap), rtol=2e-3)
+    assert np.min(a_e - np.asarray(state.contacts.neck)) > 0.5 * np.max(a_e)  # the necks did grow from points
+    np.testing.assert_allclose(a_i, a_e, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(implicit.contacts.overlap), np.asarray(explicit.contacts.overlap), rtol=1e-5)
     # the held layer at the ramp's level of t_end, the growth interval restarted there
     np.testing.assert_allclose(t_i[:4], 845.0 + (1273.0 - 845.0) * 5 / 25)
     assert int(implicit.sintering.interval_start) == int(implicit.step) == 10
@@ -182,7 +183,9 @@ def test_sources_and_property_tables_match_a_fine_explicit_run():
     assert not bool(stats.failed)
     t_e, t_i = (np.asarray(s.particles.temperature) for s in (explicit, implicit))
     assert abs(t_e[0] - 700.0) > 50.0  # the pulse, the radiation and the conduction moved it
-    assert np.max(np.abs(t_e - t_i)) < 0.05, t_e - t_i
+    # measured: 1.4e-3 K (1.7e-3 K against the run at half that step: the explicit error is some 3e-4 K), with
+    # atol = 1e-3 K per step
+    assert np.max(np.abs(t_e - t_i)) < 5e-3, t_e - t_i
 
 
 def test_step_changes_do_not_recompile():

@@ -17,7 +17,7 @@ a trapezoidal stage to ``t + gamma h`` and a BDF2 stage to ``t + h``,
 both stages with the same matrix ``C / (d h) + L + K_w + G`` (``C = dH/dT``, ``L`` the conduction Laplacian, ``G``
 the linearised convection and radiation, :func:`sintercond.sim.thermal.source_conductance`): symmetric positive
 definite, solved by Jacobi-preconditioned conjugate gradients with the held particles as Dirichlet rows
-(:func:`sintercond.sim.steady._held_solve`). Each stage takes ``Conduction.picard`` simplified-Newton iterations
+(:func:`sintercond.sim.thermal.held_solve`). Each stage takes ``Conduction.picard`` simplified-Newton iterations
 with the necks, ``c(T)``, ``kappa(T)`` and the radiation at the last iterate (one when the stage is linear). The
 enthalpy form keeps ``sum_i H_i`` of an insulated network to the solver's tolerance.
 
@@ -52,8 +52,7 @@ from sintercond.laws import materials
 from sintercond.sim import neck_growth, thermal
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, Prepared, SimState, held_ramp_temperature
-from sintercond.sim.steady import _held_solve
-from sintercond.sim.terms import conduction, sources, walls
+from sintercond.sim.terms import conduction, walls
 
 GAMMA = 2.0 - math.sqrt(2.0)
 """The TR-BDF2 stage fraction (Hosea & Shampine 1996): both stages then share one matrix."""
@@ -188,7 +187,7 @@ def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, d
         residual = (enthalpy - rhs) / dh - power
         shifted = op._replace(diagonal=op.diagonal + capacity / dh)
         inverse = 1.0 / shifted.jacobi()
-        delta = _held_solve(shifted.apply, fixed, jnp.where(fixed, held - temperature, 0.0), -residual, tol,
+        delta = thermal.held_solve(shifted.apply, fixed, jnp.where(fixed, held - temperature, 0.0), -residual, tol,
                             preconditioner=lambda r, inverse=inverse: inverse * r)
         temperature = jnp.where(fixed, held, temperature + delta)
     contacts, positions = _grow(physics, prep, state, start, temperature, duration)
@@ -245,7 +244,7 @@ def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow,
     power_1 = (enthalpy_1 - rhs) / dh
     raw = 2.0 * ERROR_CONSTANT * h * (power_n / GAMMA - power_g / (GAMMA * (1.0 - GAMMA)) + power_1 / (1.0 - GAMMA))
     inverse = 1.0 / op.jacobi()
-    error = _held_solve(op.apply, fixed, jnp.zeros_like(raw), raw / dh, tol,
+    error = thermal.held_solve(op.apply, fixed, jnp.zeros_like(raw), raw / dh, tol,
                         preconditioner=lambda r: inverse * r)
     bound = atol + rtol * jnp.maximum(jnp.abs(start.temperature), jnp.abs(end.temperature))
     err = jnp.max(jnp.where(fixed, 0.0, jnp.abs(error) / bound), initial=0.0)

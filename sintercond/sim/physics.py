@@ -177,8 +177,10 @@ class Physics:
         ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
       sintering: :class:`sintercond.sim.neck_growth.Sintering`, necks that grow with each contact's temperature
         history (:mod:`sintercond.sim.neck_growth`: contacts on their own on a packing that does not move, or
-        many-body shrinkage that moves the particles). Needs ``conduction.conductance="lifted"``, the ``"volume_conserving"`` neck model, ``Params.sintering`` and ``SimState.sintering``;
-        without mechanics ``contacts="static"`` (the necks on the table), with mechanics the necks live on the
+        many-body shrinkage that moves the particles). Needs ``conduction.conductance="lifted"``, the
+        ``"volume_conserving"`` neck model, ``Params.sintering`` and ``SimState.sintering`` (either integrator:
+        the implicit one grows the necks within its stages); without mechanics ``contacts="static"`` (the necks
+        on the table), with mechanics the necks live on the
         dynamic half pair list (``MechanicalState.neck``, :func:`sintercond.sim.neck_growth.with_pair_necks`) and
         the elastic laws act on each overlap less its neck's approach. None: the necks stay.
     """
