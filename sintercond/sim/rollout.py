@@ -235,6 +235,11 @@ def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk
             check: Callable | None = None, measure: Callable | None = None) -> tuple[SimState, Report]:
     """Advance ``n_steps`` steps in compiled chunks of ``chunk`` steps (the last one may be shorter).
 
+    With ``Conduction.integrator="implicit"`` each chunk is the interval ``chunk * dt`` stepped adaptively
+    (:func:`sintercond.sim.adaptive.integrate_interval`, TR-BDF2 within ``rtol`` / ``atol``), the next chunk
+    starting from the step the last one ended with: ``dt`` is then the output clock, and ``Report`` counts the
+    adaptive steps. A failed interval raises ``FloatingPointError``.
+
     Args:
       sim, state, params: as :func:`rollout`.
       n_steps: steps to take from ``state.step``.
