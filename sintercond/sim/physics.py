@@ -20,9 +20,6 @@ from sintercond.laws.neck import NECK_MODELS
 from sintercond.sim.neck_growth import Sintering
 
 _INTEGRATORS = ("explicit", "implicit")
-INTEGRATOR_CHOICES = ("auto",) + _INTEGRATORS
-"""Values of ``Physics.create(integrator=...)`` and the scene key ``run.integrator``: ``"auto"`` is resolved there
-(:func:`resolve_integrator`), never by the spec classes."""
 _CONDUCTANCE_MODES = ("table", "lifted")
 _CONTACT_MODES = ("static", "dynamic")
 _BEAMS = (None, "laser", "nozzle")
@@ -91,7 +88,8 @@ class Conduction:
                              f"one of {list(_INTEGRATORS)}")
         for name, value, allowed in checks:
             if value not in allowed:
-                raise ValueError(f"Conduction.{name} must be one of {list(allowed)}; got {value!r}")
+                more = " (or 'auto' through Physics.create)" if name == "integrator" else ""
+                raise ValueError(f"Conduction.{name} must be one of {list(allowed)}{more}; got {value!r}")
         if self.neck_model is not None and self.neck_model not in NECK_MODELS:
             raise ValueError(f"Conduction.neck_model must be one of {sorted(NECK_MODELS)} or None; "
                              f"got {self.neck_model!r}")
@@ -251,10 +249,7 @@ class Physics:
         :class:`sintercond.sim.neck_growth.Sintering` or None. ``integrator="auto"`` is resolved here
         (:func:`resolve_integrator`): implicit without inertial mechanics on static contacts, explicit otherwise.
         """
-        if integrator not in INTEGRATOR_CHOICES:
-            raise ValueError(f"Physics.create(integrator=...) must be one of {list(INTEGRATOR_CHOICES)}; got "
-                             f"{integrator!r}")
-        if integrator == "auto":
+        if integrator == "auto":  # any other value is Conduction's to check
             integrator = resolve_integrator(bool(mechanics), contacts, motion)[0]
         if not isinstance(mechanics, (bool, np.bool_)):
             raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
