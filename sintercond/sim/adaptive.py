@@ -175,25 +175,30 @@ def _grow(physics: Physics, prep: Prepared, state: SimState, start: _Slow, tempe
 
 def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, duration, tol):
     """Solve ``H(T) - dh F(t, T) = rhs`` from ``guess`` (necks grown from ``start`` over ``duration``): the stage's
-    ``(slow, H, operator)``."""
-    temperature = jnp.where(fixed, held, guess)
-    iterations = 1 if _linear(physics) else physics.conduction.picard
-    for _ in range(iterations):
+    ``(slow, H, operator)``, the operator (the stage matrix) at its solution."""
+
+    def iterate(_, temperature):
         contacts, positions = _grow(physics, prep, state, start, temperature, duration)
-        slow = _Slow(temperature, contacts, positions)
-        here = _at(state, slow, t)
+        here = _at(state, _Slow(temperature, contacts, positions), t)
         enthalpy, capacity = _enthalpy(physics, prep, here.particles, temperature)
         power, op = _power_and_operator(physics, here, prep)
         residual = (enthalpy - rhs) / dh - power
         shifted = op._replace(diagonal=op.diagonal + capacity / dh)
         inverse = 1.0 / shifted.jacobi()
         delta = thermal.held_solve(shifted.apply, fixed, jnp.where(fixed, held - temperature, 0.0), -residual, tol,
-                            preconditioner=lambda r, inverse=inverse: inverse * r)
-        temperature = jnp.where(fixed, held, temperature + delta)
+                                   preconditioner=lambda r: inverse * r)
+        return jnp.where(fixed, held, temperature + delta)
+
+    temperature = jnp.where(fixed, held, guess)
+    if _linear(physics) or physics.conduction.picard == 1:
+        temperature = iterate(0, temperature)
+    else:  # a loop, not unrolled: the compiled stage stays one iteration long
+        temperature = jax.lax.fori_loop(0, physics.conduction.picard, iterate, temperature)
     contacts, positions = _grow(physics, prep, state, start, temperature, duration)
     slow = _Slow(temperature, contacts, positions)
     enthalpy, capacity = _enthalpy(physics, prep, state.particles, temperature)
-    return slow, enthalpy, shifted._replace(diagonal=op.diagonal + capacity / dh)
+    _, op = _power_and_operator(physics, _at(state, slow, t), prep)
+    return slow, enthalpy, op._replace(diagonal=op.diagonal + capacity / dh)
 
 
 def _solver_tolerance(physics: Physics, dtype) -> float:
@@ -232,20 +237,31 @@ def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow,
     here = _at(state, start, t)
     enthalpy_n, _ = _enthalpy(physics, prep, here.particles, start.temperature)
     power_n, _ = _power_and_operator(physics, here, prep)
-    dh = 0.5 * GAMMA * h
-    staged, enthalpy_g, _ = _stage(physics, prep, state, fixed, held, start, start.temperature,
-                                   enthalpy_n + dh * power_n, dh, t + GAMMA * h, GAMMA * h, tol)
-    dh = _D * h
+    dh = _D * h  # = gamma h / 2: both stages solve with the same dh
+    def stage(carry, coefficients):
+        # rhs = w_prev H_prev + w_n H_n + w_f dh F_n: the trapezoid (0, 1, 1), then BDF2 (BDF_G, -BDF_N, 0);
+        # one scanned stage, so the step compiles one stage body
+        previous, enthalpy_previous = carry
+        w_prev, w_n, w_f, fraction, duration = coefficients
+        rhs = w_prev * enthalpy_previous + w_n * enthalpy_n + w_f * dh * power_n
+        new, enthalpy, op = _stage(physics, prep, state, fixed, held, previous, previous.temperature, rhs, dh,
+                                   t + fraction * h, duration * h, tol)
+        return (new, enthalpy), (enthalpy, op)
+
+    dtype = slow.temperature.dtype
+    coefficients = tuple(jnp.asarray(c, dtype) for c in ([0.0, _BDF_G], [1.0, -_BDF_N], [1.0, 0.0], [GAMMA, 1.0],
+                                                         [GAMMA, 1.0 - GAMMA]))
+    (end, enthalpy_1), (enthalpies, ops) = jax.lax.scan(stage, (start, enthalpy_n), coefficients)
+    enthalpy_g = enthalpies[0]
+    op = jax.tree.map(lambda x: x[1], ops)
     rhs = _BDF_G * enthalpy_g - _BDF_N * enthalpy_n
-    end, enthalpy_1, op = _stage(physics, prep, state, fixed, held, staged, staged.temperature, rhs, dh, t + h,
-                                 (1.0 - GAMMA) * h, tol)
     # the stage slopes from the stage equations themselves, then Bank et al.'s estimate filtered by the matrix
     power_g = 2.0 * (enthalpy_g - enthalpy_n) / (GAMMA * h) - power_n
     power_1 = (enthalpy_1 - rhs) / dh
     raw = 2.0 * ERROR_CONSTANT * h * (power_n / GAMMA - power_g / (GAMMA * (1.0 - GAMMA)) + power_1 / (1.0 - GAMMA))
     inverse = 1.0 / op.jacobi()
     error = thermal.held_solve(op.apply, fixed, jnp.zeros_like(raw), raw / dh, tol,
-                        preconditioner=lambda r: inverse * r)
+                               preconditioner=lambda r: inverse * r)
     bound = atol + rtol * jnp.maximum(jnp.abs(start.temperature), jnp.abs(end.temperature))
     err = jnp.max(jnp.where(fixed, 0.0, jnp.abs(error) / bound), initial=0.0)
     return end, jnp.where(jnp.all(jnp.isfinite(end.temperature)), err, jnp.inf)
