@@ -271,9 +271,10 @@ def test_auto_picks_implicit_without_mechanics_and_the_log_says_why():
     from sintercond.scene.build import build_model
 
     messages = []
-    model = build_model(validate_scene({**SCENE, "run": {**SCENE["run"], "integrator": "auto"}}),
-                        log=messages.append)
+    model = build_model(validate_scene({**SCENE, "run": {**SCENE["run"], "integrator": "auto", "rtol": 1e-4,
+                                                         "atol": 0.01}}), log=messages.append)
     assert model.physics.conduction.integrator == "implicit"
+    assert (model.physics.conduction.rtol, model.physics.conduction.atol) == (1e-4, 0.01)
     said = [m for m in messages if m.startswith("integrator:")]
     assert said and "implicit" in said[0] and "no inertial mechanics" in said[0]
     assert resolve_integrator(True)[0] == "explicit" and "inertial" in resolve_integrator(True)[1]
