@@ -202,12 +202,13 @@ def test_step_changes_do_not_recompile():
 
 @pytest.mark.slow
 def test_float32_runs_to_its_own_accuracy():
-    """Float32 two spheres at rtol 1e-4: within 0.05 K of the closed form (float32 keeps 1e-4 K of 1200 K)."""
+    """Float32 two spheres at rtol 1e-4, atol 1e-2 K: measured 8e-4 K from the closed form (float32 keeps 1e-4 K of
+    1200 K); bound 5e-3 K."""
     sim, state, params, k, c = pair(jnp.float32, integrator="implicit", rtol=1e-4, atol=1e-2)
     end, stats = run(sim, state, params, 100)
     assert end.particles.temperature.dtype == jnp.float32 and not bool(stats.failed)
     error = np.max(np.abs(np.asarray(end.particles.temperature, np.float64) - closed_form(0.1, k, c)))
-    assert error < 0.05
+    assert error < 5e-3
 
 
 @pytest.mark.slow
