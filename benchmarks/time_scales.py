@@ -152,7 +152,8 @@ def main(argv=None) -> None:
                 + "\n\nThe adaptive run takes some 200 times fewer steps, each of them two implicit stages (conjugate "
                 "gradients, two fixed-point iterations with the necks) and an error solve; the whole command is not "
                 "faster, because the pour (about 70 s), the outputs (a k* steady solve per output) and the "
-                "compile (the adaptive step compiles longer) dominate both runs at 398 particles. Compile times depend on JAX's persistent compilation cache (a "
+                "compile (the adaptive step compiles longer) dominate both runs at 398 particles. Compile times depend on JAX's "
+                "persistent compilation cache (a "
                 "cached explicit chunk compiles in about 2 s, a new one in about 8 s).")
         write_section("time_scales", "python benchmarks/time_scales.py --write", body)
 
