@@ -181,6 +181,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
          f"dt {model.dt:.4g} s, {model.n_steps} steps to {model.n_steps * model.dt:.6g} s; compiling the step")
 
     last = [int(state.step)]
+    written = [0.0]  # s spent on the outputs between chunks
     escaped = []  # warned once
 
     def on_chunk(s):
@@ -200,6 +201,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         if crossed or step >= model.n_steps:
             save_checkpoint(out, s)  # the lists' capacities are the shapes of their leaves
         writing = time.perf_counter() - start
+        written[0] += writing
         if writing > SLOW_OUTPUT_S:
             _log(f"outputs of step {step:,} written in {writing:.1f} s ({', '.join(scene['run']['formats'])}"
                  f"{', checkpoint' if crossed or step >= model.n_steps else ''}); {chunk:,} "
@@ -210,7 +212,7 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     wall = time.perf_counter()
     bar = tqdm(total=model.n_steps, initial=int(state.step), unit="step", disable=not progress, desc="sintercond run")
     try:
-        state, _ = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
+        state, report = advance(model.sim, state, model.params, model.n_steps - int(state.step), chunk, on_chunk,
                            reallocate=model.reallocate, progress=bar.update, check=run_check(scene, model, state))
     finally:
         bar.close()
@@ -221,9 +223,11 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
     summary = {
         "particles": len(model.radii), "contacts": model.contacts, **model.bed, "steps": int(state.step),
         "dt_s": model.dt, "stable_step_s": model.stable_step, "simulated_s": int(state.step) * model.dt,
-        "wall_s": elapsed, "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()),
-        "T_max_K": float(temperature.max()),
+        "wall_s": elapsed, "outputs_s": written[0], "T_min_K": float(temperature.min()), "T_mean_K": float(temperature.mean()),
+        "T_max_K": float(temperature.max()), "integrator": model.physics.conduction.integrator,
     }
+    if model.physics.conduction.integrator == "implicit":  # this call's adaptive steps (a resume counts its own)
+        summary.update({"implicit_steps": report.accepted, "rejected_steps": report.rejected})
     if model.physics.mechanics is not None:
         history = read_history(out)
         summary.update({"thermal_step_s": model.limits["thermal"], "mechanical_step_s": model.limits["mechanical"],

@@ -24,8 +24,10 @@ LAYERS = {
     "lifts": ["contacts.network", "contacts.sphere_coupling", "sim.mechanics", "sim.thermal", "sim.neck_growth"],
     "drive": ["sim", "sim.physics", "sim.state", "sim.contacts", "sim.terms", "sim.terms.sources", "sim.terms.walls",
               "sim.terms.conduction", "sim.terms.mechanics", "sim.terms.sintering", "sim.terms.coupling", "sim.step",
-              "sim.stability", "sim.validation", "sim.rollout", "simulate", "sim.steady", "rollout", "sim.guards"],
+              "sim.stability", "sim.validation", "sim.rollout", "simulate", "sim.steady", "rollout", "sim.guards",
+              "sim.adaptive"],
     "use": ["scene", "scene.schema", "scene.validate", "scene.estimate", "scene.reference", "scene.typed", "scene.build",
+            "scene.integrator",
             "output", "output.observe", "beds", "beds.settle", "beds.rolling", "beds.packing", "beds.packing_files",
             "run", "output.io", "output.plots", "cli", "sweep", "examples"],
 }

@@ -21,6 +21,7 @@ from sintercond.laws import heat_sources, materials, walls
 from sintercond.sim import mechanics, neck_growth, thermal
 from sintercond.scene.schema import output_interval
 from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
+from sintercond.scene.integrator import scene_integrator
 from sintercond.scene.typed import Wall, typed_scene
 from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
@@ -173,11 +174,13 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
     table = m.conductivity_table is not None
     coupling = c.coupling or "none"
     lifted = (c.params or {}).get("contact_resistance", 0.0) or s is not None or table or coupling == "sphere"
+    run = scene.run
     return simulate.Physics(
         conduction=simulate.Conduction(
             law=c.law, neck_model=c.neck_model, conductance="lifted" if lifted else "table",
             held=held, conducting_walls=walls, held_ramp=ramp is not None, conductivity_table=table,
-            specific_heat_table=m.specific_heat_table is not None, coupling=coupling),
+            specific_heat_table=m.specific_heat_table is not None, coupling=coupling,
+            integrator=scene_integrator(scene)[0], rtol=run.rtol, atol=run.atol),
         sources=simulate.Sources(beam=None if scene.beam is None else scene.beam.kind,
                                  convection=scene.convection is not None, radiation=scene.radiation is not None),
         sintering=None if s is None else neck_growth.Sintering(law=s.law, every=s.every, shrinkage=s.shrinkage))
@@ -337,6 +340,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         log(f"packing: {len(radii):,} particles in {time.perf_counter() - start:.1f} s")
     check_distinct_centres(None, centres)  # a pour, a bed, or a run folder's packing.npz as well
     physics = scene_physics(scene)
+    integrator, why = scene_integrator(scene)
+    log(f"integrator: {integrator} ({why})")
     planes = scene_walls(scene, centres, radii)  # built once: the run and its observations take them from the model
     fixed_mask, fixed_temperature, conducting = _apply_walls(planes, centres, radii)
     if scene.preheating is not None and scene.preheating.hold == "all":  # an isothermal cell on the ramp
@@ -368,6 +373,9 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                       "(preheating.duration / preheating.steps)")
     bounds.update(built.bounds)
     bounds.update(_beam_bound(scene))
+    if integrator == "implicit" and scene.run.dt != "auto":
+        # the adaptive step is bounded by its error estimate and ends on the ramp's jumps: run.dt is the output clock
+        bounds = {kind: bound for kind, bound in bounds.items() if kind not in ("thermal", "preheating")}
     dt, n_steps, limit = _time_step(scene.run, bounds, physics.mechanics is None)
     check_sintering_every(scene, n_steps)
     state = simulate.init_state(particles, built.contacts, dt, mechanics=built.motion, sintering=built.necks)

@@ -303,6 +303,15 @@ _SCHEMA = {
         "dt": Key(object, ('"auto" or a number in (0, 1e3] s', lambda v: v == "auto" or (
             not isinstance(v, (bool, str)) and isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1e3)),
             False, "s", default="auto", doc='explicit step; "auto" = 0.9 x the stable step'),
+        "integrator": Key(str, _choice("auto", "explicit", "implicit"), False, default="explicit",
+                          doc='explicit: Euler at run.dt; implicit: adaptive TR-BDF2 (docs/simulator.md) within '
+                              'run.rtol / run.atol, each output interval stepped as its error allows (static '
+                              'packings without mechanics); auto: implicit without inertial mechanics, explicit with '
+                              'it (the log says which and why)'),
+        "rtol": Key(float, _within(0.0, 0.1, low_open=True), False, default=1e-5,
+                    doc="implicit: the relative local error bound of a step, |e_i| <= atol + rtol |T_i|"),
+        "atol": Key(float, _within(0.0, 100.0, "K", low_open=True), False, "K", default=1e-3,
+                    doc="implicit: the absolute local error bound of a step"),
         "output_every": Key(int, _within(1, 1e9), False, "steps", default=f"about {DEFAULT_OUTPUTS} outputs",
                             doc=f"steps between output frames; not given, the run's steps / {DEFAULT_OUTPUTS} (rounded "
                                 "up), so that the outputs follow run.duration (and --duration)"),

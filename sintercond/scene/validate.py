@@ -15,6 +15,7 @@ from sintercond.laws.conductance import CONDUCTANCE_LAWS
 from sintercond.sim.mechanics import validate_mechanical_params
 from sintercond.laws.sintering import KINETIC_LAWS
 from sintercond.scene.estimate import estimate_run
+from sintercond.scene.integrator import scene_integrator
 from sintercond.scene.schema import (
     DEFAULT_CHECKPOINT_OUTPUTS, Key, MAX_LATTICE_PARTICLES, MAX_LISTED_SPHERES, MECHANICAL_FIELDS, POUR_START,
     SceneError, _LAW_PARAMS, _PACKING,
@@ -455,6 +456,7 @@ def _check_details(scene):
         raise SceneError(f"run.formats must be a non-empty list of distinct names from {list(allowed)}; "
                          f"got {formats!r}")
     run["formats"] = list(formats)
+    scene_integrator(scene)  # implicit with inertial mechanics is refused here, naming run.integrator
 
 
 def held_temperatures(scene) -> dict:

@@ -40,10 +40,17 @@ class Conduction:
         material, no contact resistance) or ``"lifted"`` (necks stored, law
         applied to ``params`` at each rollout; any materials and law
         parameters).
-      integrator: ``"explicit"`` (Euler; check the stable step) or
-        ``"implicit"`` (backward Euler by conjugate gradients; conduction
-        and held particles only).
-      implicit_tol: relative residual of the implicit CG solve.
+      integrator: ``"explicit"`` (Euler; check the stable step) or ``"implicit"``: the host loop
+        (:func:`sintercond.sim.rollout.advance`, ``sintercond run``) and :func:`sintercond.sim.adaptive.integrate`
+        step it adaptively by TR-BDF2 (Hosea & Shampine 1996) within ``rtol`` / ``atol``; one fixed step of
+        ``step_fn`` is backward Euler by conjugate gradients (conduction and held particles) or, with sources,
+        sintering or property tables, one TR-BDF2 step of ``dt``. Static contacts without mechanics only.
+        (``"auto"`` is :meth:`Physics.create`'s, resolved there.)
+      implicit_tol: relative residual of the implicit CG solve of the fixed backward-Euler step.
+      rtol, atol: the adaptive step's local error bound per step, ``|e_i| <= atol + rtol |T_i|`` (atol in K):
+        ``rtol`` in (0, 0.1], ``atol`` in (0, 100] K.
+      picard: fixed-point (simplified Newton) iterations per implicit stage (1 to 20): the necks, ``c(T)``,
+        ``kappa(T)`` and radiation at the stage's last iterate; a linear problem takes one whatever it says.
       held: some particles are held at fixed temperatures.
       conductivity_table: ``Params.conductivity`` is a :class:`sintercond.laws.materials.Table`, the
         conductivity against temperature (one material): each particle conducts at its own temperature,
@@ -51,7 +58,8 @@ class Conduction:
       specific_heat_table: ``Params.specific_heat`` is a :class:`sintercond.laws.materials.Table`, the specific heat
         against temperature (one material): each particle's capacity ``C_i = m_i c(T_i)`` at its temperature at
         the start of every step (explicit Euler: ``sum_i C_i(T^n) (T_i^(n+1) - T_i^n)`` equals the heat in, so
-        the enthalpy ``sum_i m_i int c dT`` is kept to first order in the step). Needs the explicit integrator.
+        the enthalpy ``sum_i m_i int c dT`` is kept to first order in the step; the implicit stages step the enthalpy
+        itself, so it is kept to round-off).
       held_ramp: the held particles follow a stepped ramp (``Params.held_ramp``,
         :class:`HeldRampParams`: Rizza & Galati 2024's Eq. 6 preheating) from their
         ``fixed_temperature``; needs ``held``.
@@ -76,24 +84,37 @@ class Conduction:
     conductivity_table: bool = False
     specific_heat_table: bool = False
     coupling: str = "none"
+    rtol: float = 1e-5
+    atol: float = 1e-3
+    picard: int = 2
 
     def __post_init__(self):
         checks = (("law", self.law, tuple(CONDUCTANCE_LAWS)), ("conductance", self.conductance, _CONDUCTANCE_MODES),
                   ("integrator", self.integrator, _INTEGRATORS), ("coupling", self.coupling, COUPLINGS))
+        if self.integrator == "auto":
+            raise ValueError("Conduction.integrator='auto' is resolved by Physics.create(integrator='auto') or the "
+                             "scene build (implicit without inertial mechanics, explicit with it); the spec takes "
+                             f"one of {list(_INTEGRATORS)}")
         for name, value, allowed in checks:
             if value not in allowed:
-                raise ValueError(f"Conduction.{name} must be one of {list(allowed)}; got {value!r}")
+                more = " (or 'auto' through Physics.create)" if name == "integrator" else ""
+                raise ValueError(f"Conduction.{name} must be one of {list(allowed)}{more}; got {value!r}")
         if self.neck_model is not None and self.neck_model not in NECK_MODELS:
             raise ValueError(f"Conduction.neck_model must be one of {sorted(NECK_MODELS)} or None; "
                              f"got {self.neck_model!r}")
         if not (isinstance(self.conducting_walls, int) and self.conducting_walls >= 0):
             raise ValueError(f"Conduction.conducting_walls must be an int >= 0; got {self.conducting_walls!r}")
-        if self.conductivity_table and (self.conductance != "lifted" or self.integrator != "explicit"):
+        for name, low, high, unit in (("rtol", 0.0, 0.1, ""), ("atol", 0.0, 100.0, " K")):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float, np.floating)) and not isinstance(value, bool)
+                    and low < value <= high):
+                raise ValueError(f"Conduction.{name} must be a number in ({low:g}, {high:g}]{unit}; got {value!r}")
+        if not (isinstance(self.picard, (int, np.integer)) and not isinstance(self.picard, bool)
+                and 1 <= self.picard <= 20):
+            raise ValueError(f"Conduction.picard must be an integer in [1, 20]; got {self.picard!r}")
+        if self.conductivity_table and self.conductance != "lifted":
             raise ValueError("Conduction.conductivity_table evaluates the law at every step: it needs "
-                             "conductance='lifted' and the explicit integrator")
-        if self.specific_heat_table and self.integrator != "explicit":
-            raise ValueError("Conduction.specific_heat_table updates each capacity at every step: it needs the "
-                             "explicit integrator")
+                             "conductance='lifted'")
         if self.held_ramp and not self.held:
             raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
         if self.coupling == "sphere":
@@ -173,9 +194,10 @@ class Physics:
         ``Mechanics.walls``) and ``Params.mechanics``. None: the thermal step.
       sintering: :class:`sintercond.sim.neck_growth.Sintering`, necks that grow with each contact's temperature
         history (:mod:`sintercond.sim.neck_growth`: contacts on their own on a packing that does not move, or
-        many-body shrinkage that moves the particles). Needs ``conduction.conductance="lifted"``, the explicit
-        integrator, the ``"volume_conserving"`` neck model, ``Params.sintering`` and ``SimState.sintering``;
-        without mechanics ``contacts="static"`` (the necks on the table), with mechanics the necks live on the
+        many-body shrinkage that moves the particles). Needs ``conduction.conductance="lifted"``, the
+        ``"volume_conserving"`` neck model, ``Params.sintering`` and ``SimState.sintering`` (either integrator:
+        the implicit one grows the necks within its stages); without mechanics ``contacts="static"`` (the necks
+        on the table), with mechanics the necks live on the
         dynamic half pair list (``MechanicalState.neck``, :func:`sintercond.sim.neck_growth.with_pair_necks`) and
         the elastic laws act on each overlap less its neck's approach. None: the necks stay.
     """
@@ -203,7 +225,6 @@ class Physics:
                                  f"{self.sintering!r}")
             needs = {"contacts": ("dynamic" if self.mechanics is not None else "static", self.contacts),
                      "conduction.conductance": ("lifted", c.conductance),
-                     "conduction.integrator": ("explicit", c.integrator),
                      "conduction.neck_model": ("volume_conserving", c.neck)}
             for name, (want, got) in needs.items():
                 if got != want:
@@ -211,8 +232,11 @@ class Physics:
                                      f"volume-conserving geometry, on a static table or, with the mechanics, on the "
                                      f"dynamic pair list); got {got!r}")
         if self.mechanics is not None:
-            needs = {"contacts": ("dynamic", self.contacts), "conduction.conductance": ("lifted", c.conductance),
-                     "conduction.integrator": ("explicit", c.integrator)}
+            if c.integrator != "explicit":
+                raise ValueError("Physics.mechanics needs conduction.integrator='explicit': the implicit integrator "
+                                 "steps the slow physics (conduction, sources, necks) and the mechanics is inertial, "
+                                 f"its step bounded by the contact stiffness; got {c.integrator!r}")
+            needs = {"contacts": ("dynamic", self.contacts), "conduction.conductance": ("lifted", c.conductance)}
             for name, (want, got) in needs.items():
                 if got != want:
                     raise ValueError(f"Physics.mechanics needs {name}={want!r}; got {got!r}")
@@ -233,15 +257,16 @@ class Physics:
         if self.contacts == "dynamic" and c.conductance != "lifted":
             raise ValueError("Physics.contacts='dynamic' needs conduction.conductance='lifted' (conductances follow "
                              "the motion)")
-        if c.integrator == "implicit" and (self.sources.any or self.contacts == "dynamic"):
-            raise ValueError("Conduction.integrator='implicit' supports conduction on static contacts and held "
-                             "particles only; use 'explicit' with sources or motion")
+        if c.integrator == "implicit" and self.contacts == "dynamic":
+            raise ValueError("Conduction.integrator='implicit' steps static contacts (conduction, sources, necks, "
+                             "property tables); use 'explicit' with dynamic contacts or motion")
 
     @classmethod
     def create(cls, law="rojek", *, neck_model=None, conductance="table", contacts="static", integrator="explicit",
                held=False, conducting_walls=0, beam=None, convection=False, radiation=False, pulse=False, source=None,
                motion=None, implicit_tol=1e-13, mechanics=False, walls=(), sintering=None, held_ramp=False,
-               conductivity_table=False, specific_heat_table=False, coupling="none", **mechanical) -> Physics:
+               conductivity_table=False, specific_heat_table=False, coupling="none", rtol=1e-5, atol=1e-3, picard=2,
+               **mechanical) -> Physics:
         """The normalising constructor: a :class:`Physics` from flat keywords (the fields of the sub-specs).
 
         ``mechanics=True`` turns the coupled step on, with ``walls`` and the
@@ -250,7 +275,11 @@ class Physics:
         normalised by :meth:`sintercond.sim.mechanics.Mechanics.create`; without it
         those keywords are refused (nothing would move). ``sintering``: a
         :class:`sintercond.sim.neck_growth.Sintering` or None. ``coupling``: ``Conduction.coupling``.
+        ``integrator="auto"`` is resolved here (:func:`resolve_integrator`): implicit without inertial mechanics on
+        static contacts, explicit otherwise.
         """
+        if integrator == "auto":  # any other value is Conduction's to check
+            integrator = resolve_integrator(bool(mechanics), contacts, motion)[0]
         if not isinstance(mechanics, (bool, np.bool_)):
             raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
         if mechanics:
@@ -265,7 +294,8 @@ class Physics:
                                          integrator=integrator, implicit_tol=implicit_tol, held=bool(held),
                                          conducting_walls=conducting_walls, held_ramp=bool(held_ramp),
                                          conductivity_table=bool(conductivity_table),
-                                         specific_heat_table=bool(specific_heat_table), coupling=coupling),
+                                         specific_heat_table=bool(specific_heat_table), coupling=coupling,
+                                         rtol=rtol, atol=atol, picard=picard),
                    contacts=contacts, motion=motion,
                    sources=Sources(beam=beam, convection=bool(convection), radiation=bool(radiation),
                                    pulse=bool(pulse), source=source),
@@ -275,3 +305,15 @@ class Physics:
     def neck(self) -> str:
         """The neck model in use (``conduction.neck``)."""
         return self.conduction.neck
+
+
+def resolve_integrator(mechanics: bool, contacts: str = "static", motion=None) -> tuple[str, str]:
+    """``(integrator, why)``: what ``integrator="auto"`` means for a spec: ``"implicit"`` (adaptive TR-BDF2) where
+    nothing is inertial and the contacts are static, ``"explicit"`` otherwise; ``why`` says which case it is."""
+    if mechanics:
+        return "explicit", ("the mechanics is inertial: its step is bounded by the contact stiffness, and the heat "
+                            "follows it explicitly")
+    if contacts != "static" or motion is not None:
+        return "explicit", "the contacts move (prescribed motion): the implicit integrator needs static contacts"
+    return "implicit", ("no inertial mechanics and static contacts: the slow physics is stepped adaptively "
+                        "(TR-BDF2) within rtol / atol, not at the explicit conduction limit")

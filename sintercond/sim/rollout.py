@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from sintercond.sim import mechanics, neck_growth
+from sintercond.sim import adaptive, mechanics, neck_growth
 from sintercond.sim.state import Params, SimState, Simulator
 from sintercond.sim.terms import coupling
 from sintercond.sim.validation import check_mechanical_step, validate_inputs
@@ -222,16 +222,24 @@ class ListOverflow(RuntimeError):
 
 
 class Report(NamedTuple):
-    """What :func:`advance` did: chunks completed and list reallocations (each redid one chunk)."""
+    """What :func:`advance` did: chunks completed and list reallocations (each redid one chunk); with the implicit
+    integrator the adaptive steps accepted and rejected."""
 
     chunks: int
     reallocations: int
+    accepted: int = 0
+    rejected: int = 0
 
 
 def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk: int,
             on_chunk: Callable | None = None, *, reallocate: Callable | None = None, progress: Callable | None = None,
             check: Callable | None = None, measure: Callable | None = None) -> tuple[SimState, Report]:
     """Advance ``n_steps`` steps in compiled chunks of ``chunk`` steps (the last one may be shorter).
+
+    With ``Conduction.integrator="implicit"`` each chunk is the interval ``chunk * dt`` stepped adaptively
+    (:func:`sintercond.sim.adaptive.integrate_interval`, TR-BDF2 within ``rtol`` / ``atol``), the next chunk
+    starting from the step the last one ended with: ``dt`` is then the output clock, and ``Report`` counts the
+    adaptive steps. A failed interval raises ``FloatingPointError``.
 
     Args:
       sim, state, params: as :func:`rollout`.
@@ -258,14 +266,27 @@ def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk
     """
     validate_inputs(sim, state, params)
     compiled = {}
-    reallocations = chunks = 0
+    reallocations = chunks = accepted = rejected = 0
     target = int(state.step) + int(n_steps)
     check = check or finite_temperatures
+    implicit = sim.physics.conduction.integrator == "implicit"
+    first_step = None
     while int(state.step) < target:
         length = min(int(chunk), target - int(state.step))
         if length not in compiled:
             compiled[length] = compiled_chunk(sim, length, measure)
-        new, figures, overflowed = compiled[length](state, params)
+        if implicit:  # the chunk is an interval of length * dt stepped adaptively from the last step it took
+            first_step = length * state.dt if first_step is None else first_step
+            new, figures, overflowed, stats = compiled[length](state, params, first_step)
+            if bool(stats.failed):
+                raise FloatingPointError(
+                    f"the adaptive implicit step failed between steps {int(state.step)} and {int(state.step) + length}"
+                    f" (t = {float(state.time):.6g} s): its step fell to round-off of the time or it took "
+                    f"{adaptive.MAX_STEPS} steps; loosen Conduction.rtol / atol or check the inputs")
+            first_step = stats.next_step
+            accepted, rejected = accepted + int(stats.accepted), rejected + int(stats.rejected)
+        else:
+            new, figures, overflowed = compiled[length](state, params)
         if bool(new.overflow) or bool(overflowed):
             if reallocate is None:
                 raise ListOverflow(f"the neighbour list overflowed at step {int(state.step)} and no reallocation "
@@ -282,7 +303,7 @@ def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk
             progress(length)
         if on_chunk is not None and (on_chunk(state) if measure is None else on_chunk(state, figures)):
             break
-    return state, Report(chunks, reallocations)
+    return state, Report(chunks, reallocations, accepted, rejected)
 
 
 def finite_temperatures(state: SimState) -> None:
@@ -299,14 +320,24 @@ def finite_temperatures(state: SimState) -> None:
 def compiled_chunk(sim: Simulator, length: int, measure: Callable | None = None):
     """``(state, params) -> (state, figures, overflowed)``: ``length`` steps of ``sim`` and ``measure`` on the end
     state, jitted with the spec's compiler options and kept across :func:`advance` calls (a second run of the same
-    spec does not recompile)."""
+    spec does not recompile). With the implicit integrator ``(state, params, first_step) -> (state, figures,
+    overflowed, stats)``: the interval ``length * dt`` stepped adaptively (:func:`sintercond.sim.adaptive.integrate_interval`)."""
 
     def run_chunk(state, params):
         state = rollout(sim, state, params, length, SaveAt(length, _nothing), checkpoint=False)[0]
-        figures, overflowed = (None, jnp.zeros((), bool)) if measure is None else measure(sim, state, params)
-        return state, figures, overflowed
+        return (state,) + _measured(state, params)
 
-    return jax.jit(run_chunk, compiler_options=mechanics.compiler_options(sim.physics))
+    def _measured(state, params):
+        figures, overflowed = (None, jnp.zeros((), bool)) if measure is None else measure(sim, state, params)
+        return figures, overflowed
+
+    def run_interval(state, params, first_step):
+        state, stats = adaptive.integrate_interval(sim.physics, state, sim.prepare_fn(state, params), length,
+                                                   first_step)
+        return (state,) + _measured(state, params) + (stats,)
+
+    implicit = sim.physics.conduction.integrator == "implicit"
+    return jax.jit(run_interval if implicit else run_chunk, compiler_options=mechanics.compiler_options(sim.physics))
 
 
 def _nothing(state) -> tuple[Any, ...]:

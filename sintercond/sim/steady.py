@@ -21,7 +21,6 @@ import typing
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.sparse.linalg import cg
 
 from sintercond import simulate as sim_module
 from sintercond._numerics import safe_divide
@@ -29,6 +28,7 @@ from sintercond._validation import all_concrete, require_positive
 from sintercond.laws.conductance import validate_pair_conductance_inputs
 from sintercond.laws.neck import neck_radius
 from sintercond.contacts.network import ContactTable, contact_pairs, ell_table, heat_inflow, laplacian, wall_inflow
+from sintercond.sim.thermal import held_solve
 from sintercond.contacts.sphere_coupling import (
     SphereGeometry,
     coupled_apply,
@@ -49,7 +49,7 @@ def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
     """
     fixed_mask = jnp.asarray(fixed_mask)
     held = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, table.conductance.dtype), 0.0)
-    return _held_solve(lambda x: laplacian(x, table), fixed_mask, held, wall_inflow(table, held.dtype), tol)
+    return held_solve(lambda x: laplacian(x, table), fixed_mask, held, wall_inflow(table, held.dtype), tol)
 
 
 def coupled_steady_state(geometry: SphereGeometry, conductance, fixed_mask, fixed_temperature, tol=1e-13):
@@ -78,19 +78,8 @@ def coupled_steady_state(geometry: SphereGeometry, conductance, fixed_mask, fixe
 
     diagonal = jnp.concatenate(coupled_diagonal(geometry, conductance))
     inverse_diagonal = safe_divide(1.0, diagonal, fill=1.0)
-    x = _held_solve(apply, fixed, held, jnp.zeros_like(held), tol, preconditioner=lambda r: inverse_diagonal * r)
+    x = held_solve(apply, fixed, held, jnp.zeros_like(held), tol, preconditioner=lambda r: inverse_diagonal * r)
     return x[:n], apply(x)[:n]
-
-
-def _held_solve(apply_fn, fixed_mask, held, inflow, tol, preconditioner=None):
-    """``x`` with ``x = held`` where ``fixed_mask`` and ``(A x) = inflow`` elsewhere, by conjugate gradients
-    (``A`` = ``apply_fn``, symmetric positive semi-definite)."""
-    def matvec(x):
-        return jnp.where(fixed_mask, 0.0, apply_fn(jnp.where(fixed_mask, 0.0, x)))
-
-    rhs = jnp.where(fixed_mask, 0.0, inflow - apply_fn(held))
-    solution, _ = cg(matvec, rhs, tol=tol, maxiter=10 * fixed_mask.shape[0], M=preconditioner)
-    return jnp.where(fixed_mask, held, solution)
 
 
 COUPLINGS = ("none", "sphere")

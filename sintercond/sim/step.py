@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 
+from sintercond.sim import adaptive
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, Prepared, SimState, Simulator
 from sintercond.sim.terms import conduction, mechanics, sintering
@@ -32,6 +33,10 @@ def simulator(physics: Physics, neighbor_fn=None) -> Simulator:
     def advance_fn(state: SimState, prep: Prepared) -> SimState:
         state = move(physics, neighbor_fn, state, prep)
         return state if physics.sintering is None else sintering.grow(physics, state, prep)
+
+    if physics.conduction.integrator == "implicit" and adaptive.needs_tr_bdf2(physics):
+        def advance_fn(state: SimState, prep: Prepared) -> SimState:  # noqa: F811 (the necks grow in its stages)
+            return adaptive.fixed_step(physics, state, prep)
 
     def step_fn(state: SimState, params: Params) -> SimState:
         return advance_fn(state, prepare_fn(state, params))

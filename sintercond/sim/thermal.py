@@ -289,6 +289,19 @@ def backward_euler_solve(temperature, laplacian_fn, wall_diagonal, wall_source, 
     return jnp.where(free, solution, held)
 
 
+def held_solve(apply_fn, fixed_mask, held, inflow, tol, preconditioner=None):
+    """``x`` with ``x = held`` where ``fixed_mask`` and ``(A x) = inflow`` elsewhere, by conjugate gradients
+    (``A`` = ``apply_fn``, symmetric positive semi-definite; ``preconditioner(r)`` an approximate inverse, e.g.
+    Jacobi's) to the relative residual ``tol``: the steady states of :mod:`sintercond.sim.steady` and the stages
+    of :mod:`sintercond.sim.adaptive`."""
+    def matvec(x):
+        return jnp.where(fixed_mask, 0.0, apply_fn(jnp.where(fixed_mask, 0.0, x)))
+
+    rhs = jnp.where(fixed_mask, 0.0, inflow - apply_fn(held))
+    solution, _ = cg(matvec, rhs, tol=tol, maxiter=10 * fixed_mask.shape[0], M=preconditioner)
+    return jnp.where(fixed_mask, held, solution)
+
+
 def source_power(sources, state, params):
     """External heat powers ``[n]`` (W) of the sources ``sources`` declares, at the state's time and positions.
 
