@@ -114,6 +114,7 @@ ELSEWHERE = {
     "material.melting_point": "test_first_day.py: a run crossing it stops or warns, naming it",
     "material.on_melting": "test_first_day.py: a run crossing it stops or warns, naming it",
     "run.output_every": "test_observable_times.py: history rows at every output_every steps",
+    "conduction.coupling": "test_sphere_coupling_transient.py: test_scene_key_round_trip_and_refusals",
     "run.integrator": "test_adaptive.py: auto resolved to implicit without mechanics (BASE has mechanics)",
     "run.rtol": "test_adaptive.py: the scene's rtol and atol reach Conduction (BASE has mechanics)",
     "run.atol": "test_adaptive.py: the scene's rtol and atol reach Conduction (BASE has mechanics)",
