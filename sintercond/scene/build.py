@@ -378,7 +378,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         bounds = {kind: bound for kind, bound in bounds.items() if kind not in ("thermal", "preheating")}
     dt, n_steps, limit = _time_step(scene.run, bounds, physics.mechanics is None)
     check_sintering_every(scene, n_steps)
-    state = simulate.init_state(particles, built.contacts, dt, mechanics=built.motion, sintering=built.necks)
+    state = simulate.init_state(particles, built.contacts, dt, mechanics=built.motion, sintering=built.necks,
+                                adaptive_step=0.0 if integrator == "implicit" else None)
     bed = {**bed, **{f"wall{k}_particles": count for k, count in touching_walls.items()}}
     return Model(sim, params, state, n_steps, built.contact_count, limit, bed, built.reallocate,
                  _wall_heat_specs(planes, centres, radii),

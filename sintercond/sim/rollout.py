@@ -276,6 +276,8 @@ def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk
         if length not in compiled:
             compiled[length] = compiled_chunk(sim, length, measure)
         if implicit:  # the chunk is an interval of length * dt stepped adaptively from the last step it took
+            if state.adaptive_step is not None:  # carried in the state: a checkpoint resumes exactly
+                first_step = state.adaptive_step if float(state.adaptive_step) > 0 else None
             first_step = length * state.dt if first_step is None else first_step
             new, figures, overflowed, stats = compiled[length](state, params, first_step)
             if bool(stats.failed):
@@ -284,6 +286,8 @@ def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk
                     f" (t = {float(state.time):.6g} s): its step fell to round-off of the time or it took "
                     f"{adaptive.MAX_STEPS} steps; loosen Conduction.rtol / atol or check the inputs")
             first_step = stats.next_step
+            if new.adaptive_step is not None:
+                new = dataclasses.replace(new, adaptive_step=jnp.asarray(stats.next_step, new.adaptive_step.dtype))
             accepted, rejected = accepted + int(stats.accepted), rejected + int(stats.rejected)
         else:
             new, figures, overflowed = compiled[length](state, params)

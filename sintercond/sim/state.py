@@ -146,6 +146,9 @@ class SimState:
       sintering: the start approaches, the growth interval's start temperatures and the stability flag
         (:class:`sintercond.sim.neck_growth.NeckState`) with ``Physics.sintering``, else None; the necks
         themselves are ``contacts.neck``.
+      adaptive_step: with ``Conduction.integrator="implicit"`` run by :func:`sintercond.sim.rollout.advance`, the
+        step (s) the adaptive integrator tries first in the next output interval (0: none taken yet, the whole
+        interval is tried), carried in the state so that a checkpoint resumes the run exactly; else None.
     """
 
     particles: ParticleState
@@ -155,6 +158,7 @@ class SimState:
     overflow: Any
     mechanics: MechanicalState | None = None
     sintering: NeckState | None = None
+    adaptive_step: Any = None
 
     @property
     def temperature(self):
@@ -210,13 +214,15 @@ def params_in_precision(params: Params, dtype) -> Params:
 
 
 
-def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechanics=None, sintering=None) -> SimState:
+def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechanics=None, sintering=None,
+               adaptive_step=None) -> SimState:
     """A :class:`SimState` at ``step`` (default 0) with time step ``dt`` (s).
 
     ``mechanics``: a :class:`sintercond.sim.mechanics.MechanicalState` for
     ``Physics.mechanics`` (:func:`sintercond.sim.mechanics.mechanical_state`).
     ``sintering``: a :class:`sintercond.sim.neck_growth.NeckState` for ``Physics.sintering``
     (:func:`sintercond.sim.neck_growth.neck_state`).
+    ``adaptive_step``: ``SimState.adaptive_step`` (0.0 for an implicit run that resumes exactly), or None.
     """
     dtype = particles.temperature.dtype
 
@@ -226,4 +232,5 @@ def init_state(particles: ParticleState, contacts: Contacts, dt, step=0, mechani
 
     return SimState(particles=particles, contacts=contacts,
                     step=scalar(step, jnp.int64 if jax.config.jax_enable_x64 else jnp.int32), dt=scalar(dt, dtype),
-                    overflow=jnp.asarray(np.zeros((), bool)), mechanics=mechanics, sintering=sintering)
+                    overflow=jnp.asarray(np.zeros((), bool)), mechanics=mechanics, sintering=sintering,
+                    adaptive_step=None if adaptive_step is None else scalar(adaptive_step, dtype))
