@@ -34,8 +34,17 @@ max(|T_i^n|, |T_i^(n+1)|)) <= 1`` over the free particles, and the next one is `
 ramp's jumps and on the end of the interval. ``h`` is a value carried by one ``lax.while_loop`` per interval, so
 a change of step never recompiles.
 
-Reverse mode through the adaptive loop (a ``while_loop``) is not supported: JAX refuses it and
-:func:`integrate` says so; forward mode works.
+Gradients. Forward mode goes through the ``while_loop``, the controller included. Reverse mode cannot (JAX
+differentiates no ``while_loop`` backwards), so with ``reverse_steps=N`` an interval is run twice: the loop above,
+outside differentiation, writes the time and length of each accepted step into a buffer of ``N``; then a
+``lax.scan`` over that buffer replays the accepted steps (no error estimate, no rejections), each step under
+``jax.checkpoint``. The value is the replay's, equal to the loop's to round-off. The derivative is that of the
+discrete map of the steps taken, with the step sizes held (the usual discretise-then-differentiate of an adaptive
+solver, e.g. diffrax's ``RecursiveCheckpointAdjoint`` without the controller's derivative): it differs from the
+derivative of the adaptive map by terms of the order of the local error control. Memory of the backward pass:
+``N`` carries of the step (temperatures ``[n]``, necks and approaches ``[c]``, positions ``[n, 3]``) for the
+interval being differentiated, plus one state per output interval (:func:`rollout`). An interval needing more than
+``N`` accepted steps is flagged (``Stats.failed``), never truncated.
 """
 
 from __future__ import annotations
@@ -53,6 +62,7 @@ from sintercond.sim import neck_growth, thermal
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, Prepared, SimState, held_ramp_temperature
 from sintercond.sim.terms import conduction, walls
+from sintercond.sim.validation import validate_inputs
 
 GAMMA = 2.0 - math.sqrt(2.0)
 """The TR-BDF2 stage fraction (Hosea & Shampine 1996): both stages then share one matrix."""
@@ -227,9 +237,9 @@ def _next_jump(physics: Physics, prep: Prepared, t):
     return jnp.where(k <= ramp.steps, k * width, jnp.inf).astype(t.dtype)
 
 
-def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow, t, h):
+def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow, t, h, estimate: bool = True):
     """One TR-BDF2 step of ``h`` (s) from ``slow`` at ``t`` (s): ``(slow at t + h, err)``, ``err`` the error norm
-    (accepted when <= 1; module docstring)."""
+    (accepted when <= 1; module docstring; 0 without ``estimate``, which skips its solve)."""
     rtol, atol = physics.conduction.rtol, physics.conduction.atol
     tol = _solver_tolerance(physics, slow.temperature.dtype)
     fixed, held = _held_values(physics, state, prep, t + 0.5 * h)  # a step never crosses a jump of the ramp
@@ -252,6 +262,8 @@ def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow,
     coefficients = tuple(jnp.asarray(c, dtype) for c in ([0.0, _BDF_G], [1.0, -_BDF_N], [1.0, 0.0], [GAMMA, 1.0],
                                                          [GAMMA, 1.0 - GAMMA]))
     (end, enthalpy_1), (enthalpies, ops) = jax.lax.scan(stage, (start, enthalpy_n), coefficients)
+    if not estimate:
+        return end, jnp.zeros((), dtype)
     enthalpy_g = enthalpies[0]
     op = jax.tree.map(lambda x: x[1], ops)
     rhs = _BDF_G * enthalpy_g - _BDF_N * enthalpy_n
@@ -290,23 +302,45 @@ def fixed_step(physics: Physics, state: SimState, prep: Prepared) -> SimState:
     return _interval_end(physics, state, end, 1)
 
 
-def integrate_interval(physics: Physics, state: SimState, prep: Prepared, steps: int, first_step):
+def integrate_interval(physics: Physics, state: SimState, prep: Prepared, steps: int, first_step,
+                       reverse_steps: int | None = None):
     """Advance ``state`` by ``steps`` of its ``dt`` (an interval of ``steps * dt`` s) adaptively: ``(state, Stats)``.
 
     Traceable; ``first_step`` (s) is the step to try first (the previous interval's ``Stats.next_step``), a traced
-    value: neither it nor ``dt`` recompiles.
+    value: neither it nor ``dt`` recompiles. ``reverse_steps``: None (one ``while_loop``: forward-mode gradients
+    only), or the most accepted steps the interval may take, recorded and replayed so that reverse mode works
+    (module docstring; more is flagged in ``Stats.failed``).
     """
+    if reverse_steps is None:
+        t, slow, stats = _adapt(physics, state, prep, steps, first_step, 0)[:3]
+        return _interval_end(physics, state, slow, steps), stats
+    if not (isinstance(reverse_steps, int) and reverse_steps >= 1):
+        raise ValueError(f"reverse_steps must be an integer >= 1 (accepted steps per interval); got {reverse_steps!r}")
+    held = jax.tree.map(_no_gradient, (state, prep, first_step))
+    _, _, stats, times, sizes = _adapt(physics, *held[:2], steps, held[2], reverse_steps)
+    slow = _replay(physics, state, prep, times, sizes, stats.accepted)
+    stats = stats._replace(failed=stats.failed | (stats.accepted > reverse_steps))
+    return _interval_end(physics, state, slow, steps), stats
+
+
+def _no_gradient(x):
+    return jax.lax.stop_gradient(x) if jnp.issubdtype(jnp.result_type(x), jnp.inexact) else x
+
+
+def _adapt(physics: Physics, state: SimState, prep: Prepared, steps: int, first_step, record: int):
+    """The adaptive loop over one interval: ``(t, slow, Stats, times [record], sizes [record])``, the last two the
+    start (s) and length (s) of each accepted step (zero past ``Stats.accepted``; dropped beyond ``record``)."""
     dtype = state.dt.dtype
     t0 = state.time
     t_end = t0 + steps * state.dt
     tiny = 64.0 * jnp.finfo(dtype).eps * jnp.maximum(jnp.abs(t_end), state.dt)
 
     def go_on(carry):
-        t, _, _, accepted, rejected, failed = carry
+        t, _, _, accepted, rejected, failed, _, _ = carry
         return (t < t_end) & ~failed & (accepted + rejected < MAX_STEPS)
 
     def body(carry):
-        t, slow, h_try, accepted, rejected, _ = carry
+        t, slow, h_try, accepted, rejected, _, times, sizes = carry
         ends = jnp.minimum(t_end, _next_jump(physics, prep, t))
         h = jnp.minimum(h_try, ends - t)
         clipped = h_try >= ends - t
@@ -318,22 +352,83 @@ def integrate_interval(physics: Physics, state: SimState, prep: Prepared, steps:
         t_new = jnp.where(ok, jnp.where(clipped & (ends == t_end), t_end, jnp.where(clipped, ends, t + h)), t)
         h_next = jnp.where(ok & clipped, jnp.maximum(h * factor, h_try), h * factor)
         failed = ~ok & (h * SHRINK < tiny)
-        return t_new, slow, h_next, accepted + ok.astype(jnp.int32), rejected + (~ok).astype(jnp.int32), failed
+        if record:
+            slot = jnp.where(ok, accepted, record)  # out of range (dropped) when rejected
+            times = times.at[slot].set(t, mode="drop")
+            sizes = sizes.at[slot].set(t_new - t, mode="drop")
+        return (t_new, slow, h_next, accepted + ok.astype(jnp.int32), rejected + (~ok).astype(jnp.int32), failed,
+                times, sizes)
 
     slow = _Slow(state.particles.temperature, state.contacts, state.particles.positions)
     zero = jnp.zeros((), jnp.int32)
     h0 = jnp.minimum(jnp.asarray(first_step, dtype), t_end - t0)
-    t, slow, h_next, accepted, rejected, failed = jax.lax.while_loop(
-        go_on, body, (t0, slow, h0, zero, zero, jnp.zeros((), bool)))
+    buffer = jnp.zeros((record,), dtype)
+    t, slow, h_next, accepted, rejected, failed, times, sizes = jax.lax.while_loop(
+        go_on, body, (t0, slow, h0, zero, zero, jnp.zeros((), bool), buffer, buffer))
     failed = failed | (t < t_end)
-    return _interval_end(physics, state, slow, steps), Stats(accepted, rejected, h_next, failed)
+    return t, slow, Stats(accepted, rejected, h_next, failed), times, sizes
 
 
-def integrate(sim, state: SimState, params: Params, steps: int, first_step=None):
+def _replay(physics: Physics, state: SimState, prep: Prepared, times, sizes, accepted) -> _Slow:
+    """The accepted steps ``(times, sizes)`` of :func:`_adapt` again, differentiably: a scan of checkpointed steps,
+    those past ``accepted`` skipped."""
+
+    def body(slow, step):
+        t, h, k = step
+        return jax.lax.cond(k < accepted, lambda s: tr_bdf2_step(physics, state, prep, s, t, h, estimate=False)[0],
+                            lambda s: s, slow), None
+
+    slow = _Slow(state.particles.temperature, state.contacts, state.particles.positions)
+    slow, _ = jax.lax.scan(jax.checkpoint(body, prevent_cse=False), slow,
+                           (times, sizes, jnp.arange(times.shape[0], dtype=accepted.dtype)))
+    return slow
+
+
+def integrate(sim, state: SimState, params: Params, steps: int, first_step=None, *, reverse_steps: int | None = None):
     """Advance ``state`` by ``steps`` of its ``dt`` adaptively (TR-BDF2 within ``Conduction.rtol`` / ``atol``):
-    ``(state, Stats)``. ``first_step`` (s): the step to try first (default the whole interval). Jit it with
-    ``steps`` static; raise ``ValueError`` on a spec it does not step."""
+    ``(state, Stats)``. ``first_step`` (s): the step to try first (default the whole interval);
+    ``reverse_steps``: as :func:`integrate_interval` (set it for ``jax.grad``). Jit it with ``steps`` and
+    ``reverse_steps`` static; raise ``ValueError`` on a spec it does not step."""
     check_supported(sim.physics)
     prep = sim.prepare_fn(state, params)
     first = steps * state.dt if first_step is None else first_step
-    return integrate_interval(sim.physics, state, prep, steps, first)
+    return integrate_interval(sim.physics, state, prep, steps, first, reverse_steps)
+
+
+def rollout(sim, state: SimState, params: Params, n_steps: int, saveat=None, *, reverse_steps: int | None = None,
+            first_step=None):
+    """Advance ``n_steps`` steps of the state's ``dt`` adaptively, saving ``saveat.fn(state)`` (a
+    :class:`sintercond.sim.rollout.SaveAt`; default the temperatures after every step) at the end of every
+    ``saveat.every`` steps (each such interval one :func:`integrate_interval`, the next starting from the step the
+    last one proposed): ``(state, saved, Stats)``, ``Stats`` summed over the intervals (``failed``: any failed).
+
+    The adaptive counterpart of :func:`sintercond.sim.rollout.rollout` (``dt`` is the output clock only); with
+    ``reverse_steps`` each interval is a ``jax.checkpoint``-ed record-and-replay, so ``jax.grad`` of a loss of the
+    saved values works (memory: module docstring). Check ``Stats.failed`` on the host: a failed interval's values
+    are not to be used. Jit it with ``sim``, ``n_steps``, ``saveat`` and ``reverse_steps`` static.
+    """
+    every = 1 if saveat is None else saveat.every
+    if not (isinstance(n_steps, int) and isinstance(every, int) and n_steps >= 1 and every >= 1 and
+            n_steps % every == 0):
+        raise ValueError(f"n_steps must be a positive multiple of saveat.every; got {n_steps!r}, {every!r}")
+    check_supported(sim.physics)
+    validate_inputs(sim, state, params)
+    fn = None if saveat is None else saveat.fn
+    observe = (lambda s: s.particles.temperature) if fn is None else fn
+    prep = sim.prepare_fn(state, params)
+
+    def interval(carry, _):
+        state, first, total = carry
+        state, stats = integrate_interval(sim.physics, state, prep, every, first, reverse_steps)
+        total = Stats(total.accepted + stats.accepted, total.rejected + stats.rejected, stats.next_step,
+                      total.failed | stats.failed)
+        return (state, stats.next_step, total), observe(state)
+
+    if reverse_steps is not None:
+        interval = jax.checkpoint(interval, prevent_cse=False)
+    first = every * state.dt if first_step is None else jnp.asarray(first_step, state.dt.dtype)
+    zero = jnp.zeros((), jnp.int32)
+    total = Stats(zero, zero, jnp.asarray(first, state.dt.dtype), jnp.zeros((), bool))
+    (state, _, total), saved = jax.lax.scan(interval, (state, jnp.asarray(first, state.dt.dtype), total), None,
+                                            length=n_steps // every)
+    return state, saved, total
