@@ -34,6 +34,10 @@ LONGEST_FIRST = (
     "test_notebooks.py",  # (220) the other six notebooks (calibrate_posterior: about 90 s of CPU more)
     "test_posterior_kinetics.py",  # (150 on a loaded 2-core machine) NUTS through grow_neck, compiled twice
     "test_moving.py",  # (90)
+    "test_shrinkage.py",  # (155 in a full run, Dec 2026)
+    "test_sphere_coupling_transient.py",  # (140 in a full run)
+    "test_sintering_scene.py",  # (130 in a full run)
+    "test_adaptive_reverse.py",  # (120*) adaptive runs compiled for reverse mode and for a fit
     "test_inverse.py",  # (110)
     "test_dryden_zok.py",  # (105)
     "test_packing.py",  # (100)
