@@ -150,11 +150,12 @@ def main(argv=None) -> None:
                 "`outputs_s`).\n\n"
                 + "\n".join(f"- {line}" for line in lines[:5]) + "\n\n" + markdown_table(header, rows)
                 + "\n\nThe adaptive run takes some 200 times fewer steps, each of them two implicit stages (conjugate "
-                "gradients, two fixed-point iterations with the necks) and an error solve; the whole command is not "
-                "faster, because the pour (about 70 s), the outputs (a k* steady solve per output) and the "
-                "compile (the adaptive step compiles longer) dominate both runs at 398 particles. Compile times depend on JAX's "
-                "persistent compilation cache (a "
-                "cached explicit chunk compiles in about 2 s, a new one in about 8 s).")
+                "gradients, two fixed-point iterations with the necks) and an error solve. At 398 particles the "
+                "whole command is only a little faster: the pour (some 45-70 s) is most of both runs, and the "
+                "adaptive step compiles longer. The outputs were 42-46 s of each run until their k* steady solve "
+                "was compiled instead of dispatched op by op (0.25 s to 3.6 ms a history row). Compile times "
+                "depend on JAX's persistent compilation cache (a cached explicit chunk compiles in about 2 s, a new "
+                "one in about 8 s).")
         write_section("time_scales", "python benchmarks/time_scales.py --write", body)
 
 

@@ -43,6 +43,9 @@ def history_columns(model) -> tuple:
             + tuple(spec[0] for spec in model.wall_heat))
 
 
+_pair_neck_conductance = jax.jit(simulate.pair_neck_conductance, static_argnums=0)  # compiled once per run
+
+
 def sintered_conductivity(model, state) -> float:
     """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
     (:func:`sintercond.sim.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
@@ -61,7 +64,7 @@ def sintered_conductivity(model, state) -> float:
         box = steady.face_layer_box(centres, radii, axis)
         return float(steady.steady_state_network_conductivity(centres, radii, pairs, np.asarray(pair_k)[keep],
                                                               axis=axis, box=box))
-    pair_k = np.asarray(simulate.pair_neck_conductance(model.physics, state, model.params))
+    pair_k = np.asarray(_pair_neck_conductance(model.physics, state, model.params))
     if not np.any(pair_k > 0):
         return 0.0
     i, j = np.asarray(state.contacts.pairs, np.int64).T

@@ -141,16 +141,14 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     contacts = setup.contacts
     radii = jnp.asarray(setup.radii)
     hot = jnp.asarray(setup.hot)
+    fixed = jnp.asarray(setup.hot | setup.cold)
     if coupling == "sphere":
         geometry = _sphere_geometry(setup, contacts.neighbors, contacts.table_neck, axis)
-        solve = _coupled_solve(physics, tol)
-        q, temperature = solve(geometry, radii, contacts, kappa, law_params, jnp.asarray(setup.hot | setup.cold), hot)
+        q, temperature = _compiled(_compiled_coupled_solve, physics, tol)(geometry, radii, contacts, kappa,
+                                                                           law_params, fixed, hot)
     else:
-        conductance = sim_module.conductance_lift(
-            physics, radii, jnp.arange(n, dtype=jnp.int32), contacts, kappa, law_params)
-        table = ContactTable(contacts.neighbors, conductance)
-        temperature = steady_state(table, jnp.asarray(setup.hot | setup.cold), jnp.where(hot, 1.0, 0.0), tol=tol)
-        q = -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0))
+        q, temperature = _compiled(_compiled_lifted_solve, physics, tol)(radii, contacts, kappa, law_params, fixed,
+                                                                          hot)
     k_star = q * setup.length / setup.area
     k_star = float(k_star) if concrete else k_star
     if not field:
@@ -161,13 +159,39 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     return k_star, jnp.where(jnp.asarray(reached), temperature, jnp.nan)
 
 
-def _coupled_solve(physics, tol):
-    """The coupled steady solve of :func:`steady_state_conductivity` from the necks, one compiled program
-    (cached per law and tolerance; a law object, unhashable, is compiled afresh): ``(Q_hot, temperature)``."""
+def _compiled(program, physics, tol):
+    """``program(physics, tol)``, a compiled solve of :func:`steady_state_conductivity` from the necks cached per
+    law and tolerance (a law object, unhashable, is compiled afresh): ``(Q_hot, temperature)``. Compiled, not
+    eager: dispatched op by op, the conjugate-gradient loop costs some 0.3 s a solve on a few hundred spheres."""
     try:
-        return _compiled_coupled_solve(physics, tol)
+        return program(physics, tol)
     except TypeError:  # unhashable law object
-        return _compiled_coupled_solve.__wrapped__(physics, tol)
+        return program.__wrapped__(physics, tol)
+
+
+@functools.cache
+def _compiled_lifted_solve(physics, tol):
+    def solve(radii, contacts, kappa, law_params, fixed, hot):
+        n = radii.shape[0]
+        conductance = sim_module.conductance_lift(physics, radii, jnp.arange(n, dtype=jnp.int32), contacts, kappa,
+                                                  law_params)
+        return _network_heat(contacts.neighbors, conductance, fixed, hot, tol)
+
+    return jax.jit(solve)
+
+
+@functools.cache
+def _compiled_network_solve(tol):
+    """The isolated-neck solve of :func:`steady_state_network_conductivity` (``K_ij`` given), one compiled program."""
+    return jax.jit(functools.partial(_network_heat, tol=tol))
+
+
+def _network_heat(neighbors, conductance, fixed, hot, tol):
+    """``(Q, temperature [n])`` of the isolated-neck network: the heat leaving the ``hot`` spheres (held at 1, the
+    rest of ``fixed`` at 0)."""
+    table = ContactTable(neighbors, conductance)
+    temperature = steady_state(table, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
+    return -jnp.sum(jnp.where(hot, heat_inflow(temperature, table), 0.0)), temperature
 
 
 @functools.cache
@@ -361,7 +385,6 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
         q, _ = _compiled_network_coupled_solve(tol)(geometry, conductance, jnp.asarray(neighbors), jnp.asarray(radii),
                                                     kappa, jnp.asarray(hot | cold), hot_mask)
         return q * length / area
-    table = ContactTable(jnp.asarray(neighbors, dtype=jnp.int32), conductance)
-    temperature = steady_state(table, jnp.asarray(hot | cold), jnp.where(hot_mask, 1.0, 0.0), tol=tol)
-    q = -jnp.sum(jnp.where(hot_mask, heat_inflow(temperature, table), 0.0))
+    q, _ = _compiled_network_solve(tol)(jnp.asarray(neighbors, dtype=jnp.int32), conductance, jnp.asarray(hot | cold),
+                                        hot_mask)
     return q * length / area
