@@ -62,7 +62,7 @@ from sintercond.sim import neck_growth, thermal
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, Prepared, SimState, held_ramp_temperature
 from sintercond.sim.terms import conduction, walls
-from sintercond.sim.validation import validate_inputs
+from sintercond.sim.validation import check_save_interval, validate_inputs
 
 GAMMA = 2.0 - math.sqrt(2.0)
 """The TR-BDF2 stage fraction (Hosea & Shampine 1996): both stages then share one matrix."""
@@ -312,12 +312,12 @@ def integrate_interval(physics: Physics, state: SimState, prep: Prepared, steps:
     (module docstring; more is flagged in ``Stats.failed``).
     """
     if reverse_steps is None:
-        t, slow, stats = _adapt(physics, state, prep, steps, first_step, 0)[:3]
+        slow, stats, _, _ = _adapt(physics, state, prep, steps, first_step, 0)
         return _interval_end(physics, state, slow, steps), stats
     if not (isinstance(reverse_steps, int) and reverse_steps >= 1):
         raise ValueError(f"reverse_steps must be an integer >= 1 (accepted steps per interval); got {reverse_steps!r}")
     held = jax.tree.map(_no_gradient, (state, prep, first_step))
-    _, _, stats, times, sizes = _adapt(physics, *held[:2], steps, held[2], reverse_steps)
+    _, stats, times, sizes = _adapt(physics, *held[:2], steps, held[2], reverse_steps)
     slow = _replay(physics, state, prep, times, sizes, stats.accepted)
     stats = stats._replace(failed=stats.failed | (stats.accepted > reverse_steps))
     return _interval_end(physics, state, slow, steps), stats
@@ -328,7 +328,7 @@ def _no_gradient(x):
 
 
 def _adapt(physics: Physics, state: SimState, prep: Prepared, steps: int, first_step, record: int):
-    """The adaptive loop over one interval: ``(t, slow, Stats, times [record], sizes [record])``, the last two the
+    """The adaptive loop over one interval: ``(slow, Stats, times [record], sizes [record])``, the last two the
     start (s) and length (s) of each accepted step (zero past ``Stats.accepted``; dropped beyond ``record``)."""
     dtype = state.dt.dtype
     t0 = state.time
@@ -366,7 +366,7 @@ def _adapt(physics: Physics, state: SimState, prep: Prepared, steps: int, first_
     t, slow, h_next, accepted, rejected, failed, times, sizes = jax.lax.while_loop(
         go_on, body, (t0, slow, h0, zero, zero, jnp.zeros((), bool), buffer, buffer))
     failed = failed | (t < t_end)
-    return t, slow, Stats(accepted, rejected, h_next, failed), times, sizes
+    return slow, Stats(accepted, rejected, h_next, failed), times, sizes
 
 
 def _replay(physics: Physics, state: SimState, prep: Prepared, times, sizes, accepted) -> _Slow:
@@ -408,9 +408,7 @@ def rollout(sim, state: SimState, params: Params, n_steps: int, saveat=None, *, 
     are not to be used. Jit it with ``sim``, ``n_steps``, ``saveat`` and ``reverse_steps`` static.
     """
     every = 1 if saveat is None else saveat.every
-    if not (isinstance(n_steps, int) and isinstance(every, int) and n_steps >= 1 and every >= 1 and
-            n_steps % every == 0):
-        raise ValueError(f"n_steps must be a positive multiple of saveat.every; got {n_steps!r}, {every!r}")
+    check_save_interval(n_steps, every)
     check_supported(sim.physics)
     validate_inputs(sim, state, params)
     fn = None if saveat is None else saveat.fn
@@ -426,9 +424,8 @@ def rollout(sim, state: SimState, params: Params, n_steps: int, saveat=None, *, 
 
     if reverse_steps is not None:
         interval = jax.checkpoint(interval, prevent_cse=False)
-    first = every * state.dt if first_step is None else jnp.asarray(first_step, state.dt.dtype)
+    first = jnp.asarray(every * state.dt if first_step is None else first_step, state.dt.dtype)
     zero = jnp.zeros((), jnp.int32)
-    total = Stats(zero, zero, jnp.asarray(first, state.dt.dtype), jnp.zeros((), bool))
-    (state, _, total), saved = jax.lax.scan(interval, (state, jnp.asarray(first, state.dt.dtype), total), None,
-                                            length=n_steps // every)
+    (state, _, total), saved = jax.lax.scan(interval, (state, first, Stats(zero, zero, first, jnp.zeros((), bool))),
+                                            None, length=n_steps // every)
     return state, saved, total

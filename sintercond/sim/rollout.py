@@ -34,7 +34,7 @@ import jax.numpy as jnp
 from sintercond.sim import adaptive, mechanics, neck_growth
 from sintercond.sim.state import Params, SimState, Simulator
 from sintercond.sim.terms import coupling
-from sintercond.sim.validation import check_mechanical_step, validate_inputs
+from sintercond.sim.validation import check_mechanical_step, check_save_interval, validate_inputs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,11 +107,7 @@ def rollout(sim: Simulator, state: SimState, params: Params, n_steps: int, savea
     central differences); memory falls; the forward run is unchanged.
     """
     every = saveat.every
-    if not (isinstance(n_steps, int) and isinstance(every, int) and n_steps >= 1 and every >= 1):
-        raise ValueError(f"n_steps and saveat.every must be integers >= 1; got {n_steps!r}, {every!r}")
-    if n_steps % every:
-        raise ValueError(f"n_steps ({n_steps}) must be a multiple of saveat.every ({every}); "
-                         f"{n_steps // every * every} or {(n_steps // every + 1) * every} would do")
+    check_save_interval(n_steps, every)
     observe = (lambda s: s.particles.temperature) if saveat.fn is None else saveat.fn
     validate_inputs(sim, state, params)
     if sim.physics.mechanics is not None and params.mechanics is not None:

@@ -162,20 +162,24 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
 def _compiled(program, physics, tol):
     """``program(physics, tol)``, a compiled solve of :func:`steady_state_conductivity` from the necks cached per
     law and tolerance (a law object, unhashable, is compiled afresh): ``(Q_hot, temperature)``. Compiled, not
-    eager: dispatched op by op, the conjugate-gradient loop costs some 0.3 s a solve on a few hundred spheres."""
+    eager: dispatched op by op, the conjugate-gradient loop costs far more than the solve (benchmarks/RESULTS.md,
+    ``time_scales``)."""
     try:
         return program(physics, tol)
     except TypeError:  # unhashable law object
         return program.__wrapped__(physics, tol)
 
 
+def _lift(physics, radii, contacts, kappa, law_params):
+    """``K_ij`` ``[n, m]`` (W/K) of a packing's table from its necks, each particle its own material."""
+    return sim_module.conductance_lift(physics, radii, jnp.arange(radii.shape[0], dtype=jnp.int32), contacts, kappa,
+                                       law_params)
+
+
 @functools.cache
 def _compiled_lifted_solve(physics, tol):
     def solve(radii, contacts, kappa, law_params, fixed, hot):
-        n = radii.shape[0]
-        conductance = sim_module.conductance_lift(physics, radii, jnp.arange(n, dtype=jnp.int32), contacts, kappa,
-                                                  law_params)
-        return _network_heat(contacts.neighbors, conductance, fixed, hot, tol)
+        return _network_heat(contacts.neighbors, _lift(physics, radii, contacts, kappa, law_params), fixed, hot, tol)
 
     return jax.jit(solve)
 
@@ -199,9 +203,7 @@ def _compiled_coupled_solve(physics, tol):
     law = physics.conduction.law
 
     def solve(geometry, radii, contacts, kappa, law_params, fixed, hot):
-        n = radii.shape[0]
-        conductance = sim_module.conductance_lift(physics, radii, jnp.arange(n, dtype=jnp.int32), contacts, kappa,
-                                                  law_params)
+        conductance = _lift(physics, radii, contacts, kappa, law_params)
         half = half_resistances(law, radii, contacts.neighbors, contacts.table_neck, contacts.table_overlap, kappa,
                                 law_params, conductance)
         return _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol)

@@ -43,6 +43,16 @@ def _checked_property(name, value, tabulated, symbol, unit, bound, needs):
     return np.atleast_1d(np.asarray(value, np.float64))
 
 
+def check_save_interval(n_steps, every) -> None:
+    """Raise ``ValueError`` unless ``n_steps`` and ``every`` (``SaveAt.every``) are integers >= 1 and ``every``
+    divides ``n_steps``: a rollout saves at the end of every ``every`` steps."""
+    if not (isinstance(n_steps, int) and isinstance(every, int) and n_steps >= 1 and every >= 1):
+        raise ValueError(f"n_steps and saveat.every must be integers >= 1; got {n_steps!r}, {every!r}")
+    if n_steps % every:
+        raise ValueError(f"n_steps ({n_steps}) must be a multiple of saveat.every ({every}); "
+                         f"{n_steps // every * every} or {(n_steps // every + 1) * every} would do")
+
+
 def validate_inputs(sim: Simulator, state: SimState, params: Params) -> None:
     """Raise ``ValueError`` naming the field and the allowed range unless ``(state, params)`` can run on ``sim``.
 
