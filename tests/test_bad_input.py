@@ -3,19 +3,38 @@
 Scenes go through the command line (``sintercond.cli.main``) as TOML files:
 exit code 2, one line on stderr naming the key and the allowed range, no
 traceback, within validation time (nothing built, nothing compiled). API calls
-raise ``ValueError`` (or a subclass) naming the argument.
+raise ``ValueError`` (or a subclass) naming the argument. "Nothing compiled" is checked, not timed: JAX's
+caches are cleared before each refusal and its compile events counted (the shared time of a 2-core CI machine
+made a wall-clock budget fail on code that had not changed).
 """
 
 import copy
 import json
 import math
+import contextlib
 import re
-import time
 
+import jax
+import jax.monitoring
 import numpy as np
 import pytest
 
 from sintercond import cli, scene
+
+_COMPILE_EVENTS = []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, _seconds, **_: _COMPILE_EVENTS.append(event) if event.startswith("/jax/core/compile/") else None)
+
+
+@contextlib.contextmanager
+def nothing_compiled(label):
+    """Fail unless the block traces and compiles nothing in JAX; its caches are cleared first, so that work done
+    before a refusal is seen whatever ran before in this process."""
+    jax.clear_caches()
+    before = len(_COMPILE_EVENTS)
+    yield
+    compiled = _COMPILE_EVENTS[before:]
+    assert not compiled, f"{label}: JAX traced or compiled before the refusal ({sorted(set(compiled))})"
 
 BASE = {
     "packing": {"kind": "simple_cubic", "counts": [4, 2, 2], "spacing": 1e-4, "radius": 0.52e-4},
@@ -253,14 +272,12 @@ def _cli_error(tmp_path, text, capsys, name="scene.toml", data=None):
         path.write_text(text)
     else:
         path.write_bytes(data)
-    start = time.perf_counter()
-    with pytest.raises(SystemExit) as exc:
+    with nothing_compiled(name), pytest.raises(SystemExit) as exc:
         cli.main(["run", str(path), "--out", str(tmp_path / "out"), "--no-progress"])
-    elapsed = time.perf_counter() - start
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "Traceback" not in err and err.startswith("sintercond: error: ")
     assert not (tmp_path / "out").exists()  # refused before anything was written or built
-    return err, elapsed
+    return err
 
 
 def test_the_corpus_is_large_enough():
@@ -271,8 +288,7 @@ def test_the_corpus_is_large_enough():
 def test_broken_scene_is_refused_naming_key_and_range(tmp_path, capsys, name, mutate, key, rng):
     raw = copy.deepcopy(BASE)
     mutate(raw)
-    err, elapsed = _cli_error(tmp_path, to_toml(raw), capsys)
-    assert elapsed < 2.0, err
+    err = _cli_error(tmp_path, to_toml(raw), capsys)
     assert re.search(key if "\\" in key else re.escape(key), err), err
     assert re.search(rng, err), err
 
@@ -291,7 +307,7 @@ FILES = [
 
 @pytest.mark.parametrize("name,text,data,message", FILES, ids=[f[0] for f in FILES])
 def test_unreadable_scene_files(tmp_path, capsys, name, text, data, message):
-    err, _ = _cli_error(tmp_path, text, capsys, data=data)
+    err = _cli_error(tmp_path, text, capsys, data=data)
     assert re.search(message, err), err
 
 
@@ -412,10 +428,10 @@ API_CALLS = _api_cases()
 
 @pytest.mark.parametrize("name,fn,args,kwargs,field", API_CALLS, ids=[c[0] for c in API_CALLS])
 def test_bad_api_call_names_the_argument(name, fn, args, kwargs, field):
-    start = time.perf_counter()
-    with pytest.raises(ValueError, match=field):
+    # least_squares evaluates the user's model (jitted, by design) before it can check the residuals' shape
+    guard = contextlib.nullcontext() if name.startswith("least_squares") else nothing_compiled(name)
+    with guard, pytest.raises(ValueError, match=field):
         fn(*args, **kwargs)
-    assert time.perf_counter() - start < 5.0
 
 
 def test_laws_under_jit_give_nan_for_invalid_materials_never_negative():

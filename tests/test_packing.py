@@ -236,16 +236,12 @@ def test_the_deposit_grid_finds_what_the_full_search_finds():
 
 
 @pytest.mark.slow
-def test_a_few_thousand_sphere_bed_is_built_in_time():
-    """Issue 27: 2,106 spheres of 20-60 um in a 0.4 mm box, 0.4 mm high. Measured 28 s on the project's 2-core
-    machine (the dense deposit and the inertia floor): the budget is 3 times that."""
-    import time
-
-    start = time.perf_counter()
+def test_a_few_thousand_sphere_bed_is_built_and_settled():
+    """Issue 27: 2,106 spheres of 20-60 um in a 0.4 mm box, 0.4 mm high, settled. How long it takes is a benchmark
+    (``benchmarks/bed_build.py``, benchmarks/RESULTS.md), not a test: a wall-clock budget failed on a shared CI
+    machine on code that had not changed."""
     bed = packing.powder_bed(400e-6, 400e-6, (20e-6, 60e-6), seed=1, method="relax")
-    elapsed = time.perf_counter() - start
     assert len(bed.radii) == 2106
-    assert elapsed < 90.0
     isolated, surface, coordination = _settled_figures(bed, 400e-6)
     assert isolated == 0 and bed.isolated == 0
     assert 0.62 < bed.packing_fraction < 0.68  # frictionless random packing of this powder (0.656 measured)

@@ -224,11 +224,12 @@ def pair_conductance(law, r_i, r_j, h, kappa_i, kappa_j=None, params=None, neck_
     """
     law = _resolve_law(law)
     params = _merge_params(law, params)
+    neck = NECK_MODELS[_resolve_neck_model(law, neck_model)]
     if all_concrete(kappa_i, kappa_j, *params.values()):
         validate_law_inputs(law, params, kappa_i, kappa_j)
     kappa_j = kappa_i if kappa_j is None else kappa_j
     r_i, r_j, h, kappa_i, kappa_j = as_float_arrays(r_i, r_j, h, kappa_i, kappa_j)
-    a = NECK_MODELS[_resolve_neck_model(law, neck_model)](r_i, r_j, h)
+    a = neck(r_i, r_j, h)
     return conductance_from_neck(law, a, r_i, r_j, h, kappa_i, kappa_j, params)
 
 

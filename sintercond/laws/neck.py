@@ -182,12 +182,14 @@ def max_overlap(r_i, r_j):
     r_i, r_j = as_float_arrays(r_i, r_j)
     r_s = jnp.minimum(r_i, r_j)
     r_l = jnp.maximum(r_i, r_j)
-    s_l = sqrt_difference_of_squares(r_l, r_s)
-    h_max = r_s / 3.0 + r_s**2 * (r_l + 2.0 * s_l) / (3.0 * (r_l + s_l) ** 2)
+    h_max = _max_overlap_of_sorted(r_s, r_l, sqrt_difference_of_squares(r_l, r_s))
     return jnp.where(_valid_radii(r_i, r_j), h_max, jnp.nan)
 
 
-_max_overlap_compiled = jax.jit(max_overlap)
+def _max_overlap_of_sorted(r_s, r_l, s_l):
+    """``h_max`` of :func:`max_overlap` from the smaller and larger radius and ``s_l = sqrt(r_l^2 - r_s^2)``;
+    array-library agnostic, so that validation computes it in NumPy before anything compiles."""
+    return r_s / 3.0 + r_s**2 * (r_l + 2.0 * s_l) / (3.0 * (r_l + s_l) ** 2)
 
 
 def neck_residual(a, r_i, r_j, h):
@@ -274,8 +276,8 @@ def validate_neck_inputs(r_i, r_j, h, *, model="volume_conserving", names=("r_i"
     require_positive(name_j, r_j)
     require_finite(name_h, h)
     if model == "volume_conserving":
-        # compiled once per shape: eager dispatch would compile each op (~0.5 s per new length)
-        h_max = np.asarray(_max_overlap_compiled(r_i, r_j), dtype=np.float64)
+        r_s, r_l = np.minimum(r_i, r_j), np.maximum(r_i, r_j)
+        h_max = _max_overlap_of_sorted(r_s, r_l, np.sqrt((r_l - r_s) * (r_l + r_s)))
         fail_where(
             h > h_max * (1.0 + _MAX_OVERLAP_SLACK_ULPS * np.finfo(np.float64).eps),
             lambda i: (
