@@ -151,12 +151,13 @@ def main(argv=None) -> None:
                 + "\n".join(f"- {line}" for line in lines[:5]) + "\n\n" + markdown_table(header, rows)
                 + "\n\nThe adaptive run takes some 200 times fewer steps, each of them two implicit stages (conjugate "
                 "gradients, two fixed-point iterations with the necks) and an error solve. At 398 particles the "
-                "whole command is only a little faster: the pour (some 45-70 s) is most of both runs, and the "
-                "adaptive step compiles longer. The outputs were 42-46 s of each run until their k* steady solve "
-                "was compiled instead of dispatched op by op (0.25 s to 3.6 ms a row, measured on a 10 x 10 x 4 simple "
-                "cubic block of 400 spheres with grown necks). Compile times "
-                "depend on JAX's persistent compilation cache (a cached explicit chunk compiles in about 2 s, a new "
-                "one in about 8 s).")
+                "whole command takes the same time either way (three runs on one machine, 2026-12-06: explicit "
+                "33.5-38.0 s, auto 36.4-38.5 s; compiled stepping alone 6.7-8.2 s against 3.1-4.3 s): the pour and "
+                "the network are most of both runs, and the adaptive step compiles longer. The outputs were 42-46 s "
+                "of each run until their k* steady solve was compiled instead of dispatched op by op (0.25 s to "
+                "3.6 ms a row, measured on a 10 x 10 x 4 simple cubic block of 400 spheres with grown necks). "
+                "Compile times depend on JAX's persistent compilation cache (a cached explicit chunk compiles in "
+                "about 2 s, a new one in about 8 s).")
         write_section("time_scales", "python benchmarks/time_scales.py --write", body)
 
 
