@@ -2,16 +2,16 @@
 
 Scenes go through the command line (``sintercond.cli.main``) as TOML files:
 exit code 2, one line on stderr naming the key and the allowed range, no
-traceback, within validation time (nothing built, nothing compiled). API calls
+traceback, nothing built and nothing compiled. API calls
 raise ``ValueError`` (or a subclass) naming the argument. "Nothing compiled" is checked, not timed: JAX's
 caches are cleared before each refusal and its compile events counted (the shared time of a 2-core CI machine
 made a wall-clock budget fail on code that had not changed).
 """
 
+import contextlib
 import copy
 import json
 import math
-import contextlib
 import re
 
 import jax

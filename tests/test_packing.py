@@ -237,9 +237,9 @@ def test_the_deposit_grid_finds_what_the_full_search_finds():
 
 @pytest.mark.slow
 def test_a_few_thousand_sphere_bed_is_built_and_settled():
-    """Issue 27: 2,106 spheres of 20-60 um in a 0.4 mm box, 0.4 mm high, settled. How long it takes is a benchmark
-    (``benchmarks/bed_build.py``, benchmarks/RESULTS.md), not a test: a wall-clock budget failed on a shared CI
-    machine on code that had not changed."""
+    """Issue 27: 2,106 spheres of 20-60 um in a 0.4 mm box, 0.4 mm high, settled. How long a relaxed bed takes is a
+    benchmark, not a test (``benchmarks/bed_build.py``: the 3,290-sphere relaxed bed in benchmarks/RESULTS.md): a
+    wall-clock budget on this bed failed on a shared CI machine on code that had not changed."""
     bed = packing.powder_bed(400e-6, 400e-6, (20e-6, 60e-6), seed=1, method="relax")
     assert len(bed.radii) == 2106
     isolated, surface, coordination = _settled_figures(bed, 400e-6)
