@@ -13,8 +13,9 @@ callback in the mat-vec), and for ``"sphere"`` the memory of the per-sphere bloc
 
 ``--transient``: the explicit step on the same beds, insulated, from a random field (300-400 K), at 0.9 of each
 network's stable step: the milliseconds a step of a compiled 200-step rollout takes (after a warm-up call, best of
-3), the stable steps, and for ``"sphere"`` the neck solve's conjugate-gradient iterations a step (counted in a
-separate run through a callback in its mat-vec).
+3), the stable steps, and for ``"sphere"`` the memory of the per-sphere blocks (``C_s`` and the geometric block,
+``[n, m, m]`` each). The coupled step takes ``NECK_SWEEPS`` (1) conjugate-gradient sweeps on the neck balance a
+step (sintercond.sim.terms.coupling).
 """
 
 from __future__ import annotations
@@ -108,11 +109,10 @@ def cells_table():
 
 
 def time_transient(n_target, steps=200):
-    """Rows ``(n, coupling, ms per step, stable step (s), CG iterations a step)`` of the explicit step on a bed."""
+    """Rows ``(n, coupling, ms per step, stable step (s), block memory (MiB))`` of the explicit step on a bed."""
     from sintercond import simulate
     from sintercond.sim import rollout as rollouts
     from sintercond.sim.stability import thermal_time_step
-    from sintercond.sim.terms import coupling as coupling_term
     from sintercond.state import particle_state
 
     centres, radii = bed(n_target)
@@ -133,18 +133,11 @@ def time_transient(n_target, steps=200):
             t0 = time.perf_counter()
             jax.block_until_ready(run(state, params))
             best = min(best, time.perf_counter() - t0)
-        iterations = float("nan")
+        memory = float("nan")
         if coupling == "sphere":
-            plain = coupling_term.cg
-            coupling_term.cg = _counting_cg(plain)
-            try:
-                MATVECS[0] = 0
-                jax.block_until_ready(jax.jit(lambda st, p, sim=sim: rollouts.rollout(sim, st, p, steps)[0])(
-                    state, params))
-                iterations = (MATVECS[0] - steps) / steps  # one mat-vec a step for the initial residual
-            finally:
-                coupling_term.cg = plain
-        rows.append((len(radii), coupling, 1e3 * best / steps, limit, iterations))
+            blocks = sim.prepare_fn(state, params).neck_blocks[1]
+            memory = 2 * blocks.size * blocks.dtype.itemsize / 2**20  # C_s and the geometric block
+        rows.append((len(radii), coupling, 1e3 * best / steps, limit, memory))
     return rows
 
 
@@ -155,7 +148,7 @@ def main():
     parser.add_argument("--transient", action="store_true")
     args = parser.parse_args()
     if args.transient:
-        print("| n | coupling | ms per step | stable step (s) | neck CG iterations a step |")
+        print("| n | coupling | ms per step | stable step (s) | block memory (MiB) |")
         print("|---|---|---|---|---|")
         for n in args.sizes:
             for r in time_transient(n):

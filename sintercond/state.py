@@ -146,9 +146,8 @@ class LiftedContacts:
       sphere: with ``Conduction.coupling="sphere"``, the necks' directions on their spheres
         (:class:`sintercond.contacts.sphere_coupling.SphereGeometry`, on this table's layout, the neck unknowns
         in the order of ``pairs``); else None.
-      neck_temperature: with ``"sphere"``, ``[c]`` the temperature of each neck (K) at the last step, the
-        starting guess of the next step's neck solve; else None.
-      neck_residual: with ``"sphere"``, the largest relative residual of a neck solve so far (scalar); else None.
+      neck_correction: with ``"sphere"``, ``[c]`` each neck's temperature less the isolated network's (K) at the
+        last step, where the next step's neck balance starts (:mod:`sintercond.sim.terms.coupling`); else None.
     """
 
     neighbors: jax.Array
@@ -160,8 +159,7 @@ class LiftedContacts:
     wall_overlap: jax.Array | None = None
     wall_temperature: jax.Array | None = None
     sphere: object = None
-    neck_temperature: jax.Array | None = None
-    neck_residual: jax.Array | None = None
+    neck_correction: jax.Array | None = None
 
     def on_table(self, per_pair) -> jax.Array:
         """A ``[c]`` per-pair value in both slots of the padded table ``[n, m]``, 0 in padding."""

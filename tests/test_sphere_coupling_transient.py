@@ -25,7 +25,7 @@ from sintercond.sim import neck_growth
 from sintercond.scene.build import build_model, scene_physics
 from sintercond.scene.typed import typed_scene
 from sintercond.sim.physics import Conduction, Physics
-from sintercond.sim.rollout import finite_temperatures, rollout
+from sintercond.sim.rollout import rollout
 from sintercond.sim.stability import thermal_time_step
 from sintercond.sim.state import Params, PulseParams
 from sintercond.sim.steady import steady_state_conductivity
@@ -134,17 +134,24 @@ def test_chain_transient_is_the_isolated_one():
 @pytest.mark.slow
 def test_simple_cubic_block_heated_along_an_axis_is_the_isolated_one():
     """A 4 x 3 x 3 simple-cubic block, insulated, each layer across x at its own temperature: the side necks carry
-    nothing, the axial ones are opposite (or alone on an end sphere), so the coupled run equals the isolated one."""
+    nothing, the axial ones are opposite (or alone on an end sphere), so the coupled network is the isolated one.
+    The step's neck balance lags one sweep (the side necks' temperatures follow the spheres' stored heat, Eq. 5):
+    the coupled run is the isolated one to that lag, under 1 % of explicit Euler's own error (the isolated run
+    against ten times smaller steps; measured 0.1 %, 0.38 mK against 0.38 K) and falling with the step (8.5 times
+    smaller at a tenth of it); its steady state is exact (FCC test below)."""
     g = np.stack(np.meshgrid(np.arange(4), np.arange(3), np.arange(3), indexing="ij"), -1).reshape(-1, 3)
     centres, radii = g * 1.9, np.ones(len(g))
     temperature = np.array([300.0, 700.0, 350.0, 500.0])[g[:, 0]]
     dt = 0.9 * min(start(coupling, centres, radii, temperature)[2] for coupling in ("none", "sphere"))
     ends = {}
-    for coupling in ("none", "sphere"):
-        sim, state, _ = start(coupling, centres, radii, temperature, dt=dt)
-        ends[coupling] = np.asarray(run(sim, state, 20).particles.temperature)
-    np.testing.assert_allclose(ends["sphere"], ends["none"], rtol=0, atol=1e-12 * 400.0)
-    assert 1.0 < np.ptp(ends["none"]) < 0.9 * 400.0
+    for coupling, divide in (("none", 1), ("sphere", 1), ("none", 10), ("sphere", 10)):
+        sim, state, _ = start(coupling, centres, radii, temperature, dt=dt / divide)
+        ends[coupling, divide] = np.asarray(run(sim, state, 20 * divide).particles.temperature)
+    euler = np.max(np.abs(ends["none", 1] - ends["none", 10]))
+    lag = np.max(np.abs(ends["sphere", 1] - ends["none", 1]))
+    assert lag < 0.01 * euler
+    assert np.max(np.abs(ends["sphere", 10] - ends["none", 10])) < 0.2 * lag
+    assert 1.0 < np.ptp(ends["none", 1]) < 0.9 * 400.0
 
 
 # --------------------------------------------------------------------------
@@ -172,7 +179,6 @@ def test_fcc_block_runs_to_the_steady_coupled_field():
     k_star = -power[hot].sum() / 100.0 * (x[cold].mean() - x[hot].mean()) / (2 * length) ** 2
     assert k_star == pytest.approx(k_ref, rel=1e-10)
     assert steady_state_conductivity(centres, radii, 1.0, **kw) > 1.1 * k_ref
-    assert float(end.contacts.neck_residual) == 0.0
 
 
 # --------------------------------------------------------------------------
@@ -200,27 +206,63 @@ def test_heat_is_conserved_on_an_insulated_cluster_with_a_pulse(cluster):
     assert np.max(np.abs(ends["sphere"] - ends["none"])) > 1e-3
 
 
-@pytest.mark.slow
-def test_neck_solve_equals_a_dense_solve(cluster):
-    """The neck temperatures of one step (CG to 1e-12, from a cold start and from a guess 0.01 K off) against a dense
-    solve of the neck balance assembled here from the blocks C_s: within 1e-12 of the temperature span (measured
-    2.5e-14)."""
-    centres, radii, temperature = cluster
-    sim, state, _ = start("sphere", centres, radii, temperature)
-    g, blocks = sim.prepare_fn(state, PARAMS).neck_blocks
+def dense_neck_solve(blocks, geometry, temperature):
+    """The neck temperatures balancing ``temperature``, by a dense solve assembled here from the blocks C_s."""
     c = np.asarray(blocks)
-    index, coupled = np.asarray(g.neck_index), np.asarray(g.coupled)
-    n, p = len(radii), state.contacts.pairs.shape[0]
-    a_nn, a_ns = np.zeros((p, p)), np.zeros((p, n))
+    index, coupled = np.asarray(geometry.neck_index), np.asarray(geometry.coupled)
+    p = geometry.neck_slots.shape[0]
+    a_nn, a_ns = np.zeros((p, p)), np.zeros((p, len(temperature)))
     for s_, k in zip(*np.nonzero(coupled)):
         for m_ in np.flatnonzero(coupled[s_]):
             a_nn[index[s_, k], index[s_, m_]] += c[s_, k, m_]
         a_ns[index[s_, k], s_] -= c[s_, k][coupled[s_]].sum()
-    exact = np.linalg.solve(a_nn, -a_ns @ temperature)
-    for guess in (np.zeros(p), exact + 0.01):
-        x, residual = coupling_term.neck_temperatures(g, blocks, jnp.asarray(temperature), jnp.asarray(guess))
-        assert np.max(np.abs(np.asarray(x) - exact)) < 1e-12 * np.ptp(temperature)
-        assert float(residual) < 1e-12
+    return np.linalg.solve(a_nn, -a_ns @ temperature)
+
+
+@pytest.mark.slow
+def test_neck_sweeps_reach_a_dense_solve(cluster):
+    """The step's neck balance (conjugate gradients from the isolated necks plus a correction) against a dense
+    solve assembled here from the blocks C_s: with as many sweeps as necks, the correction found from a cold start
+    and from one 0.01 K off gives the dense necks within 1e-12 of the temperature span (measured 2e-14), and the
+    contact flows are then C_s (T_s - x) on both sides of each neck; one sweep lowers the residual."""
+    centres, radii, temperature = cluster
+    sim, state, _ = start("sphere", centres, radii, temperature)
+    g, blocks, split = sim.prepare_fn(state, PARAMS).neck_blocks
+    exact = dense_neck_solve(blocks, g, temperature)
+    isolated = np.asarray(coupling_term.isolated_necks(g, split, jnp.asarray(temperature)))
+    p = len(exact)
+    for guess in (np.zeros(p), exact - isolated + 0.01):
+        flow, correction, residual = coupling_term.neck_sweeps(g, blocks, split, jnp.asarray(temperature),
+                                                                jnp.asarray(guess), p)
+        assert np.max(np.abs(isolated + np.asarray(correction) - exact)) < 1e-12 * np.ptp(temperature)
+        assert float(residual) < 1e-10
+        c = np.asarray(blocks)
+        drop = temperature[:, None] - exact[np.asarray(g.neck_index)]
+        q = np.einsum("nij,nj->ni", c, drop).reshape(-1)[np.asarray(g.neck_slots)]
+        np.testing.assert_allclose(np.asarray(flow), q[:, 0], rtol=0, atol=1e-10 * np.abs(q).max())
+        np.testing.assert_allclose(np.asarray(flow), -q[:, 1], rtol=0, atol=1e-10 * np.abs(q).max())
+    assert float(coupling_term.neck_sweeps(g, blocks, split, jnp.asarray(temperature), jnp.zeros(p), 1)[2]) < 1.0
+
+
+@pytest.mark.slow
+def test_one_sweep_a_step_errs_far_less_than_explicit_euler(cluster, monkeypatch):
+    """The lag of one sweep a step (module docstring of sintercond.sim.terms.coupling) against the balance solved
+    at every step (as many sweeps as necks), on the cluster from its random field: under 1 % of explicit Euler's
+    own error (the converged run against ten times smaller steps) after 30 steps at 0.9 of the stable step
+    (measured 0.08 %: 0.27 mK against 0.36 K), and at least five times smaller at a tenth of the step (32)."""
+    centres, radii, temperature = cluster
+    _, state, _ = start("sphere", centres, radii, temperature)
+    exact_sweeps = int(state.contacts.pairs.shape[0])
+    ends = {}
+    for sweeps, divide in ((exact_sweeps, 1), (exact_sweeps, 10), (1, 1), (1, 10)):
+        monkeypatch.setattr(coupling_term, "NECK_SWEEPS", sweeps)
+        sim, state, limit = start("sphere", centres, radii, temperature)
+        state = dataclasses.replace(state, dt=jnp.asarray(0.9 * limit / divide))
+        ends[sweeps, divide] = np.asarray(run(sim, state, 30 * divide).particles.temperature)
+    euler = np.max(np.abs(ends[exact_sweeps, 1] - ends[exact_sweeps, 10]))
+    lag = np.max(np.abs(ends[1, 1] - ends[exact_sweeps, 1]))
+    assert 0.0 < lag < 0.01 * euler
+    assert np.max(np.abs(ends[1, 10] - ends[exact_sweeps, 10])) < 0.2 * lag
 
 
 # --------------------------------------------------------------------------
@@ -230,7 +272,7 @@ def test_neck_solve_equals_a_dense_solve(cluster):
 @pytest.mark.slow
 def test_gradients_equal_central_differences(cluster):
     """d T_far(after 40 steps) / d (conductivity, Rojek's slope, one neck radius) on the cluster with a held sphere:
-    equal to central differences (the neck solve differentiated as an exact solve)."""
+    equal to central differences (the neck sweeps and the carried correction differentiated as they are)."""
     centres, radii, temperature = cluster
     fixed = np.arange(len(radii)) == 0
     temperature = np.where(fixed, 600.0, 300.0)
@@ -264,7 +306,7 @@ def test_gradients_equal_central_differences(cluster):
 @pytest.mark.slow
 def test_float32_agrees_with_float64(cluster):
     """With x64 off the cluster heated from a held sphere agrees with float64 to 1e-5 of the temperature span
-    (measured 3.5e-7), and no neck solve is flagged."""
+    (measured 1.8e-7)."""
     centres, radii, _ = cluster
     fixed = np.arange(len(radii)) == 0
     temperature = np.where(fixed, 600.0, 300.0)
@@ -277,7 +319,6 @@ def test_float32_agrees_with_float64(cluster):
         end32 = run(sim32, state32, 100, Params(jnp.array([1.0]), jnp.array([1.0])))
         assert end32.particles.temperature.dtype == jnp.float32
         t32 = np.asarray(end32.particles.temperature, np.float64)
-        assert float(end32.contacts.neck_residual) == 0.0
     assert np.max(np.abs(t32 - t64)) / 300.0 < 1e-5
     assert np.max(np.abs(t64 - 300.0)[~fixed]) > 10.0
 
@@ -319,17 +360,6 @@ def test_contacts_built_without_the_coupling_are_refused():
     state = simulate.init_state(particle_state(centres, radii, 300.0, 1.0), contacts, 1.0)
     with pytest.raises(ValueError, match=r"coupling='sphere' needs SimState.contacts built for it"):
         rollout(simulate.simulator(physics("sphere")), state, PARAMS, 2)
-
-
-@pytest.mark.slow
-def test_an_unconverged_neck_solve_is_refused_on_the_host():
-    """A state whose neck solve ended above its tolerance (LiftedContacts.neck_residual > 0) fails the run's check."""
-    centres, radii = chain([1.0, 1.0, 1.0], 0.05)
-    sim, state, _ = start("sphere", centres, radii, 300.0)
-    finite_temperatures(state)
-    flagged = dataclasses.replace(state, contacts=dataclasses.replace(state.contacts, neck_residual=jnp.asarray(1e-3)))
-    with pytest.raises(FloatingPointError, match=r"coupled neck solve ended at relative residual 0.001"):
-        finite_temperatures(flagged)
 
 
 # --------------------------------------------------------------------------

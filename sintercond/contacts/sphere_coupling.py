@@ -283,20 +283,35 @@ def conductance_blocks(geometry: SphereGeometry, resistance):
     return jnp.where(pair, c, 0.0)
 
 
+def slot_flows(geometry: SphereGeometry, conductance, sphere_x, neck_x):
+    """``q [n, m]`` (W): the heat leaving each sphere through each of its slots, ``q_s = C_s (x_s 1 - x_N(s))``.
+
+    Linear in ``(sphere_x [n], neck_x [p])``; the one product with the blocks that the operator, the neck balance
+    and the contact flows share (a product summed over the last axis, which XLA fuses into one pass over the
+    blocks).
+    """
+    drop = sphere_x[:, None] - neck_x[geometry.neck_index]
+    return jnp.sum(conductance * drop[:, None, :], axis=2)
+
+
+def at_necks(geometry: SphereGeometry, per_slot):
+    """``[p, 2]``: a per-slot ``[n, m]`` value at each contact's two slots (``neck_slots``)."""
+    return per_slot.reshape(-1)[geometry.neck_slots]
+
+
 def coupled_apply(geometry: SphereGeometry, conductance, sphere_x, neck_x):
     """The coupled network's ``A x`` on ``[sphere temperatures; neck temperatures]``: ``(out [n], out [p])`` (W).
 
-    ``out_s = sum_k q_sk`` is the heat leaving sphere ``s`` through its necks, ``q_s = C_s (x_s 1 - x_N(s))``;
-    ``out_c = -(q_ic + q_jc)`` the net heat leaving neck ``c`` (0 at a massless neck). ``A`` is symmetric
-    positive semi-definite, and ``sum(out_s) + sum(out_c) = 0`` (heat conserved).
+    ``out_s = sum_k q_sk`` is the heat leaving sphere ``s`` through its necks, ``q_s = C_s (x_s 1 - x_N(s))``
+    (:func:`slot_flows`); ``out_c = -(q_ic + q_jc)`` the net heat leaving neck ``c`` (0 at a massless neck). ``A``
+    is symmetric positive semi-definite, and ``sum(out_s) + sum(out_c) = 0`` (heat conserved).
 
     Args:
       geometry: :func:`sphere_geometry`. conductance: ``[n, m, m]`` :func:`conductance_blocks`.
       sphere_x: ``[n]``. neck_x: ``[p]``.
     """
-    drop = sphere_x[:, None] - neck_x[geometry.neck_index]
-    q = jnp.einsum("nij,nj->ni", conductance, drop)
-    return jnp.sum(q, axis=1), -jnp.sum(q.reshape(-1)[geometry.neck_slots], axis=1)
+    q = slot_flows(geometry, conductance, sphere_x, neck_x)
+    return jnp.sum(q, axis=1), -jnp.sum(at_necks(geometry, q), axis=1)
 
 
 def coupled_diagonal(geometry: SphereGeometry, conductance):
@@ -323,9 +338,12 @@ def contact_flows(geometry: SphereGeometry, conductance, sphere_t, neck_t):
     equal to each of them when the neck temperatures balance (a massless neck), and antisymmetric by
     construction, so the network conserves heat to round-off whatever the neck solve's residual.
     """
-    drop = sphere_t[:, None] - neck_t[geometry.neck_index]
-    q = jnp.einsum("nij,nj->ni", conductance, drop).reshape(-1)[geometry.neck_slots]
-    return 0.5 * (q[:, 0] - q[:, 1])
+    return mean_flow(at_necks(geometry, slot_flows(geometry, conductance, sphere_t, neck_t)))
+
+
+def mean_flow(q_at_necks):
+    """``[p]`` :func:`contact_flows` from the two slots' outflows ``[p, 2]`` (W)."""
+    return 0.5 * (q_at_necks[:, 0] - q_at_necks[:, 1])
 
 
 def block_total(conductance):

@@ -234,8 +234,7 @@ def coupled_contacts(contacts: LiftedContacts, centres, radii, necks, *, held=No
     padded = np.concatenate([np.asarray(necks, np.float64), [0.0]])[slot]
     geometry = sphere_geometry(centres, radii, np.asarray(contacts.neighbors), np.where(slot < count, slot + 1, 0),
                                padded, held=held, axis=held_axis, periodic_box=periodic_box, net_flow=True)
-    return dataclasses.replace(contacts, sphere=geometry, neck_temperature=jnp.zeros(count, float),
-                               neck_residual=jnp.zeros((), float))
+    return dataclasses.replace(contacts, sphere=geometry, neck_correction=jnp.zeros(count, float))
 
 
 def list_region(positions, radii, margin=None):

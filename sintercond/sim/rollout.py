@@ -33,7 +33,6 @@ import jax.numpy as jnp
 
 from sintercond.sim import adaptive, mechanics, neck_growth
 from sintercond.sim.state import Params, SimState, Simulator
-from sintercond.sim.terms import coupling
 from sintercond.sim.validation import check_mechanical_step, check_save_interval, validate_inputs
 
 
@@ -308,10 +307,8 @@ def advance(sim: Simulator, state: SimState, params: Params, n_steps: int, chunk
 
 def finite_temperatures(state: SimState) -> None:
     """:func:`advance`'s default check: every temperature finite, a sintering state still stable
-    (:func:`sintercond.sim.neck_growth.check_stable`, first: the cause of the other) and every coupled neck solve
-    converged (:func:`sintercond.sim.terms.coupling.check_neck_solve`)."""
+    (:func:`sintercond.sim.neck_growth.check_stable`, first: the cause of the other)."""
     neck_growth.check_stable(state)
-    coupling.check_neck_solve(state)
     if not bool(jnp.all(jnp.isfinite(state.particles.temperature))):
         raise FloatingPointError(f"non-finite temperature at step {int(state.step)}; reduce the time step")
 

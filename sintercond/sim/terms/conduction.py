@@ -203,9 +203,9 @@ def advance(physics: Physics, neighbor_fn, state: SimState, prep: Prepared) -> S
                                               network=(prep.scale, conductance, neighbors), pulse=pulse,
                                               rates=prep.rates)
     elif coupling.on(physics):
-        power, necks, residual = coupling.contact_power(physics, state, coupling.current_blocks(physics, state, prep))
+        power, correction, _ = coupling.contact_power(physics, state, coupling.current_blocks(physics, state, prep))
         temperature = explicit_heat(physics, state, prep, power + sources.power(physics, state, prep.params))
-        state = coupling.with_necks(state, necks, residual)
+        state = coupling.with_necks(state, correction)
     elif c.integrator == "explicit":
         power = heat_power(physics, neighbor_fn, state, prep, conductance, neighbors)
         temperature = explicit_heat(physics, state, prep, power)
