@@ -9,12 +9,13 @@ number of spheres, densified by 4 % about the origin (sintered necks, 5-6 contac
 between the face layers (``face_layer_box``). Per coupling: the first call (host setup, compile, solve), the
 second (host setup and solve on the compiled program), the conjugate-gradient iterations (counted through a
 callback in the mat-vec), and for ``"sphere"`` the memory of the per-sphere blocks (the constant geometric
-``[n, m, m]`` block and ``C_s``, float64). Prints a table; writes nothing.
+``[n, m, m]`` block and ``C_s``, float64, both counted at the table's width m: an upper bound, since ``C_s`` is
+stored packed by row width). Prints a table; writes nothing.
 
 ``--transient``: the explicit step on the same beds, insulated, from a random field (300-400 K), at 0.9 of each
 network's stable step: the milliseconds a step of a compiled 200-step rollout takes (after a warm-up call, best of
-3), the stable steps, and for ``"sphere"`` the memory of the per-sphere blocks (``C_s`` and the geometric block,
-``[n, m, m]`` each). The coupled step takes ``NECK_SWEEPS`` (1) conjugate-gradient sweeps on the neck balance a
+3), the stable steps, and for ``"sphere"`` the memory of the per-sphere blocks ``C_s`` (packed by row width, what
+a step streams twice). The coupled step takes ``NECK_SWEEPS`` (1) conjugate-gradient sweeps on the neck balance a
 step (sintercond.sim.terms.coupling).
 """
 
@@ -135,8 +136,8 @@ def time_transient(n_target, steps=200):
             best = min(best, time.perf_counter() - t0)
         memory = float("nan")
         if coupling == "sphere":
-            blocks = sim.prepare_fn(state, params).neck_blocks[1]
-            memory = 2 * blocks.size * blocks.dtype.itemsize / 2**20  # C_s and the geometric block
+            blocks = sim.prepare_fn(state, params).neck_blocks.blocks
+            memory = sum(c.nbytes for c in blocks) / 2**20  # C_s, packed
         rows.append((len(radii), coupling, 1e3 * best / steps, limit, memory))
     return rows
 

@@ -207,16 +207,21 @@ def test_heat_is_conserved_on_an_insulated_cluster_with_a_pulse(cluster):
 
 
 def dense_neck_solve(blocks, geometry, temperature):
-    """The neck temperatures balancing ``temperature``, by a dense solve assembled here from the blocks C_s."""
-    c = np.asarray(blocks)
+    """``(necks, slot outflows [n, m])``: the neck temperatures balancing ``temperature``, by a dense solve
+    assembled here from the packed blocks C_s, and each sphere's outflow through each table slot at them."""
     index, coupled = np.asarray(geometry.neck_index), np.asarray(geometry.coupled)
     p = geometry.neck_slots.shape[0]
+    full = np.zeros(coupled.shape + coupled.shape[1:])
+    for c, rows in zip(blocks, geometry.rows):
+        w = c.shape[1]
+        full[np.asarray(rows), :w, :w] = np.asarray(c)
     a_nn, a_ns = np.zeros((p, p)), np.zeros((p, len(temperature)))
     for s_, k in zip(*np.nonzero(coupled)):
         for m_ in np.flatnonzero(coupled[s_]):
-            a_nn[index[s_, k], index[s_, m_]] += c[s_, k, m_]
-        a_ns[index[s_, k], s_] -= c[s_, k][coupled[s_]].sum()
-    return np.linalg.solve(a_nn, -a_ns @ temperature)
+            a_nn[index[s_, k], index[s_, m_]] += full[s_, k, m_]
+        a_ns[index[s_, k], s_] -= full[s_, k][coupled[s_]].sum()
+    necks = np.linalg.solve(a_nn, -a_ns @ temperature)
+    return necks, np.einsum("nij,nj->ni", full, temperature[:, None] - necks[index])
 
 
 @pytest.mark.slow
@@ -227,21 +232,19 @@ def test_neck_sweeps_reach_a_dense_solve(cluster):
     contact flows are then C_s (T_s - x) on both sides of each neck; one sweep lowers the residual."""
     centres, radii, temperature = cluster
     sim, state, _ = start("sphere", centres, radii, temperature)
-    g, blocks, split = sim.prepare_fn(state, PARAMS).neck_blocks
-    exact = dense_neck_solve(blocks, g, temperature)
-    isolated = np.asarray(coupling_term.isolated_necks(g, split, jnp.asarray(temperature)))
+    network = sim.prepare_fn(state, PARAMS).neck_blocks
+    g = network.geometry
+    exact, q = dense_neck_solve(network.blocks, g, temperature)
+    q = q.reshape(-1)[np.asarray(g.neck_slots)]
+    isolated = np.asarray(coupling_term.isolated_necks(network, jnp.asarray(temperature)))
     p = len(exact)
     for guess in (np.zeros(p), exact - isolated + 0.01):
-        flow, correction, residual = coupling_term.neck_sweeps(g, blocks, split, jnp.asarray(temperature),
-                                                                jnp.asarray(guess), p)
+        flow, correction, residual = coupling_term.neck_sweeps(network, jnp.asarray(temperature), jnp.asarray(guess), p)
         assert np.max(np.abs(isolated + np.asarray(correction) - exact)) < 1e-12 * np.ptp(temperature)
         assert float(residual) < 1e-10
-        c = np.asarray(blocks)
-        drop = temperature[:, None] - exact[np.asarray(g.neck_index)]
-        q = np.einsum("nij,nj->ni", c, drop).reshape(-1)[np.asarray(g.neck_slots)]
         np.testing.assert_allclose(np.asarray(flow), q[:, 0], rtol=0, atol=1e-10 * np.abs(q).max())
         np.testing.assert_allclose(np.asarray(flow), -q[:, 1], rtol=0, atol=1e-10 * np.abs(q).max())
-    assert float(coupling_term.neck_sweeps(g, blocks, split, jnp.asarray(temperature), jnp.zeros(p), 1)[2]) < 1.0
+    assert float(coupling_term.neck_sweeps(network, jnp.asarray(temperature), jnp.zeros(p), 1)[2]) < 1.0
 
 
 @pytest.mark.slow

@@ -138,6 +138,13 @@ class SphereGeometry:
       neck_index: ``[n, m]`` int32, the contact (neck unknown) of each slot, 0 on padding.
       neck_slots: ``[p, 2]`` int32, each contact's two slots as flat indices ``row * m + slot``.
       neck_fixed: ``[p]`` bool, contacts in no block (no neck, or joining two spheres held alike).
+      rows: the packed layout of the blocks ``C_s`` (:func:`conductance_blocks`): a tuple of ``[n_b]`` int32, the
+        spheres of each bucket; a sphere with ``k`` contacts is in the narrowest bucket of width ``w_b >= k``
+        (:data:`BUCKET_WIDTHS`), its block cut to ``[w_b, w_b]`` (a table row holds its contacts first).
+      necks: per bucket ``[n_b, w_b]`` int32, ``neck_index`` of its spheres' first ``w_b`` slots.
+      packed_slots: ``[p, 2]`` int32, each contact's two slots in the packed per-slot layout (the buckets' slots
+        one after the other, row-major).
+      row_order: ``[n]`` int32, where each sphere is in the buckets' rows one after the other.
     """
 
     green: jax.Array
@@ -145,6 +152,38 @@ class SphereGeometry:
     neck_index: jax.Array
     neck_slots: jax.Array
     neck_fixed: jax.Array
+    rows: tuple = ()
+    necks: tuple = ()
+    packed_slots: jax.Array | None = None
+    row_order: jax.Array | None = None
+
+
+BUCKET_WIDTHS = (2, 4, 6, 8, 10, 12, 16, 24, 32, 48, 64)
+"""Widths of the packed blocks: a poured bed has 1-16 contacts a sphere (mean about 6), so a block padded to the
+widest row is mostly padding; beyond the last width, rows pad to the table's width."""
+
+
+def _packed_layout(pair_id, neck_index, neck_slots):
+    """``(rows, necks, packed_slots, row_order)`` of :class:`SphereGeometry` (host, NumPy)."""
+    n, m = pair_id.shape
+    count = (pair_id > 0).sum(axis=1)
+    ladder = np.array([w for w in BUCKET_WIDTHS if w < m] + [m])
+    width = ladder[np.searchsorted(ladder, np.maximum(count, 1))]
+    rows, necks, position = [], [], np.full(n * m, -1, np.int64)
+    start = 0
+    for w in np.unique(width):
+        members = np.flatnonzero(width == w)
+        rows.append(members)
+        necks.append(neck_index[members, :w])
+        slots = (members[:, None] * m + np.arange(w)[None, :]).reshape(-1)
+        position[slots] = start + np.arange(slots.size)
+        start += slots.size
+    order = np.empty(n, np.int64)
+    order[np.concatenate(rows)] = np.arange(n)
+    packed = position[neck_slots]
+    assert (packed >= 0).all()  # every contact's slot lies within its row's width
+    return (tuple(jnp.asarray(r, jnp.int32) for r in rows), tuple(jnp.asarray(k, jnp.int32) for k in necks),
+            jnp.asarray(packed, jnp.int32), jnp.asarray(order, jnp.int32))
 
 
 def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis=0, periodic_box=None,
@@ -206,8 +245,10 @@ def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis
     order = np.argsort(ids, kind="stable")
     neck_slots = flat[order].reshape(n_pairs, 2)
     neck_fixed = ~coupled.reshape(-1)[neck_slots].any(axis=1)
-    return SphereGeometry(jnp.asarray(green), jnp.asarray(coupled), jnp.asarray(np.maximum(pair_id - 1, 0), jnp.int32),
-                          jnp.asarray(neck_slots, jnp.int32), jnp.asarray(neck_fixed))
+    neck_index = np.maximum(pair_id - 1, 0)
+    return SphereGeometry(jnp.asarray(green), jnp.asarray(coupled), jnp.asarray(neck_index, jnp.int32),
+                          jnp.asarray(neck_slots, jnp.int32), jnp.asarray(neck_fixed),
+                          *_packed_layout(pair_id, neck_index, neck_slots))
 
 
 def _check_discs_apart(theta, alpha, off, neighbors):
@@ -272,31 +313,51 @@ def resistance_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
 
 
 def conductance_blocks(geometry: SphereGeometry, resistance):
-    """``C_s = R_s^{-1}`` ``[n, m, m]`` (W/K) on the coupled slots, 0 elsewhere; symmetrised (batched inverse).
+    """``C_s = R_s^{-1}`` (W/K) on the coupled slots, 0 elsewhere, symmetrised, in the packed layout: a tuple of
+    ``[n_b, w_b, w_b]``, one per bucket of :class:`SphereGeometry` (each sphere's block cut to its bucket's width,
+    which holds all its coupled slots). One batched inverse of the full blocks: inverses per bucket in one program
+    ran for minutes on XLA's CPU backend (several LAPACK calls at once, 10,841 spheres).
 
     Differentiable (through ``jnp.linalg.inv``). ``R_s`` is symmetric positive definite inside the domain
     (its diagonal dominates: ``1/K_half`` grows as ``1/a`` while ``|G|`` between discs apart stays below it).
     """
     c = jnp.linalg.inv(resistance)
     c = 0.5 * (c + jnp.swapaxes(c, 1, 2))
-    pair = geometry.coupled[:, :, None] & geometry.coupled[:, None, :]
-    return jnp.where(pair, c, 0.0)
+    c = jnp.where(geometry.coupled[:, :, None] & geometry.coupled[:, None, :], c, 0.0)
+    return tuple(c[rows][:, :w, :w] for rows, w in zip(geometry.rows, (k.shape[1] for k in geometry.necks)))
 
 
 def slot_flows(geometry: SphereGeometry, conductance, sphere_x, neck_x):
-    """``q [n, m]`` (W): the heat leaving each sphere through each of its slots, ``q_s = C_s (x_s 1 - x_N(s))``.
+    """``q`` (W), packed per slot (:class:`SphereGeometry`): the heat leaving each sphere through each of its slots,
+    ``q_s = C_s (x_s 1 - x_N(s))``.
 
     Linear in ``(sphere_x [n], neck_x [p])``; the one product with the blocks that the operator, the neck balance
-    and the contact flows share (a product summed over the last axis, which XLA fuses into one pass over the
-    blocks).
+    and the contact flows share (per bucket a product summed over the last axis, which XLA fuses into one pass
+    over the blocks).
     """
-    drop = sphere_x[:, None] - neck_x[geometry.neck_index]
-    return jnp.sum(conductance * drop[:, None, :], axis=2)
+    return jnp.concatenate([
+        jnp.sum(c * (sphere_x[rows][:, None] - neck_x[necks])[:, None, :], axis=2).reshape(-1)
+        for c, rows, necks in zip(conductance, geometry.rows, geometry.necks)])
 
 
 def at_necks(geometry: SphereGeometry, per_slot):
-    """``[p, 2]``: a per-slot ``[n, m]`` value at each contact's two slots (``neck_slots``)."""
-    return per_slot.reshape(-1)[geometry.neck_slots]
+    """``[p, 2]``: a packed per-slot value at each contact's two slots."""
+    return per_slot[geometry.packed_slots]
+
+
+def row_sums(geometry: SphereGeometry, per_slot):
+    """``[n]``: a packed per-slot value summed over each sphere's slots."""
+    sums, start = [], 0
+    for necks in geometry.necks:
+        size = necks.size
+        sums.append(jnp.sum(per_slot[start:start + size].reshape(necks.shape), axis=1))
+        start += size
+    return jnp.concatenate(sums)[geometry.row_order]
+
+
+def slot_diagonal(conductance):
+    """The blocks' diagonals, packed per slot (W/K)."""
+    return jnp.concatenate([jnp.diagonal(c, axis1=1, axis2=2).reshape(-1) for c in conductance])
 
 
 def coupled_apply(geometry: SphereGeometry, conductance, sphere_x, neck_x):
@@ -307,28 +368,21 @@ def coupled_apply(geometry: SphereGeometry, conductance, sphere_x, neck_x):
     is symmetric positive semi-definite, and ``sum(out_s) + sum(out_c) = 0`` (heat conserved).
 
     Args:
-      geometry: :func:`sphere_geometry`. conductance: ``[n, m, m]`` :func:`conductance_blocks`.
+      geometry: :func:`sphere_geometry`. conductance: the packed blocks of :func:`conductance_blocks`.
       sphere_x: ``[n]``. neck_x: ``[p]``.
     """
     q = slot_flows(geometry, conductance, sphere_x, neck_x)
-    return jnp.sum(q, axis=1), -jnp.sum(at_necks(geometry, q), axis=1)
+    return row_sums(geometry, q), -jnp.sum(at_necks(geometry, q), axis=1)
 
 
 def coupled_diagonal(geometry: SphereGeometry, conductance):
     """The diagonal of :func:`coupled_apply`'s ``A``: ``([n], [p])`` (W/K), for a Jacobi preconditioner."""
-    diag = jnp.diagonal(conductance, axis1=1, axis2=2)
-    return jnp.sum(conductance, axis=(1, 2)), jnp.sum(diag.reshape(-1)[geometry.neck_slots], axis=1)
+    return block_total(geometry, conductance), jnp.sum(at_necks(geometry, slot_diagonal(conductance)), axis=1)
 
 
 def coupled_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
-    """``C_s`` ``[n, m, m]`` (W/K) from the halves: :func:`conductance_blocks` of :func:`resistance_blocks`."""
+    """``C_s`` (W/K, packed) from the halves: :func:`conductance_blocks` of :func:`resistance_blocks`."""
     return conductance_blocks(geometry, resistance_blocks(geometry, half_resistance, radii, kappa))
-
-
-def neck_balance(geometry: SphereGeometry, conductance, sphere_x, neck_x):
-    """The neck rows of :func:`coupled_apply`, ``[p]`` (W): the net heat leaving each neck; 1 x on a neck in no
-    block (``neck_fixed``, kept at its value), so that the neck system is positive definite."""
-    return jnp.where(geometry.neck_fixed, neck_x, coupled_apply(geometry, conductance, sphere_x, neck_x)[1])
 
 
 def contact_flows(geometry: SphereGeometry, conductance, sphere_t, neck_t):
@@ -346,7 +400,7 @@ def mean_flow(q_at_necks):
     return 0.5 * (q_at_necks[:, 0] - q_at_necks[:, 1])
 
 
-def block_total(conductance):
+def block_total(geometry: SphereGeometry, conductance):
     """``[n]`` ``1^T C_s 1`` (W/K): the heat leaving sphere ``s`` per kelvin above all its necks.
 
     ``x^T S x <= sum_s 1^T C_s 1 x_s^2`` for the sphere operator ``S`` left once the necks are eliminated (it is
@@ -355,4 +409,4 @@ def block_total(conductance):
     halves) it is the pipe network's ``C_i / sum_j K_ij``; it is attained by the alternating mode of a bipartite
     lattice (neighbours at ``+1`` and ``-1``, every neck at 0 by symmetry).
     """
-    return jnp.sum(conductance, axis=(1, 2))
+    return row_sums(geometry, jnp.concatenate([jnp.sum(c, axis=2).reshape(-1) for c in conductance]))

@@ -180,7 +180,7 @@ class Prepared(NamedTuple):
     wall_conductance: jax.Array | None  # [n_walls or 1, n] (W/K)
     wall_temperature: jax.Array | None  # [n_walls or 1, n] broadcastable (K)
     rates: tuple | None = None  # thermal.conduction_rates(scale, capacity) of the static explicit step, or None
-    neck_blocks: tuple | None = None  # coupling="sphere" on necks that stay: coupling.neck_blocks
+    neck_blocks: tuple | None = None  # coupling="sphere" on necks that stay: coupling.NeckNetwork
 
 
 class Simulator(NamedTuple):

@@ -60,7 +60,8 @@ def coupled_steady_state(geometry: SphereGeometry, conductance, fixed_mask, fixe
 
     Args:
       geometry: :func:`sintercond.contacts.sphere_coupling.sphere_geometry`.
-      conductance: ``[n, m, m]`` neck conductance blocks ``C_s`` (W/K).
+      conductance: the neck conductance blocks ``C_s`` (W/K), packed
+        (:func:`sintercond.contacts.sphere_coupling.conductance_blocks`).
       fixed_mask: ``[n]`` held spheres. fixed_temperature: their temperatures (K), ``[n]`` or scalar.
 
     Returns:
@@ -70,8 +71,8 @@ def coupled_steady_state(geometry: SphereGeometry, conductance, fixed_mask, fixe
     fixed_mask = jnp.asarray(fixed_mask)
     n = fixed_mask.shape[0]
     fixed = jnp.concatenate([fixed_mask, geometry.neck_fixed])
-    spheres = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, conductance.dtype), 0.0)
-    held = jnp.concatenate([spheres, jnp.zeros(fixed.shape[0] - n, conductance.dtype)])
+    spheres = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, conductance[0].dtype), 0.0)
+    held = jnp.concatenate([spheres, jnp.zeros(fixed.shape[0] - n, conductance[0].dtype)])
 
     def apply(x):
         return jnp.concatenate(coupled_apply(geometry, conductance, x[:n], x[n:]))

@@ -37,6 +37,7 @@ Stability: :func:`stability_conductance`, half of ``1^T C_s 1``, in the place of
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -44,7 +45,7 @@ import jax.numpy as jnp
 from sintercond._numerics import safe_divide
 from sintercond.contacts.pair_list import pair_exchange
 from sintercond.contacts.sphere_coupling import (at_necks, block_total, coupled_blocks, half_resistances, mean_flow,
-                                                 slot_flows)
+                                                 SphereGeometry, slot_diagonal, slot_flows)
 from sintercond.sim.contacts import conductivity_lookup, merged_law_params, neck_conductance
 from sintercond.sim.physics import Physics
 from sintercond.sim.state import Params, SimState
@@ -58,12 +59,20 @@ def on(physics: Physics) -> bool:
     return physics.conduction.coupling == "sphere"
 
 
-def neck_blocks(physics: Physics, state: SimState, params: Params):
-    """``(geometry, C_s [n, m, m] (W/K), split [p])`` of a static lifted state at its necks now: the pair law on
-    each neck, its resistance split between the two spheres
-    (:func:`sintercond.contacts.sphere_coupling.half_resistances`; ``split`` the first sphere's share of each
-    contact's resistance), the blocks inverted; ``geometry`` the contacts' with only the necks that conduct now
-    coupled (a neck grows from zero under sintering)."""
+class NeckNetwork(NamedTuple):
+    """The coupled necks of a lifted state at its necks now (:func:`neck_blocks`)."""
+
+    geometry: SphereGeometry  # the contacts', with only the necks that conduct now coupled
+    blocks: tuple  # C_s (W/K), packed (sintercond.contacts.sphere_coupling.conductance_blocks)
+    split: jax.Array  # [p] the first sphere's share of each contact's resistance
+    ends: jax.Array  # [p, 2] int, each contact's two spheres (its slots' rows)
+    preconditioner: jax.Array  # [p] (K/W) the inverse of the neck balance's diagonal, 1 on a neck in no block
+
+
+def neck_blocks(physics: Physics, state: SimState, params: Params) -> NeckNetwork:
+    """The :class:`NeckNetwork` of a static lifted state at its necks now: the pair law on each neck, its
+    resistance split between the two spheres (:func:`sintercond.contacts.sphere_coupling.half_resistances`), the
+    blocks inverted; a neck grows from zero under sintering and is coupled once it conducts."""
     contacts, p = state.contacts, state.particles
     index, kappa = conductivity_lookup(physics, params, p)
     kappa = kappa[index]
@@ -77,7 +86,10 @@ def neck_blocks(physics: Physics, state: SimState, params: Params):
                             contacts.table_overlap, kappa, law_params, conductance)
     halves = half.reshape(-1)[geometry.neck_slots]
     split = safe_divide(halves[:, 0], halves[:, 0] + halves[:, 1], fill=0.5)
-    return geometry, coupled_blocks(geometry, half, p.radii, kappa), split
+    blocks = coupled_blocks(geometry, half, p.radii, kappa)
+    diagonal = jnp.sum(at_necks(geometry, slot_diagonal(blocks)), axis=1)
+    return NeckNetwork(geometry, blocks, split, geometry.neck_slots // geometry.coupled.shape[1],
+                       safe_divide(1.0, jnp.where(geometry.neck_fixed, 1.0, diagonal), fill=1.0))
 
 
 def current_blocks(physics: Physics, state: SimState, prep):
@@ -85,15 +97,14 @@ def current_blocks(physics: Physics, state: SimState, prep):
     return neck_blocks(physics, state, prep.params) if physics.sintering is not None else prep.neck_blocks
 
 
-def isolated_necks(geometry, split, temperature):
+def isolated_necks(network: NeckNetwork, temperature):
     """``[p]`` the isolated network's neck temperatures (K): ``T_a - split (T_a - T_b)`` for a contact between
-    spheres ``a`` and ``b`` (its slots' rows), ``split`` the share of its resistance on ``a``; 0 on a neck in no
-    block (``neck_fixed``)."""
-    ends = temperature[geometry.neck_slots // geometry.coupled.shape[1]]
-    return jnp.where(geometry.neck_fixed, 0.0, ends[:, 0] - split * (ends[:, 0] - ends[:, 1]))
+    spheres ``a`` and ``b``, ``split`` the share of its resistance on ``a``; 0 on a neck in no block."""
+    t = temperature[network.ends]
+    return jnp.where(network.geometry.neck_fixed, 0.0, t[:, 0] - network.split * (t[:, 0] - t[:, 1]))
 
 
-def neck_sweeps(geometry, blocks, split, temperature, correction, sweeps):
+def neck_sweeps(network: NeckNetwork, temperature, correction, sweeps):
     """``(flow [p], correction [p], relative residual)``: the heat through each contact (W, first sphere to second,
     :func:`sintercond.contacts.sphere_coupling.contact_flows`) at the neck temperatures left by ``sweeps``
     iterations of Jacobi-preconditioned conjugate gradients on the balance ``A_nn x = -A_ns T`` from
@@ -105,11 +116,10 @@ def neck_sweeps(geometry, blocks, split, temperature, correction, sweeps):
     plain operations: differentiable in every input, the correction included; with as many sweeps as necks it is
     the exact solve (conjugate gradients in exact arithmetic).
     """
+    geometry, blocks, inverse = network.geometry, network.blocks, network.preconditioner
     shifted = temperature - jnp.mean(temperature)
-    base = isolated_necks(geometry, split, shifted)
+    base = isolated_necks(network, shifted)
     x = base + jnp.where(geometry.neck_fixed, 0.0, correction.astype(temperature.dtype))
-    diagonal = jnp.sum(at_necks(geometry, jnp.diagonal(blocks, axis1=1, axis2=2)), axis=1)
-    inverse = safe_divide(1.0, jnp.where(geometry.neck_fixed, 1.0, diagonal), fill=1.0)
     q = slot_flows(geometry, blocks, shifted, x)
     r = jnp.sum(at_necks(geometry, q), axis=1)  # the net heat into each neck, 0 when balanced
     start = jnp.linalg.norm(r)
@@ -125,19 +135,19 @@ def neck_sweeps(geometry, blocks, split, temperature, correction, sweeps):
         rz_next = jnp.vdot(r, z)
         return (x + alpha * direction, q - alpha * product, r, z + safe_divide(rz_next, rz) * direction, rz_next)
 
-    x, q, r, _, _ = jax.lax.fori_loop(0, sweeps, sweep, (x, q, r, z, jnp.vdot(r, z)))
+    carry = (x, q, r, z, jnp.vdot(r, z))
+    for k in range(sweeps):
+        carry = sweep(k, carry)
+    x, q, r, _, _ = carry
     residual = jax.lax.stop_gradient(safe_divide(jnp.linalg.norm(r), start))
     return mean_flow(at_necks(geometry, q)), x - base, residual
 
 
 def contact_power(physics: Physics, state: SimState, network):
     """``(power [n], neck correction [p], residual)``: heat into each sphere (W) through its coupled necks, and
-    what :func:`neck_sweeps` leaves of the balance; ``network``: ``(geometry, blocks, split)`` of
-    :func:`neck_blocks`."""
+    what :func:`neck_sweeps` leaves of the balance; ``network``: :func:`neck_blocks`."""
     contacts, temperature = state.contacts, state.particles.temperature
-    geometry, blocks, split = network
-    flow, correction, residual = neck_sweeps(geometry, blocks, split, temperature, contacts.neck_correction,
-                                             NECK_SWEEPS)
+    flow, correction, residual = neck_sweeps(network, temperature, contacts.neck_correction, NECK_SWEEPS)
     return pair_exchange(-flow, contacts.pairs, temperature.shape[0]), correction, residual
 
 
@@ -151,4 +161,4 @@ def with_necks(state: SimState, correction) -> SimState:
 def stability_conductance(network):
     """``[n]`` (W/K): the denominator of the explicit limit ``C_s / (1^T C_s 1 / 2)`` in place of ``sum_j K_ij``;
     ``network``: :func:`neck_blocks`."""
-    return 0.5 * block_total(network[1])
+    return 0.5 * block_total(network.geometry, network.blocks)
