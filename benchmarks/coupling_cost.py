@@ -33,7 +33,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT))
 
-from sintercond.sim import steady  # noqa: E402
+from sintercond.sim import steady, thermal  # noqa: E402
 from sintercond.contacts.network import contact_pairs  # noqa: E402
 from sintercond.beds.packing import powder_bed  # noqa: E402
 
@@ -159,7 +159,7 @@ def main():
         sys.path.insert(0, str(ROOT / "benchmarks"))
         cells_table()
         return
-    steady.cg = _counting_cg(steady.cg)
+    thermal.cg = _counting_cg(thermal.cg)  # the steady solves run sintercond.sim.thermal.held_solve
     print("| n | contacts/sphere | width m | coupling | first call (s) | second call (s) | CG iterations | "
           "blocks (MB) | k* |")
     print("|---|---|---|---|---|---|---|---|---|")
