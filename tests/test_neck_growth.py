@@ -18,13 +18,14 @@ DENSITY, HEAT, KAPPA = 4430.0, 560.0, 7.0  # Ti6Al4V
 KINETICS = {"A": 1e-16, "activation_energy": 100.0}  # necks of a few um in a second at 1000-1200 K
 
 
-def chain(radii, temperatures, every=1, dt=1e-3, pulse=None, kinetics=KINETICS, law="grain_boundary"):
+def chain(radii, temperatures, every=1, dt=1e-3, pulse=None, kinetics=KINETICS, law="grain_boundary", neck_rtol=None):
     """Spheres in a row along x, each touching the next at a point; ``(sim, state, params)``."""
     radii = np.asarray(radii, np.float64)
     x = np.zeros((len(radii), 3))
     x[1:, 0] = np.cumsum(radii[:-1] + radii[1:])
     physics = simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted",
-                                      pulse=pulse is not None, sintering=neck_growth.Sintering(law, every=every))
+                                      pulse=pulse is not None,
+                                      sintering=neck_growth.Sintering(law, every=every, neck_rtol=neck_rtol))
     particles = particle_state(x, radii, np.asarray(temperatures, np.float64), DENSITY)
     contacts = simulate.lifted_contacts(physics, x, radii)
     state = simulate.init_state(particles, contacts, dt, sintering=neck_growth.neck_state(contacts,
@@ -33,9 +34,9 @@ def chain(radii, temperatures, every=1, dt=1e-3, pulse=None, kinetics=KINETICS, 
     return simulate.simulator(physics), state, params
 
 
-def pulsed_chain(every=1):
+def pulsed_chain(every=1, neck_rtol=None):
     pulse = simulate.PulseParams(power=jnp.array([2e-3, 0.0, 0.0]), duration=0.15)
-    return chain([40e-6, 30e-6, 35e-6], [1000.0, 1100.0, 1050.0], every=every, pulse=pulse)
+    return chain([40e-6, 30e-6, 35e-6], [1000.0, 1100.0, 1050.0], every=every, pulse=pulse, neck_rtol=neck_rtol)
 
 
 def saved_states(sim, state, params, n_steps):
@@ -69,6 +70,44 @@ def test_each_contact_grows_as_the_law_tier_does_along_its_own_temperature_histo
         np.testing.assert_allclose(float(end.contacts.table_overlap[i, slot]),
                                    float(sintering.neck_overlap(expected, radii[i], radii[j])), rtol=1e-12)
     assert np.ptp(np.asarray(temperature[:, 0])) > 50.0  # the history is not isothermal
+
+
+def test_necks_at_their_own_pace_grow_as_the_law_tier_does_over_the_intervals_their_growth_sets():
+    """Sintering(neck_rtol=0.02, every=16) on the pulsed chain: the updates (read from the necks saved at every step)
+    come at intervals that follow the rule, recomputed here from the saved necks (the first one step, then the last
+    scaled by neck_rtol over the largest relative growth in it, floored, at least 1, at most doubled and at most
+    every); each contact's neck equals the law tier's integration over those intervals (the trapezoid of each) to
+    1e-12; there are fewer updates than steps; and at its last update each neck is within neck_rtol of the necks
+    updated at every step."""
+    rtol, every, n_steps = 0.02, 16, 240
+    sim, state, params = pulsed_chain(every, rtol)
+    end, (temperature, neck) = saved_states(sim, state, params, n_steps)
+    radii = np.asarray(state.particles.radii)
+    first = np.asarray(neck[:, 0, 0])
+    updates = np.flatnonzero(np.diff(first) != 0) + 1  # the steps whose end grew the necks
+    lengths = np.diff(np.concatenate([[0], updates]))
+    assert lengths[0] == 1 and len(updates) < n_steps / 3 and lengths.max() > 4
+    slots = ((0, 1, 0), (1, 2, 1))
+    necks = np.stack([np.asarray(neck[:, i, slot]) for i, _, slot in slots])
+    for k in range(len(lengths) - 1):
+        before = necks[:, updates[k] - lengths[k]]
+        after = necks[:, updates[k]]
+        growth = np.max((after - before) / after)
+        expected = min(max(np.floor(lengths[k] * rtol / growth), 1), 2 * lengths[k], every)
+        assert lengths[k + 1] == expected, k
+    spec = sim.physics.sintering
+    for (i, j, _), row in zip(slots, necks):
+        pair = 0.5 * (np.asarray(temperature[:, i]) + np.asarray(temperature[:, j]))
+        starts = np.concatenate([[0], updates[:-1]])
+        history = 0.5 * (pair[starts] + pair[updates])
+        durations = lengths * float(state.dt)
+        expected = sintering.grow_neck("grain_boundary", 0.0, radii[i], radii[j], history, durations, KINETICS,
+                                       quadrature_nodes=spec.quadrature_nodes,
+                                       newton_iterations=spec.newton_iterations)[-1]
+        np.testing.assert_allclose(row[updates[-1]], float(expected), rtol=1e-12)
+    every_step = saved_states(*pulsed_chain(1), n_steps)[1][1]
+    reference = np.stack([np.asarray(every_step[updates[-1], i, slot]) for i, _, slot in slots])
+    assert np.max(np.abs(necks[:, updates[-1]] / reference - 1)) < rtol
 
 
 def test_an_insulated_sintering_cluster_conserves_heat_and_its_necks_grow_monotone_symmetric_and_capped():
@@ -180,7 +219,8 @@ def test_a_sintering_spec_on_what_the_first_stage_cannot_grow_is_refused(keyword
         simulate.Physics.create(**{**base, **keywords})
 
 
-@pytest.mark.parametrize("field, value", [("every", 0), ("law", "surface_diffusion"), ("newton_iterations", 1.5)])
+@pytest.mark.parametrize("field, value", [("every", 0), ("law", "surface_diffusion"), ("newton_iterations", 1.5),
+                                          ("neck_rtol", 0.0), ("neck_rtol", 1.0), ("neck_rtol", "0.01")])
 def test_a_bad_sintering_spec_is_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"Sintering.{field}"):
         neck_growth.Sintering(**{field: value})

@@ -124,7 +124,7 @@ ELSEWHERE = {
     "run.override_limits": "test_bad_input.py: the limits refused and overridden",
     "initial.from_file": "test_packing_files.py: test_a_scene_starts_from_the_files_temperatures",
     **{f"sintering.{key}": "test_sintering_scene.py: test_the_sintering_keys_reach_the_model (no mechanics)"
-       for key in ("law", "every", "params")},
+       for key in ("law", "every", "params", "neck_rtol")},
     "sintering.shrinkage": "test_sintering_scene.py: test_many_body_shrinkage_holds_the_bottom_layer_on_its_floor...",
     "sintering.start_necks": "test_sintering_mechanics.py: test_the_start_of_the_necks_is_a_key_of_runs_with_the_"
                              "mechanics_only, and the coupled scene starts from point contacts",

@@ -107,6 +107,13 @@ def test_the_sintering_keys_reach_the_model():
     scene["sintering"] = {"law": "power_law", "every": 7, "params": {"K0": 2e-30, "exponent": 5.0}}
     model = runner.build_model(validate_scene(scene))
     assert model.physics.sintering == neck_growth.Sintering(law="power_law", every=7)
+    scene["sintering"]["neck_rtol"] = 0.01
+    assert runner.build_model(validate_scene(copy.deepcopy(scene))).physics.sintering == neck_growth.Sintering(
+        law="power_law", every=7, neck_rtol=0.01)
+    for bad in (0.0, 0.6):
+        scene["sintering"]["neck_rtol"] = bad
+        with pytest.raises(SceneError, match=r"sintering.neck_rtol.*\(0, 0.5\]"):
+            validate_scene(copy.deepcopy(scene))
     assert model.physics.conduction.conductance == "lifted" and model.physics.neck == "volume_conserving"
     assert {k: float(v) for k, v in model.params.sintering.items()} == {"K0": 2e-30, "exponent": 5.0}
 

@@ -183,7 +183,8 @@ def scene_physics(scene, walls=0) -> simulate.Physics:
             integrator=scene_integrator(scene)[0], rtol=run.rtol, atol=run.atol),
         sources=simulate.Sources(beam=None if scene.beam is None else scene.beam.kind,
                                  convection=scene.convection is not None, radiation=scene.radiation is not None),
-        sintering=None if s is None else neck_growth.Sintering(law=s.law, every=s.every, shrinkage=s.shrinkage))
+        sintering=None if s is None else neck_growth.Sintering(law=s.law, every=s.every, shrinkage=s.shrinkage,
+                                                                neck_rtol=s.neck_rtol))
 
 
 def mechanics_on(scene) -> bool:

@@ -266,7 +266,13 @@ _SCHEMA = {
                        "(Frenkel)"),
         "every": Key(int, _within(1, 1e6), False, "steps", default=1,
                      doc="thermal steps between two neck updates; each grows the necks over those steps at the "
-                         "mean of the pair temperatures at their start and end"),
+                         "mean of the pair temperatures at their start and end. With neck_rtol: the longest "
+                         "interval"),
+        "neck_rtol": Key(float, _within(0.0, 0.5, low_open=True), False,
+                         doc="the necks at their own pace (explicit stepping): the interval between two neck updates "
+                             "follows the necks' largest relative growth in the last one, scaled to this (from one "
+                             "step, at most doubling, at most sintering.every); unset: every sintering.every steps "
+                             "(sintercond.sim.neck_growth.Sintering)"),
         "params": Key(dict, None, False, default="the law's",
                       doc="the kinetic law's parameters, see [sintering.params]"),
         "shrinkage": Key(str, _choice("independent", "many_body"), False, default="independent",

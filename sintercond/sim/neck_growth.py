@@ -153,7 +153,12 @@ class Sintering:
     Attributes:
       law: a key of :data:`sintercond.laws.sintering.KINETIC_LAWS` (``"grain_boundary"``, ``"power_law"``,
         ``"viscous"``); its parameters are ``Params.sintering``.
-      every: thermal steps between two neck updates (>= 1); each update grows the necks over those steps.
+      every: thermal steps between two neck updates (>= 1); each update grows the necks over those steps. With
+        ``neck_rtol``, the longest interval.
+      neck_rtol: None (the necks grow every ``every`` steps), or in (0, 1): the interval follows the necks'
+        pace: after each update the next interval is the last one scaled by ``neck_rtol`` over the largest
+        relative growth of a neck in it (``(a_new - a_old) / a_new``), at most doubled, at least one step, at
+        most ``every`` steps (:func:`next_interval_length`). The first interval is one step.
       quadrature_nodes, newton_iterations: of :func:`sintercond.laws.sintering.grow_neck` (>= 1). An update
         interval grows a neck by a small fraction of itself, so fewer than the law tier's defaults (8, 4)
         reach round-off: 4 and 2 agree with them to 1e-12 on the pulsed chain of ``benchmarks/sintering_step.py``
@@ -172,6 +177,7 @@ class Sintering:
     newton_iterations: int = 2
     shrinkage: str = "independent"
     balance_tol: float = 1e-8
+    neck_rtol: float | None = None
 
     def __post_init__(self):
         if self.law not in sintering.KINETIC_LAWS:
@@ -184,6 +190,9 @@ class Sintering:
             raise ValueError(f"Sintering.shrinkage must be one of {list(SHRINKAGE_MODES)}; got {self.shrinkage!r}")
         if not (isinstance(self.balance_tol, (int, float)) and 0.0 < self.balance_tol < 1.0):
             raise ValueError(f"Sintering.balance_tol must be in (0, 1); got {shown(self.balance_tol)}")
+        if self.neck_rtol is not None and not (isinstance(self.neck_rtol, (int, float)) and not
+                                               isinstance(self.neck_rtol, bool) and 0.0 < self.neck_rtol < 1.0):
+            raise ValueError(f"Sintering.neck_rtol must be None or in (0, 1); got {shown(self.neck_rtol)}")
 
 
 @pytree_dataclass
@@ -204,6 +213,8 @@ class NeckState:
       unbalanced: bool scalar, set when a many-body balance did not converge (None without one).
       start_positions: ``[n, 3]`` the positions at the start of a many-body run (m), the shrinkage's reference
         (None without one).
+      interval_length: int scalar, the steps of the current growth interval with ``Sintering.neck_rtol`` (1 at the
+        start; unused without it).
     """
 
     start_overlap: Any
@@ -213,6 +224,7 @@ class NeckState:
     supports: Any = None
     unbalanced: Any = None
     start_positions: Any = None
+    interval_length: Any = None
 
 
 def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, positions=None) -> NeckState:
@@ -240,7 +252,8 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, pos
                      unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type),
                      supports=None if supports is None else _supports(supports, n),
                      unbalanced=None if supports is None else jnp.zeros((), bool),
-                     start_positions=None if positions is None else _start_positions(positions, n))
+                     start_positions=None if positions is None else _start_positions(positions, n),
+                     interval_length=jnp.asarray(1, step_type))
 
 
 def check_table(contacts: LiftedContacts) -> None:
@@ -645,9 +658,32 @@ def check_stable(state) -> None:
             "expect at the end, e.g. at the kinetic law's cap)")
 
 
-def update_interval(spec: Sintering, step) -> jax.Array:
-    """Whether the step numbered ``step`` (after it was taken) ends a growth interval."""
-    return step % spec.every == 0
+def update_interval(spec: Sintering, step, carried: NeckState) -> jax.Array:
+    """Whether the step numbered ``step`` (after it was taken) ends a growth interval: every ``spec.every`` steps,
+    or with ``spec.neck_rtol`` after ``carried.interval_length`` steps."""
+    if spec.neck_rtol is None:
+        return step % spec.every == 0
+    return step - carried.interval_start >= carried.interval_length
+
+
+def next_interval_length(spec: Sintering, carried: NeckState, step, start_neck, neck, active) -> jax.Array:
+    """The steps of the next growth interval (``Sintering.neck_rtol``; ``carried.interval_length`` without it).
+
+    The interval just ended (``step - carried.interval_start`` steps) grew each neck from ``start_neck`` to
+    ``neck`` ``[c]`` (m); its largest relative growth ``g = max (a - a_start) / a`` over the ``active`` necks sets
+    the next one: ``floor(length neck_rtol / g)``, clipped to ``[1, min(2 length, every)]`` (doubled at most, so a
+    neck that starts to grow after a quiet spell is caught within a few updates)."""
+    if spec.neck_rtol is None:
+        return carried.interval_length
+    steps = carried.interval_length.dtype
+    length = (step - carried.interval_start).astype(steps)
+    growth = jnp.where(active & (neck > 0), (neck - start_neck) / jnp.where(neck > 0, neck, 1.0), 0.0)
+    largest = jnp.max(growth, initial=0.0)
+    scaled = length.astype(neck.dtype) * spec.neck_rtol / jnp.where(largest > 0, largest, 1.0)
+    longest = jnp.minimum(2 * length, jnp.asarray(spec.every, steps))
+    proposed = jnp.where(largest > 0, jnp.floor(jnp.minimum(scaled, longest.astype(neck.dtype))).astype(steps),
+                         longest)
+    return jnp.clip(proposed, jnp.asarray(1, steps), longest)
 
 
 __all__ = ["NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering",

@@ -26,17 +26,19 @@ def _at_interval_end(spec, state: SimState, grow, *carried):
     """``grow(*carried)`` at the end of a growth interval, ``carried`` unchanged otherwise."""
     if spec.every == 1:
         return grow(*carried)
-    return jax.lax.cond(neck_growth.update_interval(spec, state.step), grow, lambda *kept: kept, *carried)
+    return jax.lax.cond(neck_growth.update_interval(spec, state.step, state.sintering), grow, lambda *kept: kept,
+                        *carried)
 
 
-def _next_interval(physics: Physics, state: SimState, prep: Prepared, carried, particles, total):
-    """``carried`` (a :class:`sintercond.sim.neck_growth.NeckState`) starting the next interval, flagged unstable when the
-    step exceeds the explicit limit ``C_i / sum K`` on the grown conductances ``total`` ``[n]`` (W/K)."""
+def _next_interval(physics: Physics, state: SimState, prep: Prepared, carried, particles, total, length):
+    """``carried`` (a :class:`sintercond.sim.neck_growth.NeckState`) starting the next interval of ``length`` steps,
+    flagged unstable when the step exceeds the explicit limit ``C_i / sum K`` on the grown conductances ``total``
+    ``[n]`` (W/K)."""
     if physics.conduction.held:  # held particles are reset every step: their rows do not count
         total = jnp.where(particles.fixed, 0.0, total)
     limit = thermal.explicit_stability_limit(conduction.capacity_now(physics, state, prep), total)
     return dataclasses.replace(carried, interval_temperature=particles.temperature, interval_start=state.step,
-                               unstable=carried.unstable | jnp.any(state.dt > limit))
+                               unstable=carried.unstable | jnp.any(state.dt > limit), interval_length=length)
 
 
 def _contact_set(physics: Physics, state: SimState, particles):
@@ -64,6 +66,7 @@ def grow(physics: Physics, state: SimState, prep: Prepared) -> SimState:
         a, h, displacement, unbalanced = neck_growth.grow_necks(
             spec, law, carried, pairs, neck, active, positions=particles.positions, radii=particles.radii,
             end_temperature=particles.temperature, duration=elapsed, normal=normal)
+        length = neck_growth.next_interval_length(spec, carried, state.step, neck, a, active)
         if displacement is not None:
             moved = particles.positions + displacement
             if geometry is not None:
@@ -77,7 +80,7 @@ def grow(physics: Physics, state: SimState, prep: Prepared) -> SimState:
             motion = dataclasses.replace(motion, neck=a, neck_overlap=h)
             grown = dataclasses.replace(state, particles=particles, mechanics=motion)
         total = conduction.total_conductance(physics, grown, prep)
-        return particles, contacts, motion, _next_interval(physics, state, prep, carried, particles, total)
+        return particles, contacts, motion, _next_interval(physics, state, prep, carried, particles, total, length)
 
     static = state.contacts if physics.mechanics is None else None  # the half pair list is not grown, only read
     particles, static, motion, carried = _at_interval_end(spec, state, grow_, state.particles, static,
