@@ -220,7 +220,8 @@ def test_a_sintering_spec_on_what_the_first_stage_cannot_grow_is_refused(keyword
 
 
 @pytest.mark.parametrize("field, value", [("every", 0), ("law", "surface_diffusion"), ("newton_iterations", 1.5),
-                                          ("neck_rtol", 0.0), ("neck_rtol", 1.0), ("neck_rtol", "0.01")])
+                                          ("neck_rtol", 0.0), ("neck_rtol", 0.6), ("neck_rtol", "0.01"),
+                                          ("neck_rtol", 0.01)])
 def test_a_bad_sintering_spec_is_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"Sintering.{field}"):
         neck_growth.Sintering(**{field: value})

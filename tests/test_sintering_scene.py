@@ -114,6 +114,9 @@ def test_the_sintering_keys_reach_the_model():
         scene["sintering"]["neck_rtol"] = bad
         with pytest.raises(SceneError, match=r"sintering.neck_rtol.*\(0, 0.5\]"):
             validate_scene(copy.deepcopy(scene))
+    scene["sintering"].update(neck_rtol=0.01, every=1)
+    with pytest.raises(SceneError, match=r"sintering.neck_rtol .* give sintering.every > 1"):
+        validate_scene(copy.deepcopy(scene))
     assert model.physics.conduction.conductance == "lifted" and model.physics.neck == "volume_conserving"
     assert {k: float(v) for k, v in model.params.sintering.items()} == {"K0": 2e-30, "exponent": 5.0}
 

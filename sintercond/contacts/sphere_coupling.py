@@ -181,7 +181,8 @@ def _packed_layout(pair_id, neck_index, neck_slots):
     order = np.empty(n, np.int64)
     order[np.concatenate(rows)] = np.arange(n)
     packed = position[neck_slots]
-    assert (packed >= 0).all()  # every contact's slot lies within its row's width
+    if (packed < 0).any():  # a table row holds its contacts first, so none lies beyond its row's width
+        raise ValueError("sphere_geometry: a contact's slot lies beyond its row's contacts (the table is not packed)")
     return (tuple(jnp.asarray(r, jnp.int32) for r in rows), tuple(jnp.asarray(k, jnp.int32) for k in necks),
             jnp.asarray(packed, jnp.int32), jnp.asarray(order, jnp.int32))
 
@@ -390,7 +391,7 @@ def contact_flows(geometry: SphereGeometry, conductance, sphere_t, neck_t):
 
     The mean of the two spheres' outflows into the neck, ``(q_ic - q_jc) / 2`` with ``q_s = C_s (T_s 1 - T_N)``:
     equal to each of them when the neck temperatures balance (a massless neck), and antisymmetric by
-    construction, so the network conserves heat to round-off whatever the neck solve's residual.
+    construction, so the network conserves heat to round-off whatever the neck balance's residual.
     """
     return mean_flow(at_necks(geometry, slot_flows(geometry, conductance, sphere_t, neck_t)))
 

@@ -327,6 +327,9 @@ def _check_sintering(scene):
     s, conduction = scene["sintering"], scene["conduction"]
     _check_law_params("sintering.params", s.get("params", {}), KINETIC_LAWS[s["law"]], _SINTERING_PARAMS,
                       "kinetic law")
+    if "neck_rtol" in s and s.get("every", 1) == 1:
+        raise SceneError("sintering.neck_rtol lets the necks set the interval between updates up to sintering.every "
+                         "steps, which is 1 here: give sintering.every > 1 (the longest interval, e.g. 500)")
     if "start_necks" in s and not scene["physics"]["mechanics"]:
         raise SceneError("sintering.start_necks chooses how the necks of a run with physics.mechanics start; "
                          "without the mechanics they start from the packing's overlaps: drop it")

@@ -155,10 +155,11 @@ class Sintering:
         ``"viscous"``); its parameters are ``Params.sintering``.
       every: thermal steps between two neck updates (>= 1); each update grows the necks over those steps. With
         ``neck_rtol``, the longest interval.
-      neck_rtol: None (the necks grow every ``every`` steps), or in (0, 1): the interval follows the necks'
+      neck_rtol: None (the necks grow every ``every`` steps), or in (0, 0.5]: the interval follows the necks'
         pace: after each update the next interval is the last one scaled by ``neck_rtol`` over the largest
         relative growth of a neck in it (``(a_new - a_old) / a_new``), at most doubled, at least one step, at
-        most ``every`` steps (:func:`next_interval_length`). The first interval is one step.
+        most ``every`` steps (:func:`next_interval_length`; needs ``every > 1``). The first interval is one step,
+        and so is the one after a neck is born (a neck from zero has grown by all of itself).
       quadrature_nodes, newton_iterations: of :func:`sintercond.laws.sintering.grow_neck` (>= 1). An update
         interval grows a neck by a small fraction of itself, so fewer than the law tier's defaults (8, 4)
         reach round-off: 4 and 2 agree with them to 1e-12 on the pulsed chain of ``benchmarks/sintering_step.py``
@@ -191,8 +192,11 @@ class Sintering:
         if not (isinstance(self.balance_tol, (int, float)) and 0.0 < self.balance_tol < 1.0):
             raise ValueError(f"Sintering.balance_tol must be in (0, 1); got {shown(self.balance_tol)}")
         if self.neck_rtol is not None and not (isinstance(self.neck_rtol, (int, float)) and not
-                                               isinstance(self.neck_rtol, bool) and 0.0 < self.neck_rtol < 1.0):
-            raise ValueError(f"Sintering.neck_rtol must be None or in (0, 1); got {shown(self.neck_rtol)}")
+                                               isinstance(self.neck_rtol, bool) and 0.0 < self.neck_rtol <= 0.5):
+            raise ValueError(f"Sintering.neck_rtol must be None or in (0, 0.5]; got {shown(self.neck_rtol)}")
+        if self.neck_rtol is not None and self.every == 1:
+            raise ValueError("Sintering.neck_rtol sets the interval up to Sintering.every steps, which is 1: give "
+                             "every > 1 (the longest interval)")
 
 
 @pytree_dataclass

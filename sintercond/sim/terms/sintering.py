@@ -1,6 +1,7 @@
 """The sintering term: necks that grow with each contact's temperature history (:mod:`sintercond.sim.neck_growth`).
 
-At the end of every growth interval (``Sintering.every`` steps) each neck grows over the interval at its pair's
+At the end of every growth interval (``Sintering.every`` steps, or with ``Sintering.neck_rtol`` as many as the
+necks' growth sets) each neck grows over the interval at its pair's
 temperatures (Rojek et al. 2022's volume-conserving geometry; the kinetic laws of :mod:`sintercond.laws.sintering`),
 independently or by the many-body balance that moves the particles, and the explicit step is checked against the
 stability limit on the grown necks (a flag in ``NeckState.unstable``, refused on the host). Without mechanics the
