@@ -386,18 +386,14 @@ def coupled_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
     return conductance_blocks(geometry, resistance_blocks(geometry, half_resistance, radii, kappa))
 
 
-def contact_flows(geometry: SphereGeometry, conductance, sphere_t, neck_t):
-    """``[p]`` heat flow (W) through each contact from its first sphere (``neck_slots[:, 0]``) to its second.
-
-    The mean of the two spheres' outflows into the neck, ``(q_ic - q_jc) / 2`` with ``q_s = C_s (T_s 1 - T_N)``:
-    equal to each of them when the neck temperatures balance (a massless neck), and antisymmetric by
-    construction, so the network conserves heat to round-off whatever the neck balance's residual.
-    """
-    return mean_flow(at_necks(geometry, slot_flows(geometry, conductance, sphere_t, neck_t)))
-
-
 def mean_flow(q_at_necks):
-    """``[p]`` :func:`contact_flows` from the two slots' outflows ``[p, 2]`` (W)."""
+    """``[p]`` heat flow (W) through each contact from its first sphere (``neck_slots[:, 0]``) to its second, from
+    the two spheres' outflows into its neck ``[p, 2]`` (:func:`at_necks` of :func:`slot_flows`).
+
+    The mean ``(q_ic - q_jc) / 2``: equal to each of them when the neck temperatures balance (a massless neck),
+    and antisymmetric by construction, so the network conserves heat to round-off whatever the neck balance's
+    residual.
+    """
     return 0.5 * (q_at_necks[:, 0] - q_at_necks[:, 1])
 
 

@@ -16,7 +16,7 @@ coupling's correction, carried from step to step (``LiftedContacts.neck_correcti
 (:func:`neck_sweeps`), then
 
 1. the heat through each contact is the mean of its two spheres' outflows into its neck
-   (:func:`sintercond.contacts.sphere_coupling.contact_flows`), added to one sphere and taken from the other:
+   (:func:`sintercond.contacts.sphere_coupling.mean_flow`), added to one sphere and taken from the other:
    heat is conserved to round-off whatever the balance's residual;
 2. explicit Euler on the sphere temperatures, with the sources and held particles as in the isolated step.
 
@@ -109,7 +109,7 @@ def isolated_necks(network: NeckNetwork, temperature):
 
 def neck_sweeps(network: NeckNetwork, temperature, correction, sweeps):
     """``(flow [p], correction [p], relative residual)``: the heat through each contact (W, first sphere to second,
-    :func:`sintercond.contacts.sphere_coupling.contact_flows`) at the neck temperatures left by ``sweeps``
+    :func:`sintercond.contacts.sphere_coupling.mean_flow`) at the neck temperatures left by ``sweeps``
     iterations of Jacobi-preconditioned conjugate gradients on the balance ``A_nn x = -A_ns T`` from
     ``x_iso(T) + correction`` (module docstring); the new correction ``x - x_iso(T)``; and the balance's residual
     relative to its value at the start (0 when the balance is met).
