@@ -31,21 +31,27 @@ SCENE = "ti6al4v_preheating_bed"
 TIMES = (1.0, 5.0, 9.5)
 
 
-def scene_text(integrator: str) -> str:
-    """The built-in scene with ``run.integrator`` and LAMMPS frames (per-particle temperatures as text)."""
+LATERAL_SIZE = "lateral_size = 500e-6"
+
+
+def scene_text(integrator: str, lateral_size: float | None = None) -> str:
+    """The built-in scene with ``run.integrator`` and LAMMPS frames (per-particle temperatures as text); with
+    ``lateral_size`` (m) a wider bed of the same height (about 400 particles per 0.25 mm^2 of plate)."""
     from importlib.resources import files
 
     text = files("sintercond.data").joinpath("scenes", f"{SCENE}.toml").read_text()
-    if not text.rstrip().endswith("duration = 9.5"):
-        raise SystemExit(f"{SCENE}: expected its [run] table last")
+    if not text.rstrip().endswith("duration = 9.5") or LATERAL_SIZE not in text:
+        raise SystemExit(f"{SCENE}: expected its [run] table last and {LATERAL_SIZE!r}")
+    if lateral_size is not None:
+        text = text.replace(LATERAL_SIZE, f"lateral_size = {lateral_size!r}")
     return text.rstrip() + f'\nintegrator = "{integrator}"\nformats = ["lammps"]\n'
 
 
-def run(integrator: str, work: Path) -> dict:
+def run(integrator: str, work: Path, lateral_size: float | None = None) -> dict:
     """Run the scene in a new process; returns its summary, the process's wall time and the run folder."""
     work.mkdir(parents=True, exist_ok=True)
     path, out = work / f"{integrator}.toml", work / integrator
-    path.write_text(scene_text(integrator))
+    path.write_text(scene_text(integrator, lateral_size))
     argv = ["run", str(path), "--out", str(out), "--no-progress", "--no-pictures"]
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-c", f"from sintercond.cli import main; raise SystemExit(main({argv!r}))"],
@@ -104,9 +110,13 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", default="/tmp/sintercond_time_scales", help="run folders (default %(default)s)")
     parser.add_argument("--write", action="store_true", help="write the section of benchmarks/RESULTS.md")
+    parser.add_argument("--lateral-size", type=float, default=None,
+                        help="the bed's lateral size (m; the scene's 500e-6 by default: 398 particles); 2.5e-3 pours "
+                             "about 1e4 particles, written to the section time_scales_wide")
+    parser.add_argument("--no-in-process", action="store_true", help="skip the in-process compile and step timings")
     args = parser.parse_args(argv)
     work = Path(args.work)
-    runs = {name: run(name, work) for name in ("auto", "explicit")}
+    runs = {name: run(name, work, args.lateral_size) for name in ("auto", "explicit")}
     ex, im = runs["explicit"], runs["auto"]
     same_packing = all(np.array_equal(np.load(ex["out"] / "packing.npz")[k], np.load(im["out"] / "packing.npz")[k])
                        for k in ("centres", "radii"))
@@ -129,7 +139,7 @@ def main(argv=None) -> None:
              f"adaptive steps; process {im['wall']:.1f} s, run phase {s_i['wall_s']:.1f} s, of which outputs "
              f"{s_i['outputs_s']:.1f} s, compile and stepping {s_i['wall_s'] - s_i['outputs_s']:.1f} s",
              *ex["log"], *im["log"]]
-    timed = in_process(work)
+    timed = {} if args.no_in_process else in_process(work)
     lines[3:3] = [f"in one process, no outputs: {name} compile + stepping {first:.1f} s, stepping alone (compiled) "
                   f"{second:.1f} s" for name, (first, second) in timed.items()]
     header = ("t (s)", "max abs dT (K)", "mean neck ratio diff (%)", "k* diff (%)", "T mean (K, explicit)",
@@ -138,9 +148,13 @@ def main(argv=None) -> None:
     print("\n".join(" | ".join(r) for r in [header] + rows))
     if args.write:
         sys.path.insert(0, str(Path(__file__).parent))
-        from _common import markdown_table, write_section
+        from _common import command_line, markdown_table, write_section
 
-        body = ("## Time scales: the ti6al4v preheat, explicit against auto (adaptive TR-BDF2)\n\n"
+        wide = args.lateral_size is not None
+        title = (f"a bed {args.lateral_size * 1e3:g} mm wide ({s_e['particles']:,} particles)" if wide
+                 else "the ti6al4v preheat")
+        body = (f"## Time scales: {title}, explicit against auto (adaptive TR-BDF2)\n\n"
+                + ("`packing.lateral_size` widened, everything else as the scene. " if wide else "") +
                 "The built-in `ti6al4v_preheating_bed` (9.5 s preheating ramp, sintering necks) run by `sintercond "
                 "run` in its own process with `run.integrator = \"explicit\"` and `\"auto\"` (implicit here: no "
                 "mechanics in the run; rtol 1e-5, atol 1e-3 K), the same pour and output grid. Differences of the "
@@ -148,8 +162,11 @@ def main(argv=None) -> None:
                 "(pour, network, compile, run, outputs); run phase: `summary.json` `wall_s` (compile, stepping and "
                 "the outputs between chunks: frames, history rows with a k* steady solve each, checkpoints; "
                 "`outputs_s`).\n\n"
-                + "\n".join(f"- {line}" for line in lines[:5]) + "\n\n" + markdown_table(header, rows)
-                + "\n\nThe adaptive run takes some 200 times fewer steps, each of them two implicit stages (conjugate "
+                + "\n".join(f"- {line}" for line in lines[:5]) + "\n\n" + markdown_table(header, rows))
+        if wide:
+            write_section("time_scales_wide", command_line(), body)
+            return
+        body += ("\n\nThe adaptive run takes some 200 times fewer steps, each of them two implicit stages (conjugate "
                 "gradients, two fixed-point iterations with the necks) and an error solve. At 398 particles the "
                 "whole command takes the same time either way (three runs on one machine, 2026-12-06: explicit "
                 "33.5-38.0 s, auto 36.4-38.5 s; compiled stepping alone 6.7-8.2 s against 3.1-4.3 s): the pour and "

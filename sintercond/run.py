@@ -236,6 +236,8 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
                         "max_overlap_m": float(history["max_overlap_m"][-1])})
     if model.physics.sintering is not None:
         summary.update({name: float(value) for name, value in neck_growth.neck_statistics(state).items()})
+        if state.sintering.balance_iterations is not None and model.physics.conduction.integrator == "explicit":
+            summary["balance_iterations"] = int(state.sintering.balance_iterations)  # the last update's solve
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     if pictures:
         start = time.perf_counter()

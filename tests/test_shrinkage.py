@@ -181,7 +181,7 @@ def test_the_balance_of_a_random_cluster_is_the_least_squares_minimum_of_the_dis
     free = rng.uniform(0.0, 1e-7, len(pairs))
     supports = np.zeros((n, 3), bool)
     supports[rng.choice(n, 3, replace=False), 2] = True
-    u, unbalanced = jax.jit(neck_growth.balance_displacements, static_argnums=5)(
+    u, unbalanced, _ = jax.jit(neck_growth.balance_displacements, static_argnums=5)(
         jnp.asarray(pairs), jnp.asarray(x), jnp.asarray(weights), jnp.asarray(free), jnp.asarray(supports), 1e-13)
     expected = dense_balance(x, pairs, weights, free, supports)
     scale = np.abs(expected).max()
@@ -313,8 +313,8 @@ def test_stiff_contacts_that_stopped_growing_still_balance():
     weights = rng.uniform(1.0, 3.0, len(pairs)) / np.maximum(free, neck_growth.STIFF_CONTACT_RATIO * free.max())
     supports = np.zeros((n, 3), bool)
     supports[np.argsort(x[:, 2])[:5], 2] = True
-    u, unbalanced = neck_growth.balance_displacements(jnp.asarray(pairs), jnp.asarray(x), jnp.asarray(weights),
-                                                      jnp.asarray(free), jnp.asarray(supports), 1e-12)
+    u, unbalanced, _ = neck_growth.balance_displacements(jnp.asarray(pairs), jnp.asarray(x), jnp.asarray(weights),
+                                                         jnp.asarray(free), jnp.asarray(supports), 1e-12)
     assert not bool(unbalanced)
     expected = dense_balance(x, pairs, weights, free, supports)
     normal = (x[pairs[:, 1]] - x[pairs[:, 0]]) / np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1)[:, None]
@@ -326,8 +326,8 @@ def test_a_balance_with_a_non_finite_weight_is_flagged():
     x, _, _ = hexagon()
     pairs = jnp.array([[0, k] for k in range(1, 7)])
     weights = jnp.array([1.0, 1.0, jnp.inf, 1.0, 1.0, 1.0])
-    _, unbalanced = neck_growth.balance_displacements(pairs, jnp.asarray(x), weights, jnp.full(6, 1e-9),
-                                                      jnp.zeros((7, 3), bool), 1e-12)
+    _, unbalanced, _ = neck_growth.balance_displacements(pairs, jnp.asarray(x), weights, jnp.full(6, 1e-9),
+                                                         jnp.zeros((7, 3), bool), 1e-12)
     assert bool(unbalanced)
 
 
@@ -364,3 +364,91 @@ def test_float32_many_body_shrinkage_agrees_with_float64_to_its_stated_accuracy(
     u32 = np.asarray(end32.particles.positions, np.float64) - x
     assert np.abs(u64).max() > 1e-7  # the ring did move (m)
     np.testing.assert_allclose(u32, u64, rtol=0, atol=2e-4 * np.abs(u64).max())
+
+
+def test_conjugate_gradients_solve_a_dense_system_and_count_their_iterations():
+    """The counted solve against numpy's dense one, and its iterations against the same recurrence in numpy."""
+    rng = np.random.default_rng(3)
+    q = np.linalg.qr(rng.normal(size=(30, 30)))[0]
+    matrix = q @ np.diag(np.geomspace(1.0, 10.0, 30)) @ q.T
+    b = rng.normal(size=30)
+    diagonal = np.diag(matrix)
+    x, iterations = neck_growth.conjugate_gradients(lambda v: jnp.asarray(matrix) @ v, jnp.asarray(b),
+                                                    jnp.zeros(30), lambda r: r / jnp.asarray(diagonal), 1e-10, 1000)
+    np.testing.assert_allclose(np.asarray(x), np.linalg.solve(matrix, b), rtol=1e-8)
+    y, r = np.zeros(30), b.copy()  # preconditioned CG as in Saad (2003), Algorithm 9.1
+    z = r / diagonal
+    p, count = z.copy(), 0
+    while r @ r > (1e-10 * np.linalg.norm(b)) ** 2:
+        ap = matrix @ p
+        alpha = (r @ z) / (p @ ap)
+        y, r_new = y + alpha * p, r - alpha * ap
+        z_new = r_new / diagonal
+        p, r, z, count = z_new + (r_new @ z_new) / (r @ z) * p, r_new, z_new, count + 1
+    assert int(iterations) == count
+    assert 5 < count < 30
+    _, none = neck_growth.conjugate_gradients(lambda v: jnp.asarray(matrix) @ v, jnp.asarray(b),
+                                              jnp.asarray(np.linalg.solve(matrix, b)), lambda r: r, 1e-10, 1000)
+    assert int(none) == 0  # started at the solution
+
+
+def test_a_balance_started_from_earlier_displacements_reaches_the_same_minimum_in_fewer_iterations():
+    """The random over-constrained cluster: from rest, from its own solution (no iteration), and from the solution of
+    a balance whose weights differ by 1e-4 (as the next update's do, some 1e-4 to 1e-3), against the dense least squares."""
+    rng = np.random.default_rng(11)
+    n = 40
+    x = rng.uniform(0.0, 300e-6, (n, 3))
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n) if np.linalg.norm(x[i] - x[j]) < 150e-6])
+    weights = rng.uniform(0.2, 5.0, len(pairs))
+    free = rng.uniform(0.0, 1e-7, len(pairs))
+    supports = np.zeros((n, 3), bool)
+    supports[rng.choice(n, 3, replace=False), 2] = True
+    solve = jax.jit(neck_growth.balance_displacements, static_argnums=5)
+    args = lambda w: (jnp.asarray(pairs), jnp.asarray(x), jnp.asarray(w), jnp.asarray(free), jnp.asarray(supports))  # noqa: E731
+    u, _, from_rest = solve(*args(weights), 1e-12)
+    _, _, from_itself = solve(*args(weights), 1e-12, None, jnp.stack([u, jnp.zeros_like(u)]))
+    assert int(from_itself) <= 1 < int(from_rest)
+    changed = weights * rng.uniform(0.9999, 1.0001, len(weights))
+    recent = jnp.stack([u, jnp.zeros_like(u)])
+    u_rest, _, _ = solve(*args(changed), 1e-12)
+    u_warm, unbalanced, _ = solve(*args(changed), 1e-12, None, recent)
+    assert not bool(unbalanced)
+    rest, warm = solve(*args(changed), 1e-8)[2], solve(*args(changed), 1e-8, None, recent)[2]  # the default tolerance
+    assert int(warm) <= int(rest) - 10
+    expected = dense_balance(x, pairs, changed, free, supports)
+    normal = (x[pairs[:, 1]] - x[pairs[:, 0]]) / np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1)[:, None]
+    approach = lambda v: np.sum((v[pairs[:, 0]] - v[pairs[:, 1]]) * normal, axis=1)  # noqa: E731
+    for v in (u_rest, u_warm):
+        np.testing.assert_allclose(approach(np.asarray(v)), approach(expected), rtol=0, atol=1e-9 * np.abs(expected).max())
+        assert np.all(np.asarray(v)[supports] == 0.0)
+
+
+def test_a_heated_lattice_reports_its_balance_iterations_and_later_updates_take_fewer():
+    """A 6 x 6 x 6 simple cubic lattice on a plate, heated along a ramp: the first update starts from rest, the later
+    ones from the earlier displacements (half the iterations or fewer), and the necks are those of balances solved
+    from rest to the same tolerance."""
+    side, r = 6, 40e-6
+    grid = np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    x = grid * 2 * r + r
+    radii = np.full(len(x), r)
+    temperature = np.linspace(1000.0, 1300.0, len(x))
+    supports = np.zeros((len(x), 3), bool)
+    supports[:, 2] = x[:, 2] == x[:, 2].min()
+    sim, state, params = packing(x, radii, temperature, supports=supports, every=5, dt=2e-4, neck_ratio=0.05)
+
+    def rollout(s, p):
+        return simulate.rollout(sim, s, p, 60, simulate.SaveAt(5, lambda s: s.sintering.balance_iterations))
+
+    end, iterations = jax.jit(rollout)(state, params)
+    iterations = np.asarray(iterations)
+    assert iterations[0] > 20
+    assert np.all(iterations[1:] < iterations[0]) and np.all(iterations[-4:] <= 0.6 * iterations[0])
+    saved = neck_growth.recent_start
+    neck_growth.recent_start = lambda operator, recent, dtype: jnp.zeros_like
+    try:
+        from_rest, rest_iterations = jax.jit(lambda s, p: rollout(s, p))(state, params)  # a new trace
+    finally:
+        neck_growth.recent_start = saved
+    assert np.all(np.asarray(rest_iterations)[1:] > iterations[1:])
+    necks, expected = np.asarray(end.contacts.neck), np.asarray(from_rest.contacts.neck)
+    np.testing.assert_allclose(necks, expected, rtol=1e-9)

@@ -176,11 +176,11 @@ def _grow(physics: Physics, prep: Prepared, state: SimState, start: _Slow, tempe
     spec = physics.sintering
     carried = dataclasses.replace(state.sintering, interval_temperature=start.temperature)
     contacts = start.contacts
-    a, h, displacement, _ = neck_growth.grow_necks(
+    grown = neck_growth.grow_necks(
         spec, neck_growth.law_params(spec, prep.params.sintering), carried, contacts.pairs, contacts.neck, True,
         positions=start.positions, radii=state.particles.radii, end_temperature=temperature, duration=duration)
-    positions = start.positions if displacement is None else start.positions + displacement
-    return dataclasses.replace(contacts, neck=a, overlap=h), positions
+    positions = start.positions if grown.displacement is None else start.positions + grown.displacement
+    return dataclasses.replace(contacts, neck=grown.neck, overlap=grown.neck_overlap), positions
 
 
 def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, duration, tol):
@@ -290,8 +290,9 @@ def _interval_end(physics: Physics, state: SimState, slow: _Slow, steps) -> SimS
     new = dataclasses.replace(_with(state, slow), step=state.step + steps)
     if physics.sintering is None:
         return new
+    carried = neck_growth.remember_displacement(state.sintering, slow.positions - state.particles.positions)
     return dataclasses.replace(new, sintering=dataclasses.replace(
-        state.sintering, interval_temperature=slow.temperature, interval_start=new.step))
+        carried, interval_temperature=slow.temperature, interval_start=new.step))
 
 
 def fixed_step(physics: Physics, state: SimState, prep: Prepared) -> SimState:

@@ -42,7 +42,9 @@ and the balance is the sparse symmetric positive semi-definite system::
 
     sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0
 
-solved by preconditioned conjugate gradients (:func:`jax.scipy.sparse.linalg.cg`) and differentiated implicitly
+solved by conjugate gradients (:func:`conjugate_gradients`) preconditioned by each particle's 3x3 block
+``B_i = sum_j w_ij n_ij n_ij^T`` (:func:`balance_blocks`) and started from the Galerkin projection of the solution
+on the last updates' displacements (:func:`recent_start`), and differentiated implicitly
 (:func:`jax.lax.custom_linear_solve`: a gradient is one more solve, never the iterations). It is the minimum of the
 dissipation ``sum w (dh - dh_free)^2 / 2``: a free pair, a chain or a uniform lattice approaches exactly as the
 first stage; elsewhere contacts carry forces and approach faster or slower than free. A contact that does not grow
@@ -52,14 +54,16 @@ approach): its neck does not shrink (it keeps its size, and its recorded approac
 follow the balance.
 The balance does not fix every motion: rigid motions of a cluster (the sintering forces have no net force or
 torque) and, in a sparse packing, floppy modes (a particle sliding sideways on a single contact) cost nothing.
-The solve leaves them out: its displacements are those of least ``sum_i (sum_j w_ij) |u_i|^2``, as if each
-particle felt a vanishing drag in proportion to its dashpots (the conjugate-gradient iterates, preconditioned by
-that diagonal and started from rest, stay in the range of the system), so a free pair or a symmetric cell keeps
-its weighted centre. Reverse-mode gradients solve the system against a cotangent that can reach those free
-motions, where it is singular: that solve adds a drag of ``GRADIENT_DRAG`` times each particle's dashpots, so a
-gradient treats the choice of the free motions as fixed (exact for distances, necks, shrinkage and
-temperatures away from position-dependent sources; for absolute positions, to within the choice's own
-dependence on the weights). The components given in ``NeckState.supports`` do not move (particles resting on a plate:
+The first update leaves them out: its displacements are those of least ``sum_i u_i^T B_i u_i``, as if each
+particle felt a vanishing drag in proportion to its dashpots along their directions (the conjugate-gradient
+iterates, preconditioned by the blocks and started from rest, stay in the range of the system), so a free pair or
+a symmetric cell keeps its weighted centre. Later updates start from the earlier displacements and carry their
+free motions along, to within the change of the blocks from one update to the next; no contact moves with them.
+Reverse-mode gradients solve the system against a cotangent that can reach those free motions, where it is singular:
+that solve adds a drag of ``GRADIENT_DRAG`` times each particle's dashpots, so a gradient treats the choice of the
+free motions as fixed (exact for distances, necks, shrinkage and temperatures away from position-dependent sources;
+for absolute positions, to within the choice's own dependence on the weights).
+The components given in ``NeckState.supports`` do not move (particles resting on a plate:
 the plate's normal). Each contact's neck then follows its approach through Rojek's geometry,
 ``a = H^-1(H(a_0) + dh)`` (:func:`sintercond.laws.neck.neck_radius`), never below ``a_0`` and never beyond the
 law's cap. Only sintering forces enter: gravity and external loads do not (for the 45-105 um Ti6Al4V of the
@@ -104,7 +108,7 @@ run have not grown them yet.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -139,6 +143,16 @@ overlap to round-off, sinter as the static table's do."""
 NECK_STARTS = ("point", "overlap")
 """How :func:`pair_necks` starts the necks of a sintering run with the mechanics: point contacts whose overlaps
 stay elastic, or the overlaps taken as sintered necks."""
+
+BLOCK_FLOOR = 1e-3
+"""The fraction of each particle's trace that :func:`balance_blocks` adds to its block's diagonal: it keeps the
+block invertible where the particle's contacts leave a direction free, and changes the preconditioner, not the
+balance."""
+
+RECENT_DISPLACEMENTS = 4
+"""How many of the last many-body updates' displacements the next balance starts from (:func:`recent_start`):
+on the heated lattice of ``benchmarks/balance_iterations.py`` they leave a start whose residual is 1e-5 to 1e-7 of
+the right-hand side's; ``[4, n, 3]`` floats carried in :class:`NeckState`."""
 
 GRADIENT_DRAG = 1e-8
 """The drag, relative to each particle's dashpots, that makes the reverse-mode solve of the many-body balance
@@ -219,6 +233,10 @@ class NeckState:
         (None without one).
       interval_length: int scalar, the steps of the current growth interval with ``Sintering.neck_rtol`` (1 at the
         start; unused without it).
+      recent_displacements: ``[2, n, 3]`` the displacements of the last two many-body updates (m), newest first
+        (zeros before them), the next balance's start (:func:`balance_displacements`); None without one.
+      balance_iterations: int scalar, the conjugate-gradient iterations of the last many-body balance of an
+        explicit step (the adaptive integrator's stages do not record theirs; None without many-body shrinkage).
     """
 
     start_overlap: Any
@@ -229,6 +247,8 @@ class NeckState:
     unbalanced: Any = None
     start_positions: Any = None
     interval_length: Any = None
+    recent_displacements: Any = None
+    balance_iterations: Any = None
 
 
 def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, positions=None) -> NeckState:
@@ -252,12 +272,16 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, pos
             raise ValueError("neck_state takes supports and positions together (many-body shrinkage) or neither")
         check_table(contacts)
         start_overlap = jnp.asarray(contacts.overlap)
+    start = None if positions is None else _start_positions(positions, n)
     return NeckState(start_overlap=start_overlap, interval_temperature=jnp.asarray(temperature),
                      unstable=jnp.zeros((), bool), interval_start=jnp.asarray(step, step_type),
                      supports=None if supports is None else _supports(supports, n),
                      unbalanced=None if supports is None else jnp.zeros((), bool),
-                     start_positions=None if positions is None else _start_positions(positions, n),
-                     interval_length=jnp.asarray(1, step_type))
+                     start_positions=start,
+                     interval_length=jnp.asarray(1, step_type),
+                     recent_displacements=None if supports is None else jnp.zeros(
+                         (RECENT_DISPLACEMENTS,) + start.shape, start.dtype),
+                     balance_iterations=None if supports is None else jnp.zeros((), step_type))
 
 
 def check_table(contacts: LiftedContacts) -> None:
@@ -411,9 +435,15 @@ def _pair_normals(pairs, positions):
     return separation / jnp.linalg.norm(separation, axis=1, keepdims=True)
 
 
-def balance_displacements(pairs, positions, weights, free_approach, supports, tol, normal=None):
+def balance_displacements(pairs, positions, weights, free_approach, supports, tol, normal=None, recent=None):
     """Displacements ``[n, 3]`` (m) of the many-body balance ``sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0``
-    on the components that are not ``supports`` (module docstring), and whether its solve fell short.
+    on the components that are not ``supports`` (module docstring), whether its solve fell short, and its
+    iterations.
+
+    Preconditioned conjugate gradients (:func:`conjugate_gradients`), each particle's 3x3 block of the system
+    inverted (block Jacobi, :func:`balance_blocks`), started from the balance's Galerkin projection on the
+    ``recent`` displacements (:func:`recent_start`): over an interval the displacements change little from one
+    update to the next, so the start leaves a residual some 1e-5 to 1e-7 of the right-hand side's instead of 1.
 
     Args:
       pairs: ``[c, 2]`` the contacts; positions ``[n, 3]`` (m) give their normals ``n_ij`` (``i`` to ``j``).
@@ -423,9 +453,11 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
       tol: relative residual of the conjugate-gradient solve.
       normal: ``[c, 3]`` the unit normals, if given (a half pair list's, whose padding pairs have weight 0);
         else from ``positions``.
+      recent: ``[k, n, 3]`` earlier updates' displacements (m) spanning the start, or None (start from rest).
 
     Returns:
-      ``(u, unbalanced)``: the displacements, and a bool scalar set when the residual exceeds ``10 tol``.
+      ``(u, unbalanced, iterations)``: the displacements, a bool scalar set when the residual exceeds ``10 tol``,
+      and the iterations the solve took (int scalar).
     """
     i, j = pairs[:, 0], pairs[:, 1]
     normal = _pair_normals(pairs, positions) if normal is None else normal
@@ -441,35 +473,108 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
         return jnp.where(movable, on_particles(weights * approach), u)
 
     rhs = jnp.where(movable, on_particles(weights * free_approach), 0.0)
-    # the same scale for the three components of a particle (the trace of its diagonal block): the solve then
-    # leaves out the motions the balance does not fix, in the norm sum_i (sum_j w_ij) |u_i|^2 (module docstring)
-    trace = jnp.zeros(positions.shape[:1], positions.dtype).at[i].add(weights).at[j].add(weights)
-    usable = movable & (trace[:, None] > 0)
-    scale = jnp.where(usable, trace[:, None], 1.0)
-    inverse_diagonal = 1.0 / scale
+    blocks, inverse_blocks = balance_blocks(pairs, normal, weights, movable)
+    start = recent_start(operator, recent, positions.dtype)
     maxiter = max(10 * positions.size, MIN_BALANCE_ITERATIONS)
 
     def solve(matvec, b):
-        return jax.scipy.sparse.linalg.cg(matvec, b, tol=tol, atol=0.0, maxiter=maxiter,
-                                          M=lambda r: inverse_diagonal * r)[0]
+        x, iterations = conjugate_gradients(matvec, b, start(b), lambda r: jnp.einsum("nab,nb->na", inverse_blocks, r),
+                                            tol, maxiter)
+        return x, iterations
 
     # reverse mode solves the system against a cotangent that need not lie in its range (the free motions):
     # there the drag that selects the solution is made finite, GRADIENT_DRAG times the dashpots
+    trace = jnp.zeros(positions.shape[:1], positions.dtype).at[i].add(weights).at[j].add(weights)[:, None]
+    scale = jnp.where(movable & (trace > 0), trace, 1.0)
     drag = max(GRADIENT_DRAG, float(jnp.finfo(positions.dtype).eps) ** 0.5) * jnp.where(movable, scale, 0.0)
 
     def transpose_solve(matvec, b):
         return solve(lambda v: matvec(v) + drag * v, b)
 
-    u = jax.lax.custom_linear_solve(operator, rhs, solve, transpose_solve)
+    u, iterations = jax.lax.custom_linear_solve(operator, rhs, solve, transpose_solve, has_aux=True)
     residual = jnp.linalg.norm(rhs - operator(u))
     converged = (residual <= 10.0 * tol * jnp.linalg.norm(rhs)) & jnp.all(jnp.isfinite(u))
-    return u, ~converged
+    return u, ~converged, iterations
+
+
+def balance_blocks(pairs, normal, weights, movable):
+    """``(blocks, inverses)`` ``[n, 3, 3]``: each particle's diagonal block ``sum_j w_ij n_ij n_ij^T`` of the
+    many-body balance on its movable components (:func:`balance_displacements`), with :data:`BLOCK_FLOOR` of its
+    trace added to its diagonal, and their inverses (the held components' rows and columns are the identity's).
+
+    A directions that none of a particle's contacts resists (a particle on one contact, or on two) has no row in
+    the system: the floor only keeps the block invertible there, and the iterates never move along it."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    outer = weights[:, None, None] * normal[:, :, None] * normal[:, None, :]
+    n = movable.shape[0]
+    blocks = jnp.zeros((n, 3, 3), normal.dtype).at[i].add(outer).at[j].add(outer)
+    held = movable[:, :, None] & movable[:, None, :]
+    trace = jnp.trace(blocks, axis1=1, axis2=2)
+    floor = jnp.where(trace > 0, BLOCK_FLOOR * trace, 1.0)
+    diagonal = jnp.where(movable, floor[:, None], 1.0)
+    blocks = jnp.where(held, blocks, 0.0) + diagonal[:, :, None] * jnp.eye(3, dtype=normal.dtype)
+    return blocks, jnp.linalg.inv(blocks)
+
+
+def recent_start(operator, recent, dtype):
+    """The start of a balance's solve as a linear map of its right-hand side ``b``: the Galerkin projection of the
+    solution on the span of the ``recent`` displacements ``[k, n, 3]`` (``V (V^T A V)^-1 V^T b``, ``A`` the
+    ``operator``; the basis A-orthonormalised by Gram-Schmidt, a displacement whose remainder keeps less than 1000
+    machine epsilons of its energy ``v^T A v`` dropped: it repeats the others, or is 0), or 0 without them.
+    Linear in ``b``, so the solve stays a linear map (:func:`jax.lax.custom_linear_solve`); the displacements are
+    constants to it (their derivative does not enter the solution's, which the solve's own implicit derivative
+    gives)."""
+    if recent is None:
+        return jnp.zeros_like
+    floor = 1e3 * float(jnp.finfo(dtype).eps)  # below it, a remainder is round-off of the others
+    basis, images = [], []
+    for v in jax.lax.stop_gradient(recent.astype(dtype)):
+        av = operator(v)
+        energy = jnp.vdot(v, av)
+        for q, aq in zip(basis, images):
+            c = jnp.vdot(q, av)
+            v, av = v - c * q, av - c * aq
+        norm_sq = jnp.vdot(v, av)
+        keep = norm_sq > floor * energy
+        inverse_norm = jnp.where(keep, jax.lax.rsqrt(jnp.where(keep, norm_sq, 1.0)), 0.0)
+        basis.append(v * inverse_norm)
+        images.append(av * inverse_norm)
+    return lambda b: sum(jnp.vdot(q, b) * q for q in basis)
+
+
+def conjugate_gradients(matvec, b, x0, preconditioner, tol, maxiter):
+    """``(x, iterations)``: preconditioned conjugate gradients on the symmetric positive semi-definite ``matvec``
+    from ``x0``, until the residual is at most ``tol |b|`` or after ``maxiter`` iterations.
+
+    :func:`jax.scipy.sparse.linalg.cg` with its iterations counted (it does not report them)."""
+    threshold = (tol * jnp.linalg.norm(b)) ** 2
+
+    def unfinished(carry):
+        _, r, _, _, k = carry
+        return (jnp.vdot(r, r) > threshold) & (k < maxiter)
+
+    def iterate(carry):
+        x, r, p, rz, k = carry
+        ap = matvec(p)
+        curvature = jnp.vdot(p, ap)
+        alpha = jnp.where(curvature > 0, rz / jnp.where(curvature > 0, curvature, 1.0), 0.0)
+        x, r = x + alpha * p, r - alpha * ap
+        z = preconditioner(r)
+        rz_new = jnp.vdot(r, z)
+        p = z + jnp.where(rz > 0, rz_new / jnp.where(rz > 0, rz, 1.0), 0.0) * p
+        return x, r, p, rz_new, k + 1
+
+    r = b - matvec(x0)
+    z = preconditioner(r)
+    x, _, _, _, iterations = jax.lax.while_loop(unfinished, iterate, (x0, r, z, jnp.vdot(r, z), jnp.zeros((), jnp.int32)))
+    return x, iterations
 
 
 def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_start, r_i, r_j, temperature, duration,
-                    positions, supports):
-    """The many-body update of the pairs ``[c, 2]`` (module docstring): ``(a, u, unbalanced)``, the necks ``[c]``
-    (m) after the interval, the displacements ``[n, 3]`` (m) and whether the balance fell short. Only the
+                    positions, supports, recent):
+    """The many-body update of the pairs ``[c, 2]`` (module docstring): ``(a, u, unbalanced, iterations)``, the
+    necks ``[c]`` (m) after the interval, the displacements ``[n, 3]`` (m), whether the balance fell short and its
+    solve's iterations (started from the ``recent`` displacements, :func:`balance_displacements`). Only the
     ``active`` pairs sinter and enter the balance; the others keep ``a_start``."""
     i, j = pairs[:, 0], pairs[:, 1]
     law = sintering.kinetic_law(spec.law)
@@ -481,18 +586,18 @@ def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_star
     weights = jnp.where(growing & active, law.force(0.5 * (a_start + a_free), r_i, r_j, params)
                         / jnp.maximum(free, jnp.where(growing, STIFF_CONTACT_RATIO * fastest, 1.0)), 0.0)
     tol = max(spec.balance_tol, 50.0 * float(jnp.finfo(positions.dtype).eps))
-    u, unbalanced = balance_displacements(pairs, positions, weights, free, supports, tol, normal)
+    u, unbalanced, iterations = balance_displacements(pairs, positions, weights, free, supports, tol, normal,
+                                                      recent)
     approach = jnp.sum((u[i] - u[j]) * normal, axis=1)
     cap = jnp.minimum(law.cap(r_i, r_j, params), jnp.minimum(r_i, r_j))
     h = jnp.clip(h_start + approach, h_start, sintering.neck_overlap(cap, r_i, r_j))
     a = jnp.where(active, jnp.clip(neck_radius(r_i, r_j, h), a_start, cap), a_start)
-    return a, u, unbalanced
+    return a, u, unbalanced, iterations
 
 
 def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, active, *, positions, radii,
                end_temperature, duration, normal=None):
-    """One growth interval of the necks of the contacts ``pairs`` ``[c, 2]``: ``(neck, neck_overlap, displacement,
-    unbalanced)``.
+    """One growth interval of the necks of the contacts ``pairs`` ``[c, 2]``: a :class:`Grown`.
 
     The one growth path of both contact sets (a static packing's pairs, :class:`sintercond.state.LiftedContacts`;
     the half pair list that follows the motion with the mechanics). ``neck`` ``[c]`` (m) at the start of the
@@ -500,24 +605,56 @@ def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, a
     The pair temperature of the interval is the mean of its value at the start (``carried.interval_temperature``)
     and at the end (``end_temperature`` ``[n]``, K; module docstring). Each contact grows on its own
     (``shrinkage="independent"``) or in the many-body balance that moves the particles, with the unit normals
-    ``normal`` ``[c, 3]`` if given, else from ``positions`` ``[n, 3]`` (m). Returns the necks and their
-    approaches ``H(a)`` ``[c]`` (m), and with many-body shrinkage the displacements ``[n, 3]`` (m) and whether the
-    balance fell short (else None, None).
+    ``normal`` ``[c, 3]`` if given, else from ``positions`` ``[n, 3]`` (m); the balance starts from
+    ``carried.recent_displacements``.
     """
     i, j = pairs[:, 0], pairs[:, 1]
     r_i, r_j = radii[i], radii[j]
     temperature = _interval_temperature(carried, end_temperature, i, j)
     active = jnp.broadcast_to(jnp.asarray(active), i.shape)
     a_start = jnp.where(active, neck, 0.0)
-    u = unbalanced = None
+    u = unbalanced = iterations = None
     if spec.shrinkage == "many_body":
         normal = _pair_normals(pairs, positions) if normal is None else normal
-        a, u, unbalanced = _balanced_necks(spec, params, pairs, normal, active, a_start, r_i, r_j, temperature,
-                                           duration, positions, carried.supports)
+        a, u, unbalanced, iterations = _balanced_necks(spec, params, pairs, normal, active, a_start, r_i, r_j,
+                                                       temperature, duration, positions, carried.supports,
+                                                       carried.recent_displacements)
     else:
         a = _grown(spec, params, a_start, r_i, r_j, temperature, duration)
     a = jnp.where(active, a, 0.0)
-    return a, jnp.where(active, sintering.neck_overlap(a, r_i, r_j), 0.0), u, unbalanced
+    return Grown(a, jnp.where(active, sintering.neck_overlap(a, r_i, r_j), 0.0), u, unbalanced, iterations)
+
+
+class Grown(NamedTuple):
+    """What :func:`grow_necks` returns. ``neck``, ``neck_overlap``: ``[c]`` the necks and their approaches ``H(a)``
+    (m); with many-body shrinkage ``displacement`` ``[n, 3]`` (m), ``unbalanced`` (bool scalar, the balance fell
+    short) and ``iterations`` (int scalar, its solve's), else None."""
+
+    neck: Any
+    neck_overlap: Any
+    displacement: Any = None
+    unbalanced: Any = None
+    iterations: Any = None
+
+
+def with_displacement(carried: NeckState, grown: Grown) -> NeckState:
+    """``carried`` after a many-body update ``grown``: the displacement the newest of its recent ones, the balance's
+    iterations recorded, its shortfall flagged (``carried`` itself without many-body shrinkage)."""
+    if grown.displacement is None:
+        return carried
+    return dataclasses.replace(
+        remember_displacement(carried, grown.displacement), unbalanced=carried.unbalanced | grown.unbalanced,
+        balance_iterations=grown.iterations.astype(carried.balance_iterations.dtype))
+
+
+def remember_displacement(carried: NeckState, displacement) -> NeckState:
+    """``carried`` with ``displacement`` ``[n, 3]`` (m) the newest of its recent many-body displacements (the start
+    of the next balances, :func:`recent_start`); ``carried`` itself without many-body shrinkage."""
+    recent = carried.recent_displacements
+    if recent is None:
+        return carried
+    return dataclasses.replace(carried,
+                               recent_displacements=jnp.concatenate([displacement.astype(recent.dtype)[None], recent[:-1]]))
 
 
 def met_necks(geometry, neck, neck_overlap, moved, radii):
@@ -690,7 +827,9 @@ def next_interval_length(spec: Sintering, carried: NeckState, step, start_neck, 
     return jnp.clip(proposed, jnp.asarray(1, steps), longest)
 
 
-__all__ = ["NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering",
-           "balance_displacements", "check_stable", "check_table", "grow_necks", "law_params", "met_necks",
+__all__ = ["BLOCK_FLOOR", "Grown", "NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "RECENT_DISPLACEMENTS",
+           "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering", "balance_blocks", "balance_displacements",
+           "check_stable", "check_table", "conjugate_gradients", "grow_necks", "law_params", "met_necks",
            "neck_state", "neck_statistics", "necks_at_cap", "pair_necks", "pair_necks_at_cap", "particle_neck_ratio",
-           "validate_pair_necks", "validate_sintering", "with_pair_necks"]
+           "recent_start", "remember_displacement", "validate_pair_necks", "validate_sintering", "with_displacement",
+           "with_pair_necks"]

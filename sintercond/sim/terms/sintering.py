@@ -64,23 +64,24 @@ def grow(physics: Physics, state: SimState, prep: Prepared) -> SimState:
     def grow_(particles, contacts, motion, carried):
         elapsed = (state.step - carried.interval_start).astype(state.dt.dtype) * state.dt
         pairs, neck, active, normal, geometry = _contact_set(physics, state, particles)
-        a, h, displacement, unbalanced = neck_growth.grow_necks(
+        grown = neck_growth.grow_necks(
             spec, law, carried, pairs, neck, active, positions=particles.positions, radii=particles.radii,
             end_temperature=particles.temperature, duration=elapsed, normal=normal)
+        a, h = grown.neck, grown.neck_overlap
         length = neck_growth.next_interval_length(spec, carried, state.step, neck, a, active)
-        if displacement is not None:
-            moved = particles.positions + displacement
+        if grown.displacement is not None:
+            moved = particles.positions + grown.displacement
             if geometry is not None:
                 a, h = neck_growth.met_necks(geometry, a, h, moved, particles.radii)
             particles = dataclasses.replace(particles, positions=moved)
-            carried = dataclasses.replace(carried, unbalanced=carried.unbalanced | unbalanced)
+            carried = neck_growth.with_displacement(carried, grown)
         if geometry is None:
             contacts = dataclasses.replace(contacts, neck=a, overlap=h)
-            grown = dataclasses.replace(state, contacts=contacts)
+            after = dataclasses.replace(state, contacts=contacts)
         else:
             motion = dataclasses.replace(motion, neck=a, neck_overlap=h)
-            grown = dataclasses.replace(state, particles=particles, mechanics=motion)
-        total = conduction.total_conductance(physics, grown, prep)
+            after = dataclasses.replace(state, particles=particles, mechanics=motion)
+        total = conduction.total_conductance(physics, after, prep)
         return particles, contacts, motion, _next_interval(physics, state, prep, carried, particles, total, length)
 
     static = state.contacts if physics.mechanics is None else None  # the half pair list is not grown, only read
