@@ -452,3 +452,23 @@ def test_a_heated_lattice_reports_its_balance_iterations_and_later_updates_take_
     assert np.all(np.asarray(rest_iterations)[1:] > iterations[1:])
     necks, expected = np.asarray(end.contacts.neck), np.asarray(from_rest.contacts.neck)
     np.testing.assert_allclose(necks, expected, rtol=1e-9)
+
+
+def test_the_balance_gathered_on_a_table_equals_the_balance_scattered_from_its_pairs():
+    """A static table's rows (each contact in both) give the same forces as the pairs: a hexagonal ring with a
+    centre, random dashpots and free approaches, one sphere's vertical held."""
+    x, radii, temperature = hexagon((1300.0, 900.0))
+    sim, state, params = packing(x, radii, temperature)
+    contacts = state.contacts
+    rng = np.random.default_rng(5)
+    c = contacts.pairs.shape[0]
+    supports = np.zeros((len(radii), 3), bool)
+    supports[0, 2] = True
+    args = (contacts.pairs, state.particles.positions, jnp.asarray(rng.uniform(0.5, 2.0, c)),
+            jnp.asarray(rng.uniform(0.0, 1e-8, c)), jnp.asarray(supports), 1e-12)
+    scattered, _, _ = neck_growth.balance_displacements(*args)
+    gathered, unbalanced, _ = neck_growth.balance_displacements(*args, table=(contacts.slot_pair, contacts.neighbors))
+    assert not bool(unbalanced)
+    assert np.abs(np.asarray(scattered)).max() > 1e-10
+    np.testing.assert_allclose(np.asarray(gathered), np.asarray(scattered), rtol=0,
+                               atol=1e-9 * np.abs(np.asarray(scattered)).max())

@@ -178,7 +178,8 @@ def _grow(physics: Physics, prep: Prepared, state: SimState, start: _Slow, tempe
     contacts = start.contacts
     grown = neck_growth.grow_necks(
         spec, neck_growth.law_params(spec, prep.params.sintering), carried, contacts.pairs, contacts.neck, True,
-        positions=start.positions, radii=state.particles.radii, end_temperature=temperature, duration=duration)
+        positions=start.positions, radii=state.particles.radii, end_temperature=temperature, duration=duration,
+        table=(contacts.slot_pair, contacts.neighbors))
     positions = start.positions if grown.displacement is None else start.positions + grown.displacement
     return dataclasses.replace(contacts, neck=grown.neck, overlap=grown.neck_overlap), positions
 

@@ -435,7 +435,8 @@ def _pair_normals(pairs, positions):
     return separation / jnp.linalg.norm(separation, axis=1, keepdims=True)
 
 
-def balance_displacements(pairs, positions, weights, free_approach, supports, tol, normal=None, recent=None):
+def balance_displacements(pairs, positions, weights, free_approach, supports, tol, normal=None, recent=None,
+                          table=None):
     """Displacements ``[n, 3]`` (m) of the many-body balance ``sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0``
     on the components that are not ``supports`` (module docstring), whether its solve fell short, and its
     iterations.
@@ -454,6 +455,9 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
       normal: ``[c, 3]`` the unit normals, if given (a half pair list's, whose padding pairs have weight 0);
         else from ``positions``.
       recent: ``[k, n, 3]`` earlier updates' displacements (m) spanning the start, or None (start from rest).
+      table: ``(slot_pair, neighbors)`` ``[n, m]`` of a static table listing each pair in both its rows
+        (:class:`sintercond.state.LiftedContacts`), or None: the forces on the particles are then gathered from
+        each row's slots instead of scattered from the pairs (the same sums, some 2.5 times faster on a CPU).
 
     Returns:
       ``(u, unbalanced, iterations)``: the displacements, a bool scalar set when the residual exceeds ``10 tol``,
@@ -463,9 +467,18 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
     normal = _pair_normals(pairs, positions) if normal is None else normal
     movable = ~supports
 
+    if table is not None:
+        slot_pair, neighbors = table
+        rows = jnp.arange(neighbors.shape[0], dtype=neighbors.dtype)[:, None]
+        outward = neighbors > rows  # the row is the pair's i (pairs have i < j)
+        slot_sign = jnp.where(outward, 1.0, -1.0).astype(positions.dtype)[:, :, None]
+
     def on_particles(per_pair):  # [c] -> [n, 3]: + along n_ij on i, - on j
         f = per_pair[:, None] * normal
-        return jnp.zeros_like(positions).at[i].add(f).at[j].add(-f)
+        if table is None:
+            return jnp.zeros_like(positions).at[i].add(f).at[j].add(-f)
+        padded = jnp.concatenate([f, jnp.zeros((1, 3), f.dtype)])  # slot_pair is c in padding
+        return jnp.sum(slot_sign * padded[slot_pair], axis=1)
 
     def operator(u):  # P K P + (I - P): symmetric, the held components decoupled
         u_free = jnp.where(movable, u, 0.0)
@@ -571,7 +584,7 @@ def conjugate_gradients(matvec, b, x0, preconditioner, tol, maxiter):
 
 
 def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_start, r_i, r_j, temperature, duration,
-                    positions, supports, recent):
+                    positions, supports, recent, table):
     """The many-body update of the pairs ``[c, 2]`` (module docstring): ``(a, u, unbalanced, iterations)``, the
     necks ``[c]`` (m) after the interval, the displacements ``[n, 3]`` (m), whether the balance fell short and its
     solve's iterations (started from the ``recent`` displacements, :func:`balance_displacements`). Only the
@@ -587,7 +600,7 @@ def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_star
                         / jnp.maximum(free, jnp.where(growing, STIFF_CONTACT_RATIO * fastest, 1.0)), 0.0)
     tol = max(spec.balance_tol, 50.0 * float(jnp.finfo(positions.dtype).eps))
     u, unbalanced, iterations = balance_displacements(pairs, positions, weights, free, supports, tol, normal,
-                                                      recent)
+                                                      recent, table)
     approach = jnp.sum((u[i] - u[j]) * normal, axis=1)
     cap = jnp.minimum(law.cap(r_i, r_j, params), jnp.minimum(r_i, r_j))
     h = jnp.clip(h_start + approach, h_start, sintering.neck_overlap(cap, r_i, r_j))
@@ -596,7 +609,7 @@ def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_star
 
 
 def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, active, *, positions, radii,
-               end_temperature, duration, normal=None):
+               end_temperature, duration, normal=None, table=None):
     """One growth interval of the necks of the contacts ``pairs`` ``[c, 2]``: a :class:`Grown`.
 
     The one growth path of both contact sets (a static packing's pairs, :class:`sintercond.state.LiftedContacts`;
@@ -606,7 +619,8 @@ def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, a
     and at the end (``end_temperature`` ``[n]``, K; module docstring). Each contact grows on its own
     (``shrinkage="independent"``) or in the many-body balance that moves the particles, with the unit normals
     ``normal`` ``[c, 3]`` if given, else from ``positions`` ``[n, 3]`` (m); the balance starts from
-    ``carried.recent_displacements``.
+    ``carried.recent_displacements`` and sums its forces on a static packing's ``table`` (``(slot_pair,
+    neighbors)``, :func:`balance_displacements`) when given.
     """
     i, j = pairs[:, 0], pairs[:, 1]
     r_i, r_j = radii[i], radii[j]
@@ -618,7 +632,7 @@ def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, a
         normal = _pair_normals(pairs, positions) if normal is None else normal
         a, u, unbalanced, iterations = _balanced_necks(spec, params, pairs, normal, active, a_start, r_i, r_j,
                                                        temperature, duration, positions, carried.supports,
-                                                       carried.recent_displacements)
+                                                       carried.recent_displacements, table)
     else:
         a = _grown(spec, params, a_start, r_i, r_j, temperature, duration)
     a = jnp.where(active, a, 0.0)

@@ -66,7 +66,8 @@ def grow(physics: Physics, state: SimState, prep: Prepared) -> SimState:
         pairs, neck, active, normal, geometry = _contact_set(physics, state, particles)
         grown = neck_growth.grow_necks(
             spec, law, carried, pairs, neck, active, positions=particles.positions, radii=particles.radii,
-            end_temperature=particles.temperature, duration=elapsed, normal=normal)
+            end_temperature=particles.temperature, duration=elapsed, normal=normal,
+            table=None if geometry is not None else (contacts.slot_pair, contacts.neighbors))
         a, h = grown.neck, grown.neck_overlap
         length = neck_growth.next_interval_length(spec, carried, state.step, neck, a, active)
         if grown.displacement is not None:
