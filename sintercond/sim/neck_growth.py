@@ -233,8 +233,9 @@ class NeckState:
         (None without one).
       interval_length: int scalar, the steps of the current growth interval with ``Sintering.neck_rtol`` (1 at the
         start; unused without it).
-      recent_displacements: ``[2, n, 3]`` the displacements of the last two many-body updates (m), newest first
-        (zeros before them), the next balance's start (:func:`balance_displacements`); None without one.
+      recent_displacements: ``[k, n, 3]`` the displacements of the last :data:`RECENT_DISPLACEMENTS` many-body
+        updates (m), newest first (zeros before them), the next balance's start (:func:`recent_start`); None
+        without many-body shrinkage.
       balance_iterations: int scalar, the conjugate-gradient iterations of the last many-body balance of an
         explicit step (the adaptive integrator's stages do not record theirs; None without many-body shrinkage).
     """
@@ -515,7 +516,7 @@ def balance_blocks(pairs, normal, weights, movable):
     many-body balance on its movable components (:func:`balance_displacements`), with :data:`BLOCK_FLOOR` of its
     trace added to its diagonal, and their inverses (the held components' rows and columns are the identity's).
 
-    A directions that none of a particle's contacts resists (a particle on one contact, or on two) has no row in
+    A direction that none of a particle's contacts resists (a particle on one contact, or on two) has no row in
     the system: the floor only keeps the block invertible there, and the iterates never move along it."""
     i, j = pairs[:, 0], pairs[:, 1]
     outer = weights[:, None, None] * normal[:, :, None] * normal[:, None, :]
