@@ -102,22 +102,25 @@ def test_the_fixed_tr_bdf2_step_is_second_order():
     np.testing.assert_allclose(ratios, 4.0, rtol=0.15)
 
 
-def cell(integrator, held_ramp=True, **spec):
+def cell(integrator, held_ramp=True, shrinkage="independent", **spec):
     """A touching 2 x 2 x 2 cell of 40 um Ti6Al4V spheres at 845 K, its bottom layer held on Rizza & Galati's ramp
-    (845 -> 1273 K in 25 steps over 9.5 s), its necks growing (grain boundary, A = 1e-17)."""
+    (845 -> 1273 K in 25 steps over 9.5 s), its necks growing (grain boundary, A = 1e-17); with many-body
+    ``shrinkage`` the bottom layer rests on a plate (its vertical held)."""
     r = 40e-6
     grid = np.stack(np.meshgrid(*(np.arange(2),) * 3, indexing="ij"), -1).reshape(-1, 3)
     x = r + 2 * r * grid
     physics = simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted", held=True,
                                       held_ramp=held_ramp, integrator=integrator,
-                                      sintering=neck_growth.Sintering(every=1), **spec)
+                                      sintering=neck_growth.Sintering(every=1, shrinkage=shrinkage), **spec)
     particles = particle_state(x, np.full(8, r), np.full(8, 845.0), DENSITY, fixed=grid[:, 2] == 0)
     contacts = simulate.lifted_contacts(physics, x, np.full(8, r))
     params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],
                              sintering={"A": 1e-17, "activation_energy": 37.0},
                              held_ramp=simulate.HeldRampParams(1273.0, 9.5, 25.0))
-    state = simulate.init_state(particles, contacts, 1.0, sintering=neck_growth.neck_state(contacts,
-                                                                                          particles.temperature))
+    supports = None if shrinkage == "independent" else np.stack([np.zeros(8, bool)] * 2 + [grid[:, 2] == 0], 1)
+    necks = neck_growth.neck_state(contacts, particles.temperature, supports=supports,
+                                   positions=None if supports is None else x)
+    state = simulate.init_state(particles, contacts, 1.0, sintering=necks)
     return simulate.simulator(physics), state, params
 
 
@@ -151,6 +154,25 @@ def test_a_cell_on_the_ramp_with_growing_necks_matches_a_fine_explicit_run():
     # the held layer at the ramp's level of t_end, the growth interval restarted there
     np.testing.assert_allclose(t_i[:4], 845.0 + (1273.0 - 845.0) * 5 / 25)
     assert int(implicit.sintering.interval_start) == int(implicit.step) == 10
+
+
+@pytest.mark.slow
+def test_a_shrinking_cell_on_the_ramp_matches_a_fine_explicit_run_and_records_its_displacements():
+    """Many-body shrinkage under the adaptive step: each stage's balance starts from the accepted steps'
+    displacements (NeckState.recent_displacements), and the necks and the shrinkage follow the explicit run's."""
+    t_end = 1.9
+    sim_e, state, params = cell("explicit", shrinkage="many_body")
+    explicit, n = explicit_reference(sim_e, state, params, t_end, 0.05)
+    sim_i, state_i, _ = cell("implicit", shrinkage="many_body")
+    implicit, stats = run(sim_i, dataclasses.replace(state_i, dt=jnp.asarray(t_end / 10)), params, 10)
+    assert not bool(stats.failed) and not bool(implicit.sintering.unbalanced)
+    x0 = np.asarray(state.particles.positions)
+    u_e, u_i = (np.asarray(s.particles.positions) - x0 for s in (explicit, implicit))
+    assert np.abs(u_e).max() > 1e-7  # m: the cell did shrink
+    np.testing.assert_allclose(u_i, u_e, rtol=0, atol=1e-4 * np.abs(u_e).max())
+    np.testing.assert_allclose(np.asarray(implicit.contacts.neck), np.asarray(explicit.contacts.neck), rtol=1e-4)
+    recent = np.asarray(implicit.sintering.recent_displacements)
+    assert np.all(np.abs(recent).max(axis=(1, 2)) > 0)  # the last steps' displacements, newest first
 
 
 C_TABLE = materials.tabulated([300.0, 1300.0], [500.0, 900.0])

@@ -116,11 +116,20 @@ def _linear(physics: Physics) -> bool:
 
 
 class _Slow(NamedTuple):
-    """What a step advances: temperatures ``[n]`` (K), the contacts (necks), positions ``[n, 3]`` (m)."""
+    """What a step advances: temperatures ``[n]`` (K), the contacts (necks), positions ``[n, 3]`` (m), and with
+    many-body shrinkage the last steps' displacements (:attr:`sintercond.sim.neck_growth.NeckState.recent_displacements`,
+    the start of the next balances)."""
 
     temperature: jax.Array
     contacts: object
     positions: jax.Array
+    recent: jax.Array | None = None
+
+
+def _slow(state: SimState) -> _Slow:
+    """The :class:`_Slow` part of ``state``."""
+    recent = None if state.sintering is None else state.sintering.recent_displacements
+    return _Slow(state.particles.temperature, state.contacts, state.particles.positions, recent)
 
 
 def _at(state: SimState, slow: _Slow, t) -> SimState:
@@ -174,7 +183,8 @@ def _grow(physics: Physics, prep: Prepared, state: SimState, start: _Slow, tempe
     if physics.sintering is None:
         return start.contacts, start.positions
     spec = physics.sintering
-    carried = dataclasses.replace(state.sintering, interval_temperature=start.temperature)
+    carried = dataclasses.replace(state.sintering, interval_temperature=start.temperature,
+                                  recent_displacements=start.recent)
     contacts = start.contacts
     grown = neck_growth.grow_necks(
         spec, neck_growth.law_params(spec, prep.params.sintering), carried, contacts.pairs, contacts.neck, True,
@@ -190,7 +200,7 @@ def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, d
 
     def iterate(_, temperature):
         contacts, positions = _grow(physics, prep, state, start, temperature, duration)
-        here = _at(state, _Slow(temperature, contacts, positions), t)
+        here = _at(state, _Slow(temperature, contacts, positions, start.recent), t)
         enthalpy, capacity = _enthalpy(physics, prep, here.particles, temperature)
         power, op = _power_and_operator(physics, here, prep)
         residual = (enthalpy - rhs) / dh - power
@@ -206,7 +216,7 @@ def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, d
     else:  # a loop, not unrolled: the compiled stage stays one iteration long
         temperature = jax.lax.fori_loop(0, physics.conduction.picard, iterate, temperature)
     contacts, positions = _grow(physics, prep, state, start, temperature, duration)
-    slow = _Slow(temperature, contacts, positions)
+    slow = _Slow(temperature, contacts, positions, start.recent)
     enthalpy, capacity = _enthalpy(physics, prep, state.particles, temperature)
     _, op = _power_and_operator(physics, _at(state, slow, t), prep)
     return slow, enthalpy, op._replace(diagonal=op.diagonal + capacity / dh)
@@ -263,6 +273,8 @@ def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow,
     coefficients = tuple(jnp.asarray(c, dtype) for c in ([0.0, _BDF_G], [1.0, -_BDF_N], [1.0, 0.0], [GAMMA, 1.0],
                                                          [GAMMA, 1.0 - GAMMA]))
     (end, enthalpy_1), (enthalpies, ops) = jax.lax.scan(stage, (start, enthalpy_n), coefficients)
+    if start.recent is not None:  # the step's many-body displacement starts the next steps' balances
+        end = end._replace(recent=neck_growth.pushed(start.recent, end.positions - start.positions))
     if not estimate:
         return end, jnp.zeros((), dtype)
     enthalpy_g = enthalpies[0]
@@ -291,7 +303,8 @@ def _interval_end(physics: Physics, state: SimState, slow: _Slow, steps) -> SimS
     new = dataclasses.replace(_with(state, slow), step=state.step + steps)
     if physics.sintering is None:
         return new
-    carried = neck_growth.remember_displacement(state.sintering, slow.positions - state.particles.positions)
+    carried = state.sintering if slow.recent is None else dataclasses.replace(state.sintering,
+                                                                               recent_displacements=slow.recent)
     return dataclasses.replace(new, sintering=dataclasses.replace(
         carried, interval_temperature=slow.temperature, interval_start=new.step))
 
@@ -299,7 +312,7 @@ def _interval_end(physics: Physics, state: SimState, slow: _Slow, steps) -> SimS
 def fixed_step(physics: Physics, state: SimState, prep: Prepared) -> SimState:
     """One TR-BDF2 step of the state's ``dt`` without error control: the fixed implicit step of a spec with
     sources, necks or property tables (:func:`needs_tr_bdf2`)."""
-    slow = _Slow(state.particles.temperature, state.contacts, state.particles.positions)
+    slow = _slow(state)
     end, _ = tr_bdf2_step(physics, state, prep, slow, state.time, state.dt)
     return _interval_end(physics, state, end, 1)
 
@@ -361,7 +374,7 @@ def _adapt(physics: Physics, state: SimState, prep: Prepared, steps: int, first_
         return (t_new, slow, h_next, accepted + ok.astype(jnp.int32), rejected + (~ok).astype(jnp.int32), failed,
                 times, sizes)
 
-    slow = _Slow(state.particles.temperature, state.contacts, state.particles.positions)
+    slow = _slow(state)
     zero = jnp.zeros((), jnp.int32)
     h0 = jnp.minimum(jnp.asarray(first_step, dtype), t_end - t0)
     buffer = jnp.zeros((record,), dtype)
@@ -380,7 +393,7 @@ def _replay(physics: Physics, state: SimState, prep: Prepared, times, sizes, acc
         return jax.lax.cond(k < accepted, lambda s: tr_bdf2_step(physics, state, prep, s, t, h, estimate=False)[0],
                             lambda s: s, slow), None
 
-    slow = _Slow(state.particles.temperature, state.contacts, state.particles.positions)
+    slow = _slow(state)
     slow, _ = jax.lax.scan(jax.checkpoint(body, prevent_cse=False), slow,
                            (times, sizes, jnp.arange(times.shape[0], dtype=accepted.dtype)))
     return slow

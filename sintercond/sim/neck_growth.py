@@ -658,18 +658,15 @@ def with_displacement(carried: NeckState, grown: Grown) -> NeckState:
     if grown.displacement is None:
         return carried
     return dataclasses.replace(
-        remember_displacement(carried, grown.displacement), unbalanced=carried.unbalanced | grown.unbalanced,
+        carried, recent_displacements=pushed(carried.recent_displacements, grown.displacement),
+        unbalanced=carried.unbalanced | grown.unbalanced,
         balance_iterations=grown.iterations.astype(carried.balance_iterations.dtype))
 
 
-def remember_displacement(carried: NeckState, displacement) -> NeckState:
-    """``carried`` with ``displacement`` ``[n, 3]`` (m) the newest of its recent many-body displacements (the start
-    of the next balances, :func:`recent_start`); ``carried`` itself without many-body shrinkage."""
-    recent = carried.recent_displacements
-    if recent is None:
-        return carried
-    return dataclasses.replace(carried,
-                               recent_displacements=jnp.concatenate([displacement.astype(recent.dtype)[None], recent[:-1]]))
+def pushed(recent, displacement):
+    """``recent`` ``[k, n, 3]`` (:attr:`NeckState.recent_displacements`) with ``displacement`` ``[n, 3]`` (m) the
+    newest, the oldest dropped."""
+    return jnp.concatenate([displacement.astype(recent.dtype)[None], recent[:-1]])
 
 
 def met_necks(geometry, neck, neck_overlap, moved, radii):
@@ -846,5 +843,5 @@ __all__ = ["BLOCK_FLOOR", "Grown", "NECK_STARTS", "NeckState", "POINT_CONTACT_GA
            "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering", "balance_blocks", "balance_displacements",
            "check_stable", "check_table", "conjugate_gradients", "grow_necks", "law_params", "met_necks",
            "neck_state", "neck_statistics", "necks_at_cap", "pair_necks", "pair_necks_at_cap", "particle_neck_ratio",
-           "recent_start", "remember_displacement", "validate_pair_necks", "validate_sintering", "with_displacement",
+           "pushed", "recent_start", "validate_pair_necks", "validate_sintering", "with_displacement",
            "with_pair_necks"]
