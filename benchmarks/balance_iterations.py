@@ -8,12 +8,13 @@ steps of 0.2 ms. Each variant runs ``--updates`` neck updates in one jitted roll
 iterations (``NeckState.balance_iterations``) and the rollout's wall time (best of 3, after a compile):
 
 * ``block Jacobi, recent start`` (the library): each particle's 3x3 block inverted, the solve started from the
-  Galerkin projection on the last two updates' displacements;
+  Galerkin projection on the last four updates' displacements;
 * ``block Jacobi, from rest``: the same preconditioner, no start;
 * ``diagonal, from rest``: each particle's dashpot sum as the preconditioner, from rest (the iterations of the solve
   as it was before; :func:`jax.scipy.sparse.linalg.cg` takes the same);
 * ``as before``: the same, its forces scattered from the pairs instead of gathered on the table's rows: the solve
-  as it was before, the obvious alternative.
+  as it was before (the obvious alternative), in the library's counted conjugate gradients (the diagonal as a
+  3x3 block), not jax.scipy's cg, which takes the same iterations.
 
 Every variant but the last gathers the forces on the table's rows.
 
@@ -58,7 +59,7 @@ def variant(name):
     """The library's balance with its preconditioner and start swapped for the variant's."""
     saved = neck_growth.balance_blocks, neck_growth.recent_start, neck_growth.balance_displacements
     if name != "block Jacobi, recent start":
-        neck_growth.recent_start = lambda operator, recent, dtype: jnp.zeros_like
+        neck_growth.recent_start = lambda *args: jnp.zeros_like
     if name in ("diagonal, from rest", "as before"):
         neck_growth.balance_blocks = _diagonal_blocks
     if name == "as before":  # the table (the last argument) left out: the forces scattered from the pairs

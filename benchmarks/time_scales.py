@@ -13,7 +13,8 @@ network, compile, run, outputs) and of its run phase (``summary.json``'s ``wall_
 the outputs written between chunks). The pour is the same in both (the seed; the benchmark checks the packings
 are identical).
 
-Usage: ``python benchmarks/time_scales.py [--work DIR] [--write]``.
+Usage: ``python benchmarks/time_scales.py [--work DIR] [--write] [--lateral-size M] [--no-in-process]``
+(``--lateral-size 2.5e-3``: a rolled bed of about 1e4 particles, the section ``time_scales_wide``).
 """
 
 from __future__ import annotations

@@ -159,7 +159,7 @@ def test_a_cell_on_the_ramp_with_growing_necks_matches_a_fine_explicit_run():
 @pytest.mark.slow
 def test_a_shrinking_cell_on_the_ramp_matches_a_fine_explicit_run_and_records_its_displacements():
     """Many-body shrinkage under the adaptive step: each stage's balance starts from the accepted steps'
-    displacements (NeckState.recent_displacements), and the necks and the shrinkage follow the explicit run's."""
+    displacements (NeckState.recent_balances), and the necks and the shrinkage follow the explicit run's."""
     t_end = 1.9
     sim_e, state, params = cell("explicit", shrinkage="many_body")
     explicit, n = explicit_reference(sim_e, state, params, t_end, 0.05)
@@ -171,7 +171,7 @@ def test_a_shrinking_cell_on_the_ramp_matches_a_fine_explicit_run_and_records_it
     assert np.abs(u_e).max() > 1e-7  # m: the cell did shrink
     np.testing.assert_allclose(u_i, u_e, rtol=0, atol=1e-4 * np.abs(u_e).max())
     np.testing.assert_allclose(np.asarray(implicit.contacts.neck), np.asarray(explicit.contacts.neck), rtol=1e-4)
-    recent = np.asarray(implicit.sintering.recent_displacements)
+    recent = np.asarray(implicit.sintering.recent_balances)
     assert np.all(np.abs(recent).max(axis=(1, 2)) > 0)  # the last steps' displacements, newest first
 
 

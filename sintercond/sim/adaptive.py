@@ -117,19 +117,23 @@ def _linear(physics: Physics) -> bool:
 
 class _Slow(NamedTuple):
     """What a step advances: temperatures ``[n]`` (K), the contacts (necks), positions ``[n, 3]`` (m), and with
-    many-body shrinkage the last steps' displacements (:attr:`sintercond.sim.neck_growth.NeckState.recent_displacements`,
-    the start of the next balances)."""
+    many-body shrinkage the last steps' balances (``recent``, as
+    :attr:`sintercond.sim.neck_growth.NeckState.recent_balances`: the start of the next balances) and the sum of
+    this step's stages' (``balance``, ``B u`` of :func:`sintercond.sim.neck_growth.balance_displacements`)."""
 
     temperature: jax.Array
     contacts: object
     positions: jax.Array
     recent: jax.Array | None = None
+    balance: jax.Array | None = None
 
 
 def _slow(state: SimState) -> _Slow:
     """The :class:`_Slow` part of ``state``."""
-    recent = None if state.sintering is None else state.sintering.recent_displacements
-    return _Slow(state.particles.temperature, state.contacts, state.particles.positions, recent)
+    recent = None if state.sintering is None else state.sintering.recent_balances
+    positions = state.particles.positions
+    return _Slow(state.particles.temperature, state.contacts, positions, recent,
+                 None if recent is None else jnp.zeros_like(positions))
 
 
 def _at(state: SimState, slow: _Slow, t) -> SimState:
@@ -178,20 +182,21 @@ def _power_and_operator(physics: Physics, state: SimState, prep: Prepared):
 
 
 def _grow(physics: Physics, prep: Prepared, state: SimState, start: _Slow, temperature, duration):
-    """The necks (and positions, many-body) after ``duration`` (s) from ``start``, the pair temperature the mean of
-    ``start``'s and ``temperature`` (:func:`sintercond.sim.neck_growth.grow_necks`)."""
+    """``(contacts, positions, balance)``: the necks (and positions and ``B u``, many-body; else None) after
+    ``duration`` (s) from ``start``, the pair temperature the mean of ``start``'s and ``temperature``
+    (:func:`sintercond.sim.neck_growth.grow_necks`)."""
     if physics.sintering is None:
-        return start.contacts, start.positions
+        return start.contacts, start.positions, None
     spec = physics.sintering
     carried = dataclasses.replace(state.sintering, interval_temperature=start.temperature,
-                                  recent_displacements=start.recent)
+                                  recent_balances=start.recent)
     contacts = start.contacts
     grown = neck_growth.grow_necks(
         spec, neck_growth.law_params(spec, prep.params.sintering), carried, contacts.pairs, contacts.neck, True,
         positions=start.positions, radii=state.particles.radii, end_temperature=temperature, duration=duration,
         table=(contacts.slot_pair, contacts.neighbors))
     positions = start.positions if grown.displacement is None else start.positions + grown.displacement
-    return dataclasses.replace(contacts, neck=grown.neck, overlap=grown.neck_overlap), positions
+    return dataclasses.replace(contacts, neck=grown.neck, overlap=grown.neck_overlap), positions, grown.balance
 
 
 def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, duration, tol):
@@ -199,8 +204,8 @@ def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, d
     ``(slow, H, operator)``, the operator (the stage matrix) at its solution."""
 
     def iterate(_, temperature):
-        contacts, positions = _grow(physics, prep, state, start, temperature, duration)
-        here = _at(state, _Slow(temperature, contacts, positions, start.recent), t)
+        contacts, positions, _ = _grow(physics, prep, state, start, temperature, duration)
+        here = _at(state, _Slow(temperature, contacts, positions), t)
         enthalpy, capacity = _enthalpy(physics, prep, here.particles, temperature)
         power, op = _power_and_operator(physics, here, prep)
         residual = (enthalpy - rhs) / dh - power
@@ -215,8 +220,8 @@ def _stage(physics, prep, state, fixed, held, start: _Slow, guess, rhs, dh, t, d
         temperature = iterate(0, temperature)
     else:  # a loop, not unrolled: the compiled stage stays one iteration long
         temperature = jax.lax.fori_loop(0, physics.conduction.picard, iterate, temperature)
-    contacts, positions = _grow(physics, prep, state, start, temperature, duration)
-    slow = _Slow(temperature, contacts, positions, start.recent)
+    contacts, positions, balance = _grow(physics, prep, state, start, temperature, duration)
+    slow = _Slow(temperature, contacts, positions, start.recent, None if balance is None else start.balance + balance)
     enthalpy, capacity = _enthalpy(physics, prep, state.particles, temperature)
     _, op = _power_and_operator(physics, _at(state, slow, t), prep)
     return slow, enthalpy, op._replace(diagonal=op.diagonal + capacity / dh)
@@ -254,7 +259,8 @@ def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow,
     rtol, atol = physics.conduction.rtol, physics.conduction.atol
     tol = _solver_tolerance(physics, slow.temperature.dtype)
     fixed, held = _held_values(physics, state, prep, t + 0.5 * h)  # a step never crosses a jump of the ramp
-    start = slow._replace(temperature=jnp.where(fixed, held, slow.temperature))
+    start = slow._replace(temperature=jnp.where(fixed, held, slow.temperature),
+                          balance=None if slow.balance is None else jnp.zeros_like(slow.balance))
     here = _at(state, start, t)
     enthalpy_n, _ = _enthalpy(physics, prep, here.particles, start.temperature)
     power_n, _ = _power_and_operator(physics, here, prep)
@@ -273,8 +279,8 @@ def tr_bdf2_step(physics: Physics, state: SimState, prep: Prepared, slow: _Slow,
     coefficients = tuple(jnp.asarray(c, dtype) for c in ([0.0, _BDF_G], [1.0, -_BDF_N], [1.0, 0.0], [GAMMA, 1.0],
                                                          [GAMMA, 1.0 - GAMMA]))
     (end, enthalpy_1), (enthalpies, ops) = jax.lax.scan(stage, (start, enthalpy_n), coefficients)
-    if start.recent is not None:  # the step's many-body displacement starts the next steps' balances
-        end = end._replace(recent=neck_growth.pushed(start.recent, end.positions - start.positions))
+    if start.recent is not None:  # the step's many-body balances start the next steps'
+        end = end._replace(recent=neck_growth.pushed(start.recent, end.balance))
     if not estimate:
         return end, jnp.zeros((), dtype)
     enthalpy_g = enthalpies[0]
@@ -304,7 +310,7 @@ def _interval_end(physics: Physics, state: SimState, slow: _Slow, steps) -> SimS
     if physics.sintering is None:
         return new
     carried = state.sintering if slow.recent is None else dataclasses.replace(state.sintering,
-                                                                               recent_displacements=slow.recent)
+                                                                               recent_balances=slow.recent)
     return dataclasses.replace(new, sintering=dataclasses.replace(
         carried, interval_temperature=slow.temperature, interval_start=new.step))
 

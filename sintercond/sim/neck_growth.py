@@ -54,13 +54,15 @@ approach): its neck does not shrink (it keeps its size, and its recorded approac
 follow the balance.
 The balance does not fix every motion: rigid motions of a cluster (the sintering forces have no net force or
 torque) and, in a sparse packing, floppy modes (a particle sliding sideways on a single contact) cost nothing.
-The first update leaves them out: its displacements are those of least ``sum_i u_i^T B_i u_i``, as if each
-particle felt a vanishing drag in proportion to its dashpots along their directions (the conjugate-gradient
-iterates, preconditioned by the blocks and started from rest, stay in the range of the system), so a free pair or
-a symmetric cell keeps its weighted centre. Later updates start from the earlier displacements and carry their
-free motions along, to within the change of the blocks from one update to the next; no contact moves with them.
+The solve leaves them out: its displacements are those of least ``sum_i u_i^T B_i u_i``, as if each particle
+felt a vanishing drag in proportion to its dashpots along their directions (the conjugate-gradient iterates,
+preconditioned by the blocks, keep ``B u`` in the range of the system, and so does the start from the recent
+balances, :func:`balance_displacements`), so a free pair or a symmetric cell keeps its weighted centre. The free
+motions depend on the normals only, not on the weights: as the particles move they turn, and the starts carry a
+little of the earlier updates' free motions along (0.1 % of the displacements on a heated 6^3 lattice after 400 and
+800 updates); no contact moves with them.
 Reverse-mode gradients solve the system against a cotangent that can reach those free motions, where it is singular:
-that solve adds a drag of ``GRADIENT_DRAG`` times each particle's dashpots, so a gradient treats the choice of the
+that solve adds a drag of ``GRADIENT_DRAG`` times each particle's block, so a gradient treats the choice of the
 free motions as fixed (exact for distances, necks, shrinkage and temperatures away from position-dependent sources;
 for absolute positions, to within the choice's own dependence on the weights).
 The components given in ``NeckState.supports`` do not move (particles resting on a plate:
@@ -149,10 +151,16 @@ BLOCK_FLOOR = 1e-3
 block invertible where the particle's contacts leave a direction free, and changes the preconditioner, not the
 balance."""
 
-RECENT_DISPLACEMENTS = 4
-"""How many of the last many-body updates' displacements the next balance starts from (:func:`recent_start`):
-on the heated lattice of ``benchmarks/balance_iterations.py`` they leave a start whose residual is 1e-5 to 1e-7 of
-the right-hand side's; ``[4, n, 3]`` floats carried in :class:`NeckState`."""
+RECENT_BALANCES = 4
+"""How many of the last many-body updates the next balance starts from (:func:`recent_start`): two leave more
+iterations on the heated lattice of ``benchmarks/balance_iterations.py`` (56 against 45 an update at 10,648
+spheres), more than four add little; ``[4, n, 3]`` floats carried in :class:`NeckState`."""
+
+RAYLEIGH_FLOOR = 1e-8
+"""A recent balance's remainder whose ``v^T A v / v^T B v`` is below this (:func:`recent_start`) is mostly free
+motion (what the balance does not fix: the contacts changed since it was taken): it is left out of the start,
+whose normalisation would otherwise blow it up. The balance's own smooth modes have some ``1 / L^2`` for a packing
+``L`` particles across, far above it."""
 
 GRADIENT_DRAG = 1e-8
 """The drag, relative to each particle's dashpots, that makes the reverse-mode solve of the many-body balance
@@ -233,9 +241,9 @@ class NeckState:
         (None without one).
       interval_length: int scalar, the steps of the current growth interval with ``Sintering.neck_rtol`` (1 at the
         start; unused without it).
-      recent_displacements: ``[k, n, 3]`` the displacements of the last :data:`RECENT_DISPLACEMENTS` many-body
-        updates (m), newest first (zeros before them), the next balance's start (:func:`recent_start`); None
-        without many-body shrinkage.
+      recent_balances: ``[k, n, 3]`` the last :data:`RECENT_BALANCES` many-body updates' displacements times
+        their blocks, ``B u`` (:func:`balance_displacements`), newest first (zeros before them): the next
+        balance's start (:func:`recent_start`); None without many-body shrinkage.
       balance_iterations: int scalar, the conjugate-gradient iterations of the last many-body balance of an
         explicit step (the adaptive integrator's stages do not record theirs; None without many-body shrinkage).
     """
@@ -248,7 +256,7 @@ class NeckState:
     unbalanced: Any = None
     start_positions: Any = None
     interval_length: Any = None
-    recent_displacements: Any = None
+    recent_balances: Any = None
     balance_iterations: Any = None
 
 
@@ -280,8 +288,8 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, pos
                      unbalanced=None if supports is None else jnp.zeros((), bool),
                      start_positions=start,
                      interval_length=jnp.asarray(1, step_type),
-                     recent_displacements=None if supports is None else jnp.zeros(
-                         (RECENT_DISPLACEMENTS,) + start.shape, start.dtype),
+                     recent_balances=None if supports is None else jnp.zeros(
+                         (RECENT_BALANCES,) + start.shape, start.dtype),
                      balance_iterations=None if supports is None else jnp.zeros((), step_type))
 
 
@@ -439,13 +447,18 @@ def _pair_normals(pairs, positions):
 def balance_displacements(pairs, positions, weights, free_approach, supports, tol, normal=None, recent=None,
                           table=None):
     """Displacements ``[n, 3]`` (m) of the many-body balance ``sum_j w_ij [(u_i - u_j) . n_ij - dh_free,ij] n_ij = 0``
-    on the components that are not ``supports`` (module docstring), whether its solve fell short, and its
-    iterations.
+    on the components that are not ``supports`` (module docstring), whether its solve fell short, its iterations,
+    and what the next balances start from.
 
     Preconditioned conjugate gradients (:func:`conjugate_gradients`), each particle's 3x3 block of the system
     inverted (block Jacobi, :func:`balance_blocks`), started from the balance's Galerkin projection on the
-    ``recent`` displacements (:func:`recent_start`): over an interval the displacements change little from one
-    update to the next, so the start leaves a residual some 1e-5 to 1e-7 of the right-hand side's instead of 1.
+    ``recent`` balances' displacements (:func:`recent_start`): over an interval the displacements change little
+    from one update to the next, so the start leaves a small fraction of the right-hand side as its residual.
+    They are kept as ``B u`` (``B`` each particle's block): the solve's iterates ``u`` have ``B u`` in the range of
+    the system, so the start ``B_new^-1 sum_k c_k B_k u_k`` has no part along the free motions (which do not
+    change with the weights, only with the normals); kept as ``u``, the free motions the blocks' change leaves in
+    each start were carried on and extrapolated (8 % of the displacements after 400 updates of a heated 6^3
+    lattice, against 0.1 % as ``B u``).
 
     Args:
       pairs: ``[c, 2]`` the contacts; positions ``[n, 3]`` (m) give their normals ``n_ij`` (``i`` to ``j``).
@@ -455,14 +468,14 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
       tol: relative residual of the conjugate-gradient solve.
       normal: ``[c, 3]`` the unit normals, if given (a half pair list's, whose padding pairs have weight 0);
         else from ``positions``.
-      recent: ``[k, n, 3]`` earlier updates' displacements (m) spanning the start, or None (start from rest).
+      recent: ``[k, n, 3]`` earlier balances' ``B u`` (the last return value), or None (start from rest).
       table: ``(slot_pair, neighbors)`` ``[n, m]`` of a static table listing each pair in both its rows
         (:class:`sintercond.state.LiftedContacts`), or None: the forces on the particles are then gathered from
         each row's slots instead of scattered from the pairs (the same sums, some 2.5 times faster on a CPU).
 
     Returns:
-      ``(u, unbalanced, iterations)``: the displacements, a bool scalar set when the residual exceeds ``10 tol``,
-      and the iterations the solve took (int scalar).
+      ``(u, unbalanced, iterations, balance)``: the displacements, a bool scalar set when the residual exceeds
+      ``10 tol``, the iterations the solve took (int scalar), and ``B u`` ``[n, 3]`` (for ``recent``).
     """
     i, j = pairs[:, 0], pairs[:, 1]
     normal = _pair_normals(pairs, positions) if normal is None else normal
@@ -488,27 +501,31 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
 
     rhs = jnp.where(movable, on_particles(weights * free_approach), 0.0)
     blocks, inverse_blocks = balance_blocks(pairs, normal, weights, movable)
-    start = recent_start(operator, recent, positions.dtype)
+    if recent is not None:  # B_new^-1 B_k u_k: each u_k less its free motions; none on a particle without contacts
+        trace = jnp.zeros(positions.shape[:1], positions.dtype).at[i].add(weights).at[j].add(weights)
+        recent = jnp.where(movable & (trace[:, None] > 0), jnp.einsum("nab,knb->kna", inverse_blocks, recent), 0.0)
+    start = recent_start(operator, recent, positions.dtype, blocks)
+    # a start farther from the balance than rest (the contacts changed since the recent balances) is not taken
+    take_start = jax.lax.stop_gradient(jnp.linalg.norm(rhs - operator(start(rhs))) <= jnp.linalg.norm(rhs))
     maxiter = max(10 * positions.size, MIN_BALANCE_ITERATIONS)
 
     def solve(matvec, b):
-        x, iterations = conjugate_gradients(matvec, b, start(b), lambda r: jnp.einsum("nab,nb->na", inverse_blocks, r),
-                                            tol, maxiter)
+        x, iterations = conjugate_gradients(matvec, b, jnp.where(take_start, start(b), 0.0),
+                                            lambda r: jnp.einsum("nab,nb->na", inverse_blocks, r), tol, maxiter)
         return x, iterations
 
     # reverse mode solves the system against a cotangent that need not lie in its range (the free motions):
-    # there the drag that selects the solution is made finite, GRADIENT_DRAG times the dashpots
-    trace = jnp.zeros(positions.shape[:1], positions.dtype).at[i].add(weights).at[j].add(weights)[:, None]
-    scale = jnp.where(movable & (trace > 0), trace, 1.0)
-    drag = max(GRADIENT_DRAG, float(jnp.finfo(positions.dtype).eps) ** 0.5) * jnp.where(movable, scale, 0.0)
+    # there the drag that selects the solution is made finite, GRADIENT_DRAG times the blocks (the norm in which
+    # the forward solve leaves the free motions out)
+    drag = max(GRADIENT_DRAG, float(jnp.finfo(positions.dtype).eps) ** 0.5)
 
     def transpose_solve(matvec, b):
-        return solve(lambda v: matvec(v) + drag * v, b)
+        return solve(lambda v: matvec(v) + drag * jnp.where(movable, jnp.einsum("nab,nb->na", blocks, v), 0.0), b)
 
     u, iterations = jax.lax.custom_linear_solve(operator, rhs, solve, transpose_solve, has_aux=True)
     residual = jnp.linalg.norm(rhs - operator(u))
     converged = (residual <= 10.0 * tol * jnp.linalg.norm(rhs)) & jnp.all(jnp.isfinite(u))
-    return u, ~converged, iterations
+    return u, ~converged, iterations, jnp.einsum("nab,nb->na", blocks, u)
 
 
 def balance_blocks(pairs, normal, weights, movable):
@@ -522,19 +539,21 @@ def balance_blocks(pairs, normal, weights, movable):
     outer = weights[:, None, None] * normal[:, :, None] * normal[:, None, :]
     n = movable.shape[0]
     blocks = jnp.zeros((n, 3, 3), normal.dtype).at[i].add(outer).at[j].add(outer)
-    held = movable[:, :, None] & movable[:, None, :]
+    both_movable = movable[:, :, None] & movable[:, None, :]
     trace = jnp.trace(blocks, axis1=1, axis2=2)
     floor = jnp.where(trace > 0, BLOCK_FLOOR * trace, 1.0)
     diagonal = jnp.where(movable, floor[:, None], 1.0)
-    blocks = jnp.where(held, blocks, 0.0) + diagonal[:, :, None] * jnp.eye(3, dtype=normal.dtype)
+    blocks = jnp.where(both_movable, blocks, 0.0) + diagonal[:, :, None] * jnp.eye(3, dtype=normal.dtype)
     return blocks, jnp.linalg.inv(blocks)
 
 
-def recent_start(operator, recent, dtype):
+def recent_start(operator, recent, dtype, blocks=None):
     """The start of a balance's solve as a linear map of its right-hand side ``b``: the Galerkin projection of the
     solution on the span of the ``recent`` displacements ``[k, n, 3]`` (``V (V^T A V)^-1 V^T b``, ``A`` the
     ``operator``; the basis A-orthonormalised by Gram-Schmidt, a displacement whose remainder keeps less than 1000
-    machine epsilons of its energy ``v^T A v`` dropped: it repeats the others, or is 0), or 0 without them.
+    machine epsilons of its energy ``v^T A v`` dropped: it repeats the others, or is 0; and, given the ``blocks``
+    ``B``, one whose remainder's ``v^T A v / v^T B v`` is below :data:`RAYLEIGH_FLOOR`: mostly free motion), or 0
+    without them.
     Linear in ``b``, so the solve stays a linear map (:func:`jax.lax.custom_linear_solve`); the displacements are
     constants to it (their derivative does not enter the solution's, which the solve's own implicit derivative
     gives)."""
@@ -550,6 +569,8 @@ def recent_start(operator, recent, dtype):
             v, av = v - c * q, av - c * aq
         norm_sq = jnp.vdot(v, av)
         keep = norm_sq > floor * energy
+        if blocks is not None:  # a remainder that is mostly free motion would bring it, amplified, into the start
+            keep = keep & (norm_sq > RAYLEIGH_FLOOR * jnp.vdot(v, jnp.einsum("nab,nb->na", blocks, v)))
         inverse_norm = jnp.where(keep, jax.lax.rsqrt(jnp.where(keep, norm_sq, 1.0)), 0.0)
         basis.append(v * inverse_norm)
         images.append(av * inverse_norm)
@@ -558,29 +579,32 @@ def recent_start(operator, recent, dtype):
 
 def conjugate_gradients(matvec, b, x0, preconditioner, tol, maxiter):
     """``(x, iterations)``: preconditioned conjugate gradients on the symmetric positive semi-definite ``matvec``
-    from ``x0``, until the residual is at most ``tol |b|`` or after ``maxiter`` iterations.
+    from ``x0``, until the residual is at most ``tol |b|``, after ``maxiter`` iterations, or when a search
+    direction has no positive curvature left (round-off, or a right-hand side outside the range).
 
     :func:`jax.scipy.sparse.linalg.cg` with its iterations counted (it does not report them)."""
     threshold = (tol * jnp.linalg.norm(b)) ** 2
 
     def unfinished(carry):
-        _, r, _, _, k = carry
-        return (jnp.vdot(r, r) > threshold) & (k < maxiter)
+        _, r, _, _, k, broken = carry
+        return (jnp.vdot(r, r) > threshold) & (k < maxiter) & ~broken
 
     def iterate(carry):
-        x, r, p, rz, k = carry
+        x, r, p, rz, k, _ = carry
         ap = matvec(p)
         curvature = jnp.vdot(p, ap)
-        alpha = jnp.where(curvature > 0, rz / jnp.where(curvature > 0, curvature, 1.0), 0.0)
+        broken = ~(curvature > 0) | ~(rz > 0)  # no descent left (or not finite): the caller checks the residual
+        alpha = jnp.where(broken, 0.0, rz / jnp.where(broken, 1.0, curvature))
         x, r = x + alpha * p, r - alpha * ap
         z = preconditioner(r)
         rz_new = jnp.vdot(r, z)
-        p = z + jnp.where(rz > 0, rz_new / jnp.where(rz > 0, rz, 1.0), 0.0) * p
-        return x, r, p, rz_new, k + 1
+        p = z + jnp.where(broken, 0.0, rz_new / jnp.where(broken, 1.0, rz)) * p
+        return x, r, p, rz_new, k + 1, broken
 
     r = b - matvec(x0)
     z = preconditioner(r)
-    x, _, _, _, iterations = jax.lax.while_loop(unfinished, iterate, (x0, r, z, jnp.vdot(r, z), jnp.zeros((), jnp.int32)))
+    start = (x0, r, z, jnp.vdot(r, z), jnp.zeros((), jnp.int32), jnp.zeros((), bool))
+    x, _, _, _, iterations, _ = jax.lax.while_loop(unfinished, iterate, start)
     return x, iterations
 
 
@@ -600,13 +624,13 @@ def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_star
     weights = jnp.where(growing & active, law.force(0.5 * (a_start + a_free), r_i, r_j, params)
                         / jnp.maximum(free, jnp.where(growing, STIFF_CONTACT_RATIO * fastest, 1.0)), 0.0)
     tol = max(spec.balance_tol, 50.0 * float(jnp.finfo(positions.dtype).eps))
-    u, unbalanced, iterations = balance_displacements(pairs, positions, weights, free, supports, tol, normal,
-                                                      recent, table)
+    u, unbalanced, iterations, balance = balance_displacements(pairs, positions, weights, free, supports, tol,
+                                                               normal, recent, table)
     approach = jnp.sum((u[i] - u[j]) * normal, axis=1)
     cap = jnp.minimum(law.cap(r_i, r_j, params), jnp.minimum(r_i, r_j))
     h = jnp.clip(h_start + approach, h_start, sintering.neck_overlap(cap, r_i, r_j))
     a = jnp.where(active, jnp.clip(neck_radius(r_i, r_j, h), a_start, cap), a_start)
-    return a, u, unbalanced, iterations
+    return a, u, unbalanced, iterations, balance
 
 
 def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, active, *, positions, radii,
@@ -620,7 +644,7 @@ def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, a
     and at the end (``end_temperature`` ``[n]``, K; module docstring). Each contact grows on its own
     (``shrinkage="independent"``) or in the many-body balance that moves the particles, with the unit normals
     ``normal`` ``[c, 3]`` if given, else from ``positions`` ``[n, 3]`` (m); the balance starts from
-    ``carried.recent_displacements`` and sums its forces on a static packing's ``table`` (``(slot_pair,
+    ``carried.recent_balances`` and sums its forces on a static packing's ``table`` (``(slot_pair,
     neighbors)``, :func:`balance_displacements`) when given.
     """
     i, j = pairs[:, 0], pairs[:, 1]
@@ -628,28 +652,30 @@ def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, a
     temperature = _interval_temperature(carried, end_temperature, i, j)
     active = jnp.broadcast_to(jnp.asarray(active), i.shape)
     a_start = jnp.where(active, neck, 0.0)
-    u = unbalanced = iterations = None
+    u = unbalanced = iterations = balance = None
     if spec.shrinkage == "many_body":
         normal = _pair_normals(pairs, positions) if normal is None else normal
-        a, u, unbalanced, iterations = _balanced_necks(spec, params, pairs, normal, active, a_start, r_i, r_j,
+        a, u, unbalanced, iterations, balance = _balanced_necks(spec, params, pairs, normal, active, a_start, r_i, r_j,
                                                        temperature, duration, positions, carried.supports,
-                                                       carried.recent_displacements, table)
+                                                       carried.recent_balances, table)
     else:
         a = _grown(spec, params, a_start, r_i, r_j, temperature, duration)
     a = jnp.where(active, a, 0.0)
-    return Grown(a, jnp.where(active, sintering.neck_overlap(a, r_i, r_j), 0.0), u, unbalanced, iterations)
+    return Grown(a, jnp.where(active, sintering.neck_overlap(a, r_i, r_j), 0.0), u, unbalanced, iterations, balance)
 
 
 class Grown(NamedTuple):
     """What :func:`grow_necks` returns. ``neck``, ``neck_overlap``: ``[c]`` the necks and their approaches ``H(a)``
     (m); with many-body shrinkage ``displacement`` ``[n, 3]`` (m), ``unbalanced`` (bool scalar, the balance fell
-    short) and ``iterations`` (int scalar, its solve's), else None."""
+    short), ``iterations`` (int scalar, its solve's) and ``balance`` (``[n, 3]``, ``B u``: what the next balances
+    start from, :func:`balance_displacements`), else None."""
 
     neck: Any
     neck_overlap: Any
     displacement: Any = None
     unbalanced: Any = None
     iterations: Any = None
+    balance: Any = None
 
 
 def with_displacement(carried: NeckState, grown: Grown) -> NeckState:
@@ -658,15 +684,15 @@ def with_displacement(carried: NeckState, grown: Grown) -> NeckState:
     if grown.displacement is None:
         return carried
     return dataclasses.replace(
-        carried, recent_displacements=pushed(carried.recent_displacements, grown.displacement),
+        carried, recent_balances=pushed(carried.recent_balances, grown.balance),
         unbalanced=carried.unbalanced | grown.unbalanced,
         balance_iterations=grown.iterations.astype(carried.balance_iterations.dtype))
 
 
-def pushed(recent, displacement):
-    """``recent`` ``[k, n, 3]`` (:attr:`NeckState.recent_displacements`) with ``displacement`` ``[n, 3]`` (m) the
-    newest, the oldest dropped."""
-    return jnp.concatenate([displacement.astype(recent.dtype)[None], recent[:-1]])
+def pushed(recent, balance):
+    """``recent`` ``[k, n, 3]`` (:attr:`NeckState.recent_balances`) with ``balance`` ``[n, 3]`` the newest, the
+    oldest dropped."""
+    return jnp.concatenate([balance.astype(recent.dtype)[None], recent[:-1]])
 
 
 def met_necks(geometry, neck, neck_overlap, moved, radii):
@@ -839,7 +865,7 @@ def next_interval_length(spec: Sintering, carried: NeckState, step, start_neck, 
     return jnp.clip(proposed, jnp.asarray(1, steps), longest)
 
 
-__all__ = ["BLOCK_FLOOR", "Grown", "NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "RECENT_DISPLACEMENTS",
+__all__ = ["BLOCK_FLOOR", "Grown", "NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "RAYLEIGH_FLOOR", "RECENT_BALANCES",
            "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering", "balance_blocks", "balance_displacements",
            "check_stable", "check_table", "conjugate_gradients", "grow_necks", "law_params", "met_necks",
            "neck_state", "neck_statistics", "necks_at_cap", "pair_necks", "pair_necks_at_cap", "particle_neck_ratio",
