@@ -75,7 +75,8 @@ def model(n):
     centres, radii, temperature = lattice(n)
     particles = particle_state(centres, radii, temperature, 4430.0)
     physics = simulate.Physics.create(law="rojek", conductance="lifted",
-                                      sintering=neck_growth.Sintering(every=EVERY, shrinkage="many_body"))
+                                      sintering=neck_growth.Sintering(every=EVERY, shrinkage="many_body",
+                                                                                      recent_start=True))
     contacts = simulate.lifted_contacts(physics, centres, radii)
     supports = np.zeros((len(radii), 3), bool)
     supports[:, 2] = centres[:, 2] == centres[:, 2].min()

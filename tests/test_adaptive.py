@@ -111,7 +111,9 @@ def cell(integrator, held_ramp=True, shrinkage="independent", **spec):
     x = r + 2 * r * grid
     physics = simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted", held=True,
                                       held_ramp=held_ramp, integrator=integrator,
-                                      sintering=neck_growth.Sintering(every=1, shrinkage=shrinkage), **spec)
+                                      sintering=neck_growth.Sintering(every=1, shrinkage=shrinkage,
+                                                                      recent_start=shrinkage == "many_body"),
+                                      **spec)
     particles = particle_state(x, np.full(8, r), np.full(8, 845.0), DENSITY, fixed=grid[:, 2] == 0)
     contacts = simulate.lifted_contacts(physics, x, np.full(8, r))
     params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT],

@@ -23,7 +23,8 @@ KINETICS = {"A": 1e-16, "activation_energy": 100.0}
 PSI = np.deg2rad(sintering.KINETIC_LAWS["grain_boundary"].default_params["dihedral_angle"])
 
 
-def packing(x, radii, temperature, supports=None, every=1, dt=1e-3, held=False, kinetics=KINETICS, neck_ratio=0.0):
+def packing(x, radii, temperature, supports=None, every=1, dt=1e-3, held=False, kinetics=KINETICS, neck_ratio=0.0,
+            recent_start=False):
     """A static packing whose contacts touch (or overlap), sintering many-body; ``(sim, state, params)``.
 
     ``held``: every particle held at its temperature (isothermal pairs, the contacts at known temperatures).
@@ -33,7 +34,8 @@ def packing(x, radii, temperature, supports=None, every=1, dt=1e-3, held=False, 
     temperature = np.broadcast_to(np.asarray(temperature, np.float64), radii.shape)
     physics = simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted", held=held,
                                       sintering=neck_growth.Sintering(every=every, shrinkage="many_body",
-                                                                                      balance_tol=1e-12))
+                                                                                      balance_tol=1e-12,
+                                                                                      recent_start=recent_start))
     particles = particle_state(x, radii, temperature, DENSITY, fixed=np.full(len(radii), held) if held else None,
                                fixed_temperature=temperature if held else None)
     contacts = simulate.lifted_contacts(physics, x, radii)
@@ -435,7 +437,8 @@ def test_a_heated_lattice_reports_its_balance_iterations_and_later_updates_take_
     temperature = np.linspace(1000.0, 1300.0, len(x))
     supports = np.zeros((len(x), 3), bool)
     supports[:, 2] = x[:, 2] == x[:, 2].min()
-    sim, state, params = packing(x, radii, temperature, supports=supports, every=5, dt=2e-4, neck_ratio=0.05)
+    sim, state, params = packing(x, radii, temperature, supports=supports, every=5, dt=2e-4, neck_ratio=0.05,
+                                 recent_start=True)
 
     def rollout(s, p):
         return simulate.rollout(sim, s, p, 60, simulate.SaveAt(5, lambda s: s.sintering.balance_iterations))
@@ -489,7 +492,7 @@ def test_the_starts_from_recent_balances_carry_no_free_motions_over_hundreds_of_
     supports = np.zeros((len(x), 3), bool)
     supports[:, 2] = x[:, 2] == x[:, 2].min()
     sim, state, params = packing(x, np.full(len(x), r), temperature, supports=supports, every=5, dt=2e-4,
-                                 neck_ratio=0.05)
+                                 neck_ratio=0.05, recent_start=True)
     end = jax.jit(lambda s, p: simulate.rollout(sim, s, p, 2000, checkpoint=False)[0])(state, params)
     saved = neck_growth.recent_start
     neck_growth.recent_start = lambda *args: jnp.zeros_like
