@@ -8,8 +8,8 @@ steps of 0.2 ms. Each variant runs ``--updates`` neck updates in one jitted roll
 iterations (``NeckState.balance_iterations``) and the rollout's wall time (best of 3, after a compile):
 
 * ``block Jacobi, recent start`` (the library): each particle's 3x3 block inverted, the solve started from the
-  Galerkin projection on the last four updates' displacements;
-* ``block Jacobi, from rest``: the same preconditioner, no start;
+  Galerkin projection on the last four updates' balances (``Sintering(recent_start=True)``, the default);
+* ``block Jacobi, from rest``: the same preconditioner, no start (``recent_start=False``);
 * ``diagonal, from rest``: each particle's dashpot sum as the preconditioner, from rest (the iterations of the solve
   as it was before; :func:`jax.scipy.sparse.linalg.cg` takes the same);
 * ``as before``: the same, its forces scattered from the pairs instead of gathered on the table's rows: the solve
@@ -56,27 +56,25 @@ def _diagonal_blocks(pairs, normal, weights, movable):
 
 @contextlib.contextmanager
 def variant(name):
-    """The library's balance with its preconditioner and start swapped for the variant's."""
-    saved = neck_growth.balance_blocks, neck_growth.recent_start, neck_growth.balance_displacements
-    if name != "block Jacobi, recent start":
-        neck_growth.recent_start = lambda *args: jnp.zeros_like
+    """The library's balance with its preconditioner swapped for the variant's (the start: :func:`model`)."""
+    saved = neck_growth.balance_blocks, neck_growth.balance_displacements
     if name in ("diagonal, from rest", "as before"):
         neck_growth.balance_blocks = _diagonal_blocks
     if name == "as before":  # the table (the last argument) left out: the forces scattered from the pairs
-        balance = saved[2]
+        balance = saved[1]
         neck_growth.balance_displacements = lambda *args: balance(*args[:-1])
     try:
         yield
     finally:
-        neck_growth.balance_blocks, neck_growth.recent_start, neck_growth.balance_displacements = saved
+        neck_growth.balance_blocks, neck_growth.balance_displacements = saved
 
 
-def model(n):
+def model(n, recent_start=True):
     centres, radii, temperature = lattice(n)
     particles = particle_state(centres, radii, temperature, 4430.0)
     physics = simulate.Physics.create(law="rojek", conductance="lifted",
                                       sintering=neck_growth.Sintering(every=EVERY, shrinkage="many_body",
-                                                                                      recent_start=True))
+                                                                      recent_start=recent_start))
     contacts = simulate.lifted_contacts(physics, centres, radii)
     supports = np.zeros((len(radii), 3), bool)
     supports[:, 2] = centres[:, 2] == centres[:, 2].min()
@@ -87,7 +85,7 @@ def model(n):
 
 
 def measure(name, n, updates):
-    sim, state, params = model(n)
+    sim, state, params = model(n, recent_start=name == "block Jacobi, recent start")
     with variant(name):
         run = jax.jit(lambda s, p: simulate.rollout(
             sim, s, p, updates * EVERY, simulate.SaveAt(EVERY, lambda s: s.sintering.balance_iterations),

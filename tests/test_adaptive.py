@@ -174,7 +174,7 @@ def test_a_shrinking_cell_on_the_ramp_matches_a_fine_explicit_run_and_records_it
     np.testing.assert_allclose(u_i, u_e, rtol=0, atol=1e-4 * np.abs(u_e).max())
     np.testing.assert_allclose(np.asarray(implicit.contacts.neck), np.asarray(explicit.contacts.neck), rtol=1e-4)
     recent = np.asarray(implicit.sintering.recent_balances)
-    assert np.all(np.abs(recent).max(axis=(1, 2)) > 0)  # the last steps' displacements, newest first
+    assert np.all(np.abs(recent).max(axis=1) > 0)  # the last steps' displacements, newest first
 
 
 C_TABLE = materials.tabulated([300.0, 1300.0], [500.0, 900.0])

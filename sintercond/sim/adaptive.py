@@ -119,7 +119,8 @@ class _Slow(NamedTuple):
     """What a step advances: temperatures ``[n]`` (K), the contacts (necks), positions ``[n, 3]`` (m), and with
     many-body shrinkage the last steps' balances (``recent``, as
     :attr:`sintercond.sim.neck_growth.NeckState.recent_balances`: the start of the next balances) and the sum of
-    this step's stages' (``balance``, ``B u`` of :func:`sintercond.sim.neck_growth.balance_displacements`)."""
+    this step's stages' (``balance``, the contact values of ``B u``,
+    :func:`sintercond.sim.neck_growth.balance_displacements`)."""
 
     temperature: jax.Array
     contacts: object
@@ -133,7 +134,7 @@ def _slow(state: SimState) -> _Slow:
     recent = None if state.sintering is None else state.sintering.recent_balances
     positions = state.particles.positions
     return _Slow(state.particles.temperature, state.contacts, positions, recent,
-                 None if recent is None else jnp.zeros_like(positions))
+                 None if recent is None else jnp.zeros_like(recent[0]))
 
 
 def _at(state: SimState, slow: _Slow, t) -> SimState:
@@ -182,7 +183,7 @@ def _power_and_operator(physics: Physics, state: SimState, prep: Prepared):
 
 
 def _grow(physics: Physics, prep: Prepared, state: SimState, start: _Slow, temperature, duration):
-    """``(contacts, positions, balance)``: the necks (and positions and ``B u``, many-body; else None) after
+    """``(contacts, positions, balance)``: the necks (and positions and the balance, many-body; else None) after
     ``duration`` (s) from ``start``, the pair temperature the mean of ``start``'s and ``temperature``
     (:func:`sintercond.sim.neck_growth.grow_necks`)."""
     if physics.sintering is None:

@@ -44,7 +44,7 @@ and the balance is the sparse symmetric positive semi-definite system::
 
 solved by conjugate gradients (:func:`conjugate_gradients`) preconditioned by each particle's 3x3 block
 ``B_i = sum_j w_ij n_ij n_ij^T`` (:func:`balance_blocks`) and started from the Galerkin projection of the solution
-on the last updates' displacements (:func:`recent_start`), and differentiated implicitly
+on the last updates' balances (:func:`recent_start`), and differentiated implicitly
 (:func:`jax.lax.custom_linear_solve`: a gradient is one more solve, never the iterations). It is the minimum of the
 dissipation ``sum w (dh - dh_free)^2 / 2``: a free pair, a chain or a uniform lattice approaches exactly as the
 first stage; elsewhere contacts carry forces and approach faster or slower than free. A contact that does not grow
@@ -56,11 +56,9 @@ The balance does not fix every motion: rigid motions of a cluster (the sintering
 torque) and, in a sparse packing, floppy modes (a particle sliding sideways on a single contact) cost nothing.
 The solve leaves them out: its displacements are those of least ``sum_i u_i^T B_i u_i``, as if each particle
 felt a vanishing drag in proportion to its dashpots along their directions (the conjugate-gradient iterates,
-preconditioned by the blocks, keep ``B u`` in the range of the system, and so does the start from the recent
-balances, :func:`balance_displacements`), so a free pair or a symmetric cell keeps its weighted centre. The free
-motions depend on the normals only, not on the weights: as the particles move they turn, and the starts carry a
-little of the earlier updates' free motions along (0.1 % of the displacements on a heated 6^3 lattice after 400 and
-800 updates); no contact moves with them.
+preconditioned by the blocks, keep ``B u`` a sum of the contacts' normals, and so does the start from the recent
+balances, taken on the new normals: :func:`balance_displacements`), so a free pair or a symmetric cell keeps its
+weighted centre, and the displacements do not depend on where the solve starts.
 Reverse-mode gradients solve the system against a cotangent that can reach those free motions, where it is singular:
 that solve adds a drag of ``GRADIENT_DRAG`` times each particle's block, so a gradient treats the choice of the
 free motions as fixed (exact for distances, necks, shrinkage and temperatures away from position-dependent sources;
@@ -154,13 +152,13 @@ balance."""
 RECENT_BALANCES = 4
 """How many of the last many-body updates the next balance starts from (:func:`recent_start`): two leave more
 iterations on the heated lattice of ``benchmarks/balance_iterations.py`` (56 against 45 an update at 10,648
-spheres), more than four add little; ``[4, n, 3]`` floats carried in :class:`NeckState`."""
+spheres), more than four add little; ``[4, c]`` floats carried in :class:`NeckState`."""
 
 RAYLEIGH_FLOOR = 1e-8
-"""A recent balance's remainder whose ``v^T A v / v^T B v`` is below this (:func:`recent_start`) is mostly free
-motion (what the balance does not fix: the contacts changed since it was taken): it is left out of the start,
-whose normalisation would otherwise blow it up. The balance's own smooth modes have some ``1 / L^2`` for a packing
-``L`` particles across, far above it."""
+"""A recent balance's remainder whose ``v^T A v / v^T B v`` is below this (:func:`recent_start`) is left out of
+the start, whose normalisation would blow up what little of it is not round-off. The starts lie in the range of the
+system (:func:`balance_displacements`), whose smooth modes have some ``1 / L^2`` for a packing ``L`` particles
+across, far above it."""
 
 GRADIENT_DRAG = 1e-8
 """The drag, relative to each particle's dashpots, that makes the reverse-mode solve of the many-body balance
@@ -192,9 +190,9 @@ class Sintering:
         least 50 machine epsilons); an update that does not reach ten times it sets ``NeckState.unbalanced``.
         The default is far below the error of updating every few steps (``benchmarks/sintering_step.py``); the
         solve's iterations, its whole cost, grow with the log of its inverse.
-      recent_start: start each many-body balance from the recent ones (:func:`recent_start`; 6.8x fewer
-        iterations on a heated lattice). Off by default: on a poured bed its starts let the free motions grow
-        (the preheating bed's shrinkage after 0.5 s: -0.060 against 0.0042 from rest, necks equal).
+      recent_start: start each many-body balance on a static packing from the recent ones (:func:`recent_start`;
+        the same displacements as from rest, in 6.8x fewer iterations on a heated lattice); False solves each
+        from rest. With the mechanics the balances start from rest (the half pair list reorders its pairs).
     """
 
     law: str = "grain_boundary"
@@ -204,7 +202,7 @@ class Sintering:
     shrinkage: str = "independent"
     balance_tol: float = 1e-8
     neck_rtol: float | None = None
-    recent_start: bool = False
+    recent_start: bool = True
 
     def __post_init__(self):
         if self.law not in sintering.KINETIC_LAWS:
@@ -247,9 +245,10 @@ class NeckState:
         (None without one).
       interval_length: int scalar, the steps of the current growth interval with ``Sintering.neck_rtol`` (1 at the
         start; unused without it).
-      recent_balances: ``[k, n, 3]`` the last :data:`RECENT_BALANCES` many-body updates' displacements times
-        their blocks, ``B u`` (:func:`balance_displacements`), newest first (zeros before them): the next
-        balance's start (:func:`recent_start`); None without many-body shrinkage.
+      recent_balances: ``[k, c]`` the last :data:`RECENT_BALANCES` many-body updates' contact values ``y`` of
+        their displacements times their blocks, ``B u = sum_j y_ij n_ij`` (:func:`balance_displacements`), newest
+        first (zeros before them): the next balance's start (:func:`recent_start`); None without many-body
+        shrinkage, and with the mechanics.
       balance_iterations: int scalar, the conjugate-gradient iterations of the last many-body balance of an
         explicit step (the adaptive integrator's stages do not record theirs; None without many-body shrinkage).
     """
@@ -294,8 +293,8 @@ def neck_state(contacts: LiftedContacts, temperature, step=0, supports=None, pos
                      unbalanced=None if supports is None else jnp.zeros((), bool),
                      start_positions=start,
                      interval_length=jnp.asarray(1, step_type),
-                     recent_balances=None if supports is None else jnp.zeros(
-                         (RECENT_BALANCES,) + start.shape, start.dtype),
+                     recent_balances=None if supports is None or start_overlap is None else jnp.zeros(
+                         (RECENT_BALANCES, start_overlap.shape[0]), start.dtype),
                      balance_iterations=None if supports is None else jnp.zeros((), step_type))
 
 
@@ -458,13 +457,16 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
 
     Preconditioned conjugate gradients (:func:`conjugate_gradients`), each particle's 3x3 block of the system
     inverted (block Jacobi, :func:`balance_blocks`), started from the balance's Galerkin projection on the
-    ``recent`` balances' displacements (:func:`recent_start`): over an interval the displacements change little
-    from one update to the next, so the start leaves a small fraction of the right-hand side as its residual.
-    They are kept as ``B u`` (``B`` each particle's block): the solve's iterates ``u`` have ``B u`` in the range of
-    the system, so the start ``B_new^-1 sum_k c_k B_k u_k`` has no part along the free motions (which do not
-    change with the weights, only with the normals); kept as ``u``, the free motions the blocks' change leaves in
-    each start were carried on and extrapolated (8 % of the displacements after 400 updates of a heated 6^3
-    lattice, against 0.1 % as ``B u``).
+    ``recent`` balances (:func:`recent_start`): over an interval the displacements change little from one update
+    to the next, so the start leaves a small fraction of the right-hand side as its residual.
+    A balance is kept as the contact values ``y`` ``[c]`` of its ``B u = sum_j y_ij n_ij`` (``B`` each particle's
+    block; :func:`conjugate_gradients` carries them along its iterates, which from rest keep ``B u`` in the range of
+    the system, a sum of the contacts' normals) and started from as ``B^-1 sum_j y_ij n_ij`` on the new normals and
+    blocks: whatever the ``y``, such a start has no part along the motions the balance leaves free, so the solve
+    gives the displacements it gives from rest (those of least ``sum_i u_i^T B_i u_i``) and only takes fewer
+    iterations. Kept as particle vectors (``u``, or ``B u`` mapped by the new blocks), the starts carried the free
+    motions that the normals' turn left in them, amplified by the blocks' floor on a particle with one or two
+    contacts: the preheating bed's shrinkage went to -0.060 against 0.0042 from rest.
 
     Args:
       pairs: ``[c, 2]`` the contacts; positions ``[n, 3]`` (m) give their normals ``n_ij`` (``i`` to ``j``).
@@ -474,51 +476,57 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
       tol: relative residual of the conjugate-gradient solve.
       normal: ``[c, 3]`` the unit normals, if given (a half pair list's, whose padding pairs have weight 0);
         else from ``positions``.
-      recent: ``[k, n, 3]`` earlier balances' ``B u`` (the last return value), or None (start from rest).
+      recent: ``[k, c]`` earlier balances on the same contacts (the last return value), or None (start from rest).
       table: ``(slot_pair, neighbors)`` ``[n, m]`` of a static table listing each pair in both its rows
         (:class:`sintercond.state.LiftedContacts`), or None: the forces on the particles are then gathered from
         each row's slots instead of scattered from the pairs (the same sums, some 2.5 times faster on a CPU).
 
     Returns:
       ``(u, unbalanced, iterations, balance)``: the displacements, a bool scalar set when the residual exceeds
-      ``10 tol``, the iterations the solve took (int scalar), and ``B u`` ``[n, 3]`` (for ``recent``).
+      ``10 tol``, the iterations the solve took (int scalar), and the contact values ``y`` ``[c]`` of ``B u`` (for
+      ``recent``).
     """
     i, j = pairs[:, 0], pairs[:, 1]
     normal = _pair_normals(pairs, positions) if normal is None else normal
     movable = ~supports
 
     if table is not None:
-        slot_pair, neighbors = table
-        rows = jnp.arange(neighbors.shape[0], dtype=neighbors.dtype)[:, None]
-        outward = neighbors > rows  # the row is the pair's i (pairs have i < j)
-        slot_sign = jnp.where(outward, 1.0, -1.0).astype(positions.dtype)[:, :, None]
+        slot_sign, slot_pair = _slot_signs(table, positions.dtype)
 
-    def on_particles(per_pair):  # [c] -> [n, 3]: + along n_ij on i, - on j
+    def on_particles(per_pair):  # [c] -> [n, 3]: + along n_ij on i, - on j, on the movable components
         f = per_pair[:, None] * normal
         if table is None:
-            return jnp.zeros_like(positions).at[i].add(f).at[j].add(-f)
-        padded = jnp.concatenate([f, jnp.zeros((1, 3), f.dtype)])  # slot_pair is c in padding
-        return jnp.sum(slot_sign * padded[slot_pair], axis=1)
+            summed = jnp.zeros_like(positions).at[i].add(f).at[j].add(-f)
+        else:
+            padded = jnp.concatenate([f, jnp.zeros((1, 3), f.dtype)])  # slot_pair is c in padding
+            summed = jnp.sum(slot_sign * padded[slot_pair], axis=1)
+        return jnp.where(movable, summed, 0.0)
 
-    def operator(u):  # P K P + (I - P): symmetric, the held components decoupled
+    def pulled(u):  # the dashpots' pull w_ij (u_i - u_j) . n_ij [c] on the movable components
         u_free = jnp.where(movable, u, 0.0)
-        approach = jnp.sum((u_free[i] - u_free[j]) * normal, axis=1)
-        return jnp.where(movable, on_particles(weights * approach), u)
+        return weights * jnp.sum((u_free[i] - u_free[j]) * normal, axis=1)
 
-    rhs = jnp.where(movable, on_particles(weights * free_approach), 0.0)
+    def operator_and_pull(u):  # P K P + (I - P): symmetric, the held components decoupled
+        pull = pulled(u)
+        return jnp.where(movable, on_particles(pull), u), pull
+
+    def operator(u):
+        return operator_and_pull(u)[0]
+
+    rhs = on_particles(weights * free_approach)
     blocks, inverse_blocks = balance_blocks(pairs, normal, weights, movable)
-    if recent is not None:  # B_new^-1 B_k u_k: each u_k less its free motions; none on a particle without contacts
-        trace = jnp.zeros(positions.shape[:1], positions.dtype).at[i].add(weights).at[j].add(weights)
-        recent = jnp.where(movable & (trace[:, None] > 0), jnp.einsum("nab,knb->kna", inverse_blocks, recent), 0.0)
-    start = recent_start(operator, recent, positions.dtype, blocks)
-    # a start farther from the balance than rest (the contacts changed since the recent balances) is not taken
-    take_start = jax.lax.stop_gradient(jnp.linalg.norm(rhs - operator(start(rhs))) <= jnp.linalg.norm(rhs))
+    precondition = lambda r: jnp.einsum("nab,nb->na", inverse_blocks, r)  # noqa: E731
+    start = _recent(recent, on_particles, precondition, operator, positions.dtype, blocks)
     maxiter = max(10 * positions.size, MIN_BALANCE_ITERATIONS)
 
-    def solve(matvec, b):
-        x, iterations = conjugate_gradients(matvec, b, jnp.where(take_start, start(b), 0.0),
-                                            lambda r: jnp.einsum("nab,nb->na", inverse_blocks, r), tol, maxiter)
-        return x, iterations
+    def solve(matvec, b):  # b is rhs (the primal solve): the contact values follow it; else they are not used
+        x0, y0 = start(b)
+        # a start farther from the balance than rest (the contacts changed since the recent balances) is not taken
+        taken = jax.lax.stop_gradient(jnp.linalg.norm(b - matvec(x0)) <= jnp.linalg.norm(b))
+        x0, y0 = jnp.where(taken, x0, 0.0), jnp.where(taken, y0, 0.0)
+        x, iterations, y = conjugate_gradients(matvec, b, x0, precondition, tol, maxiter, operator_and_pull,
+                                               weights * free_approach - pulled(x0))
+        return x, (iterations, y0 + y)
 
     # reverse mode solves the system against a cotangent that need not lie in its range (the free motions):
     # there the drag that selects the solution is made finite, GRADIENT_DRAG times the blocks (the norm in which
@@ -526,12 +534,34 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
     drag = max(GRADIENT_DRAG, float(jnp.finfo(positions.dtype).eps) ** 0.5)
 
     def transpose_solve(matvec, b):
-        return solve(lambda v: matvec(v) + drag * jnp.where(movable, jnp.einsum("nab,nb->na", blocks, v), 0.0), b)
+        x, iterations = conjugate_gradients(
+            lambda v: matvec(v) + drag * jnp.where(movable, jnp.einsum("nab,nb->na", blocks, v), 0.0), b,
+            jnp.zeros_like(b), precondition, tol, maxiter)
+        return x, (iterations, jnp.zeros_like(weights))
 
-    u, iterations = jax.lax.custom_linear_solve(operator, rhs, solve, transpose_solve, has_aux=True)
+    u, (iterations, balance) = jax.lax.custom_linear_solve(operator, rhs, solve, transpose_solve, has_aux=True)
     residual = jnp.linalg.norm(rhs - operator(u))
     converged = (residual <= 10.0 * tol * jnp.linalg.norm(rhs)) & jnp.all(jnp.isfinite(u))
-    return u, ~converged, iterations, jnp.einsum("nab,nb->na", blocks, u)
+    return u, ~converged, iterations, jax.lax.stop_gradient(balance)
+
+
+def _slot_signs(table, dtype):
+    """``(sign, slot_pair)``: ``[n, m, 1]`` +1 where a static table's row is its pair's ``i``, -1 where its ``j``."""
+    slot_pair, neighbors = table
+    rows = jnp.arange(neighbors.shape[0], dtype=neighbors.dtype)[:, None]
+    return jnp.where(neighbors > rows, 1.0, -1.0).astype(dtype)[:, :, None], slot_pair  # pairs have i < j
+
+
+def _recent(recent, on_particles, precondition, operator, dtype, blocks):
+    """The start of a balance as a linear map of its right-hand side ``b``: ``(x0, y0)``, the displacements
+    ``[n, 3]`` and their contact values ``[c]`` (``B x0 = sum_j y0_ij n_ij``), from the ``recent`` balances'
+    contact values ``[k, c]`` (:func:`balance_displacements`); from rest without them."""
+    if recent is None:
+        return lambda b: (jnp.zeros_like(b), 0.0)
+    recent = jax.lax.stop_gradient(recent.astype(dtype))
+    displacements = jax.vmap(lambda y: precondition(on_particles(y)))(recent)
+    coefficients = recent_start(operator, displacements, dtype, blocks)
+    return lambda b: (jnp.einsum("k,kna->na", coefficients(b), displacements), coefficients(b) @ recent)
 
 
 def balance_blocks(pairs, normal, weights, movable):
@@ -554,64 +584,76 @@ def balance_blocks(pairs, normal, weights, movable):
 
 
 def recent_start(operator, recent, dtype, blocks=None):
-    """The start of a balance's solve as a linear map of its right-hand side ``b``: the Galerkin projection of the
-    solution on the span of the ``recent`` displacements ``[k, n, 3]`` (``V (V^T A V)^-1 V^T b``, ``A`` the
-    ``operator``; the basis A-orthonormalised by Gram-Schmidt, a displacement whose remainder keeps less than 1000
-    machine epsilons of its energy ``v^T A v`` dropped: it repeats the others, or is 0; and, given the ``blocks``
-    ``B``, one whose remainder's ``v^T A v / v^T B v`` is below :data:`RAYLEIGH_FLOOR`: mostly free motion), or 0
-    without them.
+    """The start of a balance's solve: the Galerkin projection of its solution on the span of the ``recent``
+    displacements ``[k, n, 3]`` (``V (V^T A V)^-1 V^T b``, ``A`` the ``operator``), as the map from the right-hand
+    side ``b`` to the ``[k]`` coefficients of the displacements. The basis is A-orthonormalised by Gram-Schmidt; a
+    displacement whose remainder keeps less than 1000 machine epsilons of its energy ``v^T A v`` is dropped (it
+    repeats the others, or is 0), and so, given the ``blocks`` ``B``, is one whose remainder's
+    ``v^T A v / v^T B v`` is below :data:`RAYLEIGH_FLOOR`.
     Linear in ``b``, so the solve stays a linear map (:func:`jax.lax.custom_linear_solve`); the displacements are
     constants to it (their derivative does not enter the solution's, which the solve's own implicit derivative
     gives)."""
-    if recent is None:
-        return jnp.zeros_like
     floor = 1e3 * float(jnp.finfo(dtype).eps)  # below it, a remainder is round-off of the others
-    basis, images = [], []
-    for v in jax.lax.stop_gradient(recent.astype(dtype)):
+    k = recent.shape[0]
+    basis, images, combinations = [], [], []
+    for index, v in enumerate(jax.lax.stop_gradient(recent.astype(dtype))):
         av = operator(v)
         energy = jnp.vdot(v, av)
-        for q, aq in zip(basis, images):
+        combination = jnp.zeros((k,), dtype).at[index].set(1.0)  # of the recent displacements
+        for q, aq, cq in zip(basis, images, combinations):
             c = jnp.vdot(q, av)
-            v, av = v - c * q, av - c * aq
+            v, av, combination = v - c * q, av - c * aq, combination - c * cq
         norm_sq = jnp.vdot(v, av)
         keep = norm_sq > floor * energy
-        if blocks is not None:  # a remainder that is mostly free motion would bring it, amplified, into the start
+        if blocks is not None:  # a remainder with little energy for its size: its normalisation would blow it up
             keep = keep & (norm_sq > RAYLEIGH_FLOOR * jnp.vdot(v, jnp.einsum("nab,nb->na", blocks, v)))
         inverse_norm = jnp.where(keep, jax.lax.rsqrt(jnp.where(keep, norm_sq, 1.0)), 0.0)
         basis.append(v * inverse_norm)
         images.append(av * inverse_norm)
-    return lambda b: sum(jnp.vdot(q, b) * q for q in basis)
+        combinations.append(combination * inverse_norm)
+    return lambda b: sum(jnp.vdot(q, b) * cq for q, cq in zip(basis, combinations))
 
 
-def conjugate_gradients(matvec, b, x0, preconditioner, tol, maxiter):
+def conjugate_gradients(matvec, b, x0, preconditioner, tol, maxiter, with_pull=None, pulled_residual=None):
     """``(x, iterations)``: preconditioned conjugate gradients on the symmetric positive semi-definite ``matvec``
     from ``x0``, until the residual is at most ``tol |b|``, after ``maxiter`` iterations, or when a search
     direction has no positive curvature left (round-off, or a right-hand side outside the range).
 
-    :func:`jax.scipy.sparse.linalg.cg` with its iterations counted (it does not report them)."""
+    :func:`jax.scipy.sparse.linalg.cg` with its iterations counted (it does not report them), and optionally
+    carrying the contact values of its steps: given ``with_pull(p) -> (A p, g p)`` for an operator ``A = P g``
+    (``g`` to another space, ``P`` back; ``A`` on ``b``'s components where ``P`` is not) and the residual of ``x0``
+    there, ``b - A x0 = P pulled_residual``, it returns ``(x, iterations, y)`` with ``B (x - x0) = P y``, ``B`` the
+    inverse of the ``preconditioner`` (the iterates are sums of preconditioned residuals, each ``P`` of something).
+    """
     threshold = (tol * jnp.linalg.norm(b)) ** 2
+    carried = with_pull is not None
+    if not carried:
+        with_pull = lambda p: (matvec(p), jnp.zeros((0,), b.dtype))  # noqa: E731
+        pulled_residual = jnp.zeros((0,), b.dtype)
 
     def unfinished(carry):
-        _, r, _, _, k, broken = carry
+        r, k, broken = carry[1], carry[4], carry[5]
         return (jnp.vdot(r, r) > threshold) & (k < maxiter) & ~broken
 
     def iterate(carry):
-        x, r, p, rz, k, _ = carry
-        ap = matvec(p)
+        x, r, p, rz, k, _, y, rho, pi = carry  # B p = P pi, r = P rho (where P is), B (x - x0) = P y
+        ap, gp = with_pull(p)
         curvature = jnp.vdot(p, ap)
         broken = ~(curvature > 0) | ~(rz > 0)  # no descent left (or not finite): the caller checks the residual
         alpha = jnp.where(broken, 0.0, rz / jnp.where(broken, 1.0, curvature))
-        x, r = x + alpha * p, r - alpha * ap
+        x, r, y, rho = x + alpha * p, r - alpha * ap, y + alpha * pi, rho - alpha * gp
         z = preconditioner(r)
         rz_new = jnp.vdot(r, z)
-        p = z + jnp.where(broken, 0.0, rz_new / jnp.where(broken, 1.0, rz)) * p
-        return x, r, p, rz_new, k + 1, broken
+        beta = jnp.where(broken, 0.0, rz_new / jnp.where(broken, 1.0, rz))
+        return x, r, z + beta * p, rz_new, k + 1, broken, y, rho, rho + beta * pi
 
     r = b - matvec(x0)
     z = preconditioner(r)
-    start = (x0, r, z, jnp.vdot(r, z), jnp.zeros((), jnp.int32), jnp.zeros((), bool))
-    x, _, _, _, iterations, _ = jax.lax.while_loop(unfinished, iterate, start)
-    return x, iterations
+    zero = jnp.zeros_like(pulled_residual)
+    start = (x0, r, z, jnp.vdot(r, z), jnp.zeros((), jnp.int32), jnp.zeros((), bool), zero, pulled_residual,
+             pulled_residual)
+    x, _, _, _, iterations, _, y, _, _ = jax.lax.while_loop(unfinished, iterate, start)
+    return (x, iterations, y) if carried else (x, iterations)
 
 
 def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_start, r_i, r_j, temperature, duration,
@@ -691,14 +733,15 @@ def with_displacement(carried: NeckState, grown: Grown) -> NeckState:
     if grown.displacement is None:
         return carried
     return dataclasses.replace(
-        carried, recent_balances=pushed(carried.recent_balances, grown.balance),
+        carried, recent_balances=None if carried.recent_balances is None else pushed(carried.recent_balances,
+                                                                                     grown.balance),
         unbalanced=carried.unbalanced | grown.unbalanced,
         balance_iterations=grown.iterations.astype(carried.balance_iterations.dtype))
 
 
 def pushed(recent, balance):
-    """``recent`` ``[k, n, 3]`` (:attr:`NeckState.recent_balances`) with ``balance`` ``[n, 3]`` the newest, the
-    oldest dropped."""
+    """``recent`` ``[k, c]`` (:attr:`NeckState.recent_balances`) with ``balance`` ``[c]`` the newest, the oldest
+    dropped."""
     return jnp.concatenate([balance.astype(recent.dtype)[None], recent[:-1]])
 
 
