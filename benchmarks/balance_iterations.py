@@ -20,8 +20,9 @@ Every variant but the last gathers the forces on the table's rows.
 
 The first update has no recent displacements: the table gives the first update's iterations and the mean over the
 others. The largest relative difference of the final necks from the library's shows that every variant solves the
-same balance to its tolerance (1e-8); the displacements (relative to the largest) differ by the free motions
-(rigid and floppy: the simple cubic lattice of central contacts has rows that slide) each variant leaves in.
+same balance to its tolerance (1e-8); the displacements (relative to the largest) agree to it where the
+preconditioner is the library's (its blocks' norm chooses the free motions), and differ by the free motions
+(rigid and floppy: the simple cubic lattice of central contacts has rows that slide) where it is the diagonal.
 """
 
 import argparse
@@ -129,8 +130,10 @@ def main(argv=None):
                 f"The simple cubic lattice of `sintering_step` (845-1273 K ramp, bottom layer held), "
                 f"`shrinkage = \"many_body\"` every {EVERY} steps of {DT * 1e3:g} ms, {args.updates} updates in one "
                 "jitted rollout (each update's 10 conduction steps included in the time). Tolerance 1e-8 (relative "
-                "residual) for every solve. The necks agree to the tolerance; the displacements differ by the free "
-                "motions each solve leaves in (rigid, and the rows of the lattice that slide). Every variant but "
+                "residual) for every solve. The necks agree to the tolerance. The block Jacobi solves, started from "
+                "the recent balances or from rest, leave out the same free motions (those of least sum_i u_i^T B_i "
+                "u_i): their displacements agree to the tolerance; the diagonal preconditioner's differ by the free "
+                "motions of its own norm (rigid, and the rows of the lattice that slide). Every variant but "
                 "`as before` gathers the forces on the table's rows; `as before` scatters them from the pairs, as the "
                 "solve did before (the same iterations as `diagonal, from rest`).\n\n" + table)
         write_section("balance_iterations", command_line(), body)
