@@ -6,6 +6,7 @@ limit) for held ramps, growing necks, sources, c(T) and kappa(T).
 """
 
 import dataclasses
+import re
 
 import jax
 import jax.numpy as jnp
@@ -292,17 +293,71 @@ def test_bad_scene_keys_are_refused_naming_them(key, value, match):
         validate_scene({**SCENE, "run": {**SCENE["run"], key: value}})
 
 
-def test_auto_picks_implicit_without_mechanics_and_the_log_says_why():
+def _built_integrator(scene):
+    """``(integrator, what the log said of it)`` of a scene's model."""
     from sintercond.scene.build import build_model
 
     messages = []
-    model = build_model(validate_scene({**SCENE, "run": {**SCENE["run"], "integrator": "auto", "rtol": 1e-4,
-                                                         "atol": 0.01}}), log=messages.append)
-    assert model.physics.conduction.integrator == "implicit"
-    assert (model.physics.conduction.rtol, model.physics.conduction.atol) == (1e-4, 0.01)
+    model = build_model(validate_scene(scene), log=messages.append)
     said = [m for m in messages if m.startswith("integrator:")]
-    assert said and "implicit" in said[0] and "no inertial mechanics" in said[0]
+    assert len(said) == 1
+    assert model.physics.conduction.integrator == model.sim.physics.conduction.integrator
+    return model, said[0]
+
+
+def test_auto_picks_implicit_for_a_long_run_without_mechanics_and_the_log_says_why():
+    """The default (run.integrator not given) is "auto": the preheat and a 50 s hold take some 1.4e5 explicit
+    steps."""
+    model, said = _built_integrator({**SCENE, "run": {"duration": 60.0, "rtol": 1e-4, "atol": 0.01}})
+    assert model.physics.conduction.integrator == "implicit"
+    assert model.state.adaptive_step is not None
+    assert (model.physics.conduction.rtol, model.physics.conduction.atol) == (1e-4, 0.01)
+    assert "implicit" in said and "no inertial mechanics" in said
     assert resolve_integrator(True)[0] == "explicit" and "inertial" in resolve_integrator(True)[1]
+
+
+@pytest.mark.parametrize("change, reason", [
+    ({"run": {"duration": 0.5}}, r"takes [0-9,]+ steps, fewer than 100,000"),
+    ({"run": {"duration": 60.0}, "beam": {"intensity": 1e7, "attenuation": 2e4, "spot_radius": 100e-6,
+                                         "absorptance": 0.7, "speed": 0.1, "path": [[0.0, 0.0], [1e-4, 0.0]]}}, r"scanning beam"),
+    ({"run": {"duration": 60.0}, "conduction": {**SCENE["conduction"], "coupling": "sphere"}, "sintering": None},
+     r"coupled necks"),
+])
+def test_auto_picks_explicit_where_the_adaptive_step_would_not_pay_and_says_why(change, reason):
+    model, said = _built_integrator({key: value for key, value in {**SCENE, **change}.items() if value is not None})
+    assert model.physics.conduction.integrator == "explicit" and model.state.adaptive_step is None
+    assert re.search(r"integrator: explicit \(run\.integrator = \"auto\": .*" + reason, said), said
+    assert model.n_steps < 100_000 or "fewer than" not in said
+
+
+def test_implicit_with_coupled_necks_is_refused_at_the_scene_key_and_in_the_api():
+    scene = {**SCENE, "conduction": {**SCENE["conduction"], "coupling": "sphere"},
+             "run": {**SCENE["run"], "integrator": "implicit"}}
+    with pytest.raises(SceneError, match=r"coupling = \"sphere\" is not supported with run\.integrator = "
+                                         r"\"implicit\""):
+        validate_scene(scene)
+    with pytest.raises(ValueError, match=r"coupling='sphere' needs Conduction\.integrator='explicit'"):
+        simulate.Physics.create(conductance="lifted", integrator="implicit", coupling="sphere")
+    assert simulate.Physics.create(conductance="lifted", integrator="auto",
+                                   coupling="sphere").conduction.integrator == "explicit"
+
+
+def test_an_isothermal_cell_on_the_ramp_runs_implicit_at_its_given_step(tmp_path):
+    """Every particle held (preheating.hold = "all"): no conduction bound is left, and run.dt (the output clock)
+    sets the step. This refused to build ("min() arg is an empty sequence") before; its necks follow the explicit
+    run's."""
+    from sintercond import run as runner
+
+    cell = {**SCENE, "walls": [], "preheating": {**SCENE["preheating"], "hold": "all"},
+            "sintering": {"law": "grain_boundary", "every": 1}}
+    ratios = {}
+    for integrator in ("implicit", "explicit"):
+        scene = {**cell, "run": {"duration": 2.0, "dt": 1e-3, "integrator": integrator, "formats": ["vtp"]}}
+        _, summary = runner.run_scene(validate_scene(scene), tmp_path / integrator, progress=False, pictures=False)
+        assert summary["integrator"] == integrator
+        ratios[integrator] = summary["mean_neck_ratio"]
+    assert ratios["explicit"] > 0.1
+    assert ratios["implicit"] == pytest.approx(ratios["explicit"], rel=1e-4)
 
 
 def test_implicit_with_mechanics_is_refused_at_the_scene_key():
@@ -333,3 +388,21 @@ def test_an_adaptive_run_resumes_exactly(tmp_path):
     resumed, _ = runner.resume(tmp_path / "cut", progress=False, pictures=False)
     np.testing.assert_array_equal(np.asarray(resumed), np.asarray(full))
     assert (tmp_path / "full" / "history.csv").read_text() == (tmp_path / "cut" / "history.csv").read_text()
+
+
+@pytest.mark.slow
+def test_a_run_extended_past_the_auto_threshold_keeps_its_integrator(tmp_path):
+    """run.integrator = "auto" decides on the run's explicit step count; a run that started explicit (0.5 s, some
+    1,100 steps) and is extended to 46 s (past 100,000 steps) goes on explicitly from its checkpoint, as an
+    uninterrupted explicit run does."""
+    from sintercond import run as runner
+
+    scene = {**SCENE, "run": {"duration": 0.5, "output_every": 5000, "formats": ["vtp"]}}
+    _, short = runner.run_scene(validate_scene(scene), tmp_path / "run", progress=False, pictures=False)
+    assert short["integrator"] == "explicit"
+    extended, summary = runner.resume(tmp_path / "run", progress=False, pictures=False, duration=46.0)
+    assert summary["integrator"] == "explicit" and summary["steps"] > 100_000
+    whole, _ = runner.run_scene(validate_scene({**SCENE, "run": {"duration": 46.0, "integrator": "explicit",
+                                                                "output_every": 5000, "formats": ["vtp"]}}),
+                                tmp_path / "whole", progress=False, pictures=False)
+    np.testing.assert_allclose(np.asarray(extended), np.asarray(whole), rtol=0, atol=1e-9)

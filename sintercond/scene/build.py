@@ -21,7 +21,7 @@ from sintercond.laws import heat_sources, materials, walls
 from sintercond.sim import mechanics, neck_growth, thermal
 from sintercond.scene.schema import output_interval
 from sintercond.scene.estimate import RAMP_STEP_FRACTION, check_sintering_every, ramp_step
-from sintercond.scene.integrator import scene_integrator
+from sintercond.scene.integrator import auto_by_steps, scene_integrator
 from sintercond.scene.typed import Wall, typed_scene
 from sintercond.scene.validate import check_distinct_centres
 from sintercond.scene import (BEAM_STEP_FRACTION, WALL_STEP_FRACTION, SceneError, advance_speed, beam_step,
@@ -342,7 +342,6 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
     check_distinct_centres(None, centres)  # a pour, a bed, or a run folder's packing.npz as well
     physics = scene_physics(scene)
     integrator, why = scene_integrator(scene)
-    log(f"integrator: {integrator} ({why})")
     planes = scene_walls(scene, centres, radii)  # built once: the run and its observations take them from the model
     fixed_mask, fixed_temperature, conducting = _apply_walls(planes, centres, radii)
     if scene.preheating is not None and scene.preheating.hold == "all":  # an isothermal cell on the ramp
@@ -374,6 +373,12 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                                       "(preheating.duration / preheating.steps)")
     bounds.update(built.bounds)
     bounds.update(_beam_bound(scene))
+    integrator, why = auto_by_steps(scene, integrator, why, _explicit_steps(scene.run, bounds))
+    log(f"integrator: {integrator} ({why})")
+    if integrator != physics.conduction.integrator:
+        physics = dataclasses.replace(physics, conduction=dataclasses.replace(physics.conduction,
+                                                                              integrator=integrator))
+        sim = simulate.simulator(physics)
     if integrator == "implicit" and scene.run.dt != "auto":
         # the adaptive step is bounded by its error estimate and ends on the ramp's jumps: run.dt is the output clock
         bounds = {kind: bound for kind, bound in bounds.items() if kind not in ("thermal", "preheating")}
@@ -560,10 +565,18 @@ def _beam_bound(scene) -> dict:
     return {}
 
 
+def _explicit_steps(run, bounds) -> int:
+    """The steps an explicit run of ``run.duration`` would take: at ``run.dt``, or 0.9 of the smallest bound where
+    that is shorter (or ``run.dt`` is ``"auto"``)."""
+    limit = min((bound for bound, _ in bounds.values()), default=np.inf)
+    dt = min(0.9 * limit, np.inf if run.dt == "auto" else run.dt)
+    return max(1, int(np.ceil(run.duration / dt * (1 - 1e-12)))) if np.isfinite(dt) else 1
+
+
 def _time_step(run, bounds, thermal_only) -> tuple[float, int, float]:
     """``(dt, n_steps, limit)``: ``run.dt`` checked against every bound (``{kind: (step, why)}``, s) or 0.9 of the
     smallest, shortened to ``duration / n_steps`` so that the run ends exactly at ``run.duration``."""
-    limit = min(bound for bound, _ in bounds.values())
+    limit = min((bound for bound, _ in bounds.values()), default=np.inf)  # none: an implicit run at its run.dt
     if run.dt == "auto":
         dt = 0.9 * limit if np.isfinite(limit) else run.duration
     else:

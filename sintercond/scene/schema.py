@@ -309,11 +309,12 @@ _SCHEMA = {
         "dt": Key(object, ('"auto" or a number in (0, 1e3] s', lambda v: v == "auto" or (
             not isinstance(v, (bool, str)) and isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1e3)),
             False, "s", default="auto", doc='explicit step; "auto" = 0.9 x the stable step'),
-        "integrator": Key(str, _choice("auto", "explicit", "implicit"), False, default="explicit",
+        "integrator": Key(str, _choice("auto", "explicit", "implicit"), False, default="auto",
                           doc='explicit: Euler at run.dt; implicit: adaptive TR-BDF2 (docs/simulator.md) within '
                               'run.rtol / run.atol, each output interval stepped as its error allows (static '
-                              'packings without mechanics); auto: implicit without inertial mechanics, explicit with '
-                              'it (the log says which and why)'),
+                              'packings without mechanics or coupled necks); auto: implicit where the run has no '
+                              'inertial mechanics, coupled necks or beam and would take at least 100,000 explicit '
+                              'steps, explicit otherwise (the log says which and why)'),
         "rtol": Key(float, _within(0.0, 0.1, low_open=True), False, default=1e-5,
                     doc="implicit: the relative local error bound of a step, |e_i| <= atol + rtol |T_i|"),
         "atol": Key(float, _within(0.0, 100.0, "K", low_open=True), False, "K", default=1e-3,

@@ -376,7 +376,9 @@ def _check_coupling(scene):
                "sintering.shrinkage = \"many_body\"": scene.get("sintering", {}).get("shrinkage") == "many_body",
                "material.conductivity_table": "conductivity_table" in scene["material"],
                "material.specific_heat_table": "specific_heat_table" in scene["material"],
-               "a conducting wall": any(w["mode"] == "conducting" for w in walls)}
+               "a conducting wall": any(w["mode"] == "conducting" for w in walls),
+               "run.integrator = \"implicit\" (the coupled necks are stepped explicitly)":
+                   scene["run"].get("integrator") == "implicit"}
     for what, present in refused.items():
         if present:
             raise SceneError(f"conduction.coupling = \"sphere\" is not supported with {what} yet; use "

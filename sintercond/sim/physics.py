@@ -276,10 +276,10 @@ class Physics:
         those keywords are refused (nothing would move). ``sintering``: a
         :class:`sintercond.sim.neck_growth.Sintering` or None. ``coupling``: ``Conduction.coupling``.
         ``integrator="auto"`` is resolved here (:func:`resolve_integrator`): implicit without inertial mechanics on
-        static contacts, explicit otherwise.
+        static contacts, uncoupled necks and no beam, explicit otherwise.
         """
         if integrator == "auto":  # any other value is Conduction's to check
-            integrator = resolve_integrator(bool(mechanics), contacts, motion)[0]
+            integrator = resolve_integrator(bool(mechanics), contacts, motion, coupling, beam)[0]
         if not isinstance(mechanics, (bool, np.bool_)):
             raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
         if mechanics:
@@ -307,13 +307,21 @@ class Physics:
         return self.conduction.neck
 
 
-def resolve_integrator(mechanics: bool, contacts: str = "static", motion=None) -> tuple[str, str]:
+def resolve_integrator(mechanics: bool, contacts: str = "static", motion=None, coupling: str = "none",
+                       beam=None) -> tuple[str, str]:
     """``(integrator, why)``: what ``integrator="auto"`` means for a spec: ``"implicit"`` (adaptive TR-BDF2) where
-    nothing is inertial and the contacts are static, ``"explicit"`` otherwise; ``why`` says which case it is."""
+    nothing is inertial, the contacts are static, the necks are not coupled and no beam scans, ``"explicit"``
+    otherwise; ``why`` says which case it is."""
     if mechanics:
         return "explicit", ("the mechanics is inertial: its step is bounded by the contact stiffness, and the heat "
                             "follows it explicitly")
     if contacts != "static" or motion is not None:
         return "explicit", "the contacts move (prescribed motion): the implicit integrator needs static contacts"
+    if coupling == "sphere":
+        return "explicit", ("the coupled necks (conduction.coupling = \"sphere\") are stepped explicitly, one sweep "
+                            "a step: the implicit stages do not carry their coupling")
+    if beam is not None:
+        return "explicit", ("a scanning beam sets the step: its spot crosses a particle in a few explicit steps, and "
+                            "the adaptive step, following it, costs more (benchmarks/RESULTS.md, integrator_choice)")
     return "implicit", ("no inertial mechanics and static contacts: the slow physics is stepped adaptively "
                         "(TR-BDF2) within rtol / atol, not at the explicit conduction limit")
