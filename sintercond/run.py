@@ -321,7 +321,7 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
     saved = np.load(out / "checkpoint.npz")
     step = int(saved["step"])
     raw = json.loads((out / "scene.json").read_text())
-    if raw["run"]["integrator"] == "auto":  # the run keeps the integrator it started with (scene.json: validated)
+    if raw["run"].get("integrator") in (None, "auto"):  # the run keeps the integrator it started with
         raw["run"]["integrator"] = "implicit" if ".adaptive_step" in saved.files else "explicit"
     if duration is not None:
         done = step * float(saved[".dt"])

@@ -350,11 +350,13 @@ def test_gradients_of_positions_equal_central_differences_and_are_zero_when_noth
 
 
 @pytest.mark.slow
-def test_float32_many_body_shrinkage_agrees_with_float64_to_its_stated_accuracy():
+@pytest.mark.parametrize("recent_start", [False, True])
+def test_float32_many_body_shrinkage_agrees_with_float64_to_its_stated_accuracy(recent_start):
     """docs/simulator.md: necks to about 1e-6 relative; displacements to a few 1e-5 of themselves (the float32
-    positions round each update's small displacement to their own spacing)."""
+    positions round each update's small displacement to their own spacing); from rest and from the recent
+    balances."""
     x, radii, temperature = hexagon((1300.0, 900.0))
-    sim, state, params = packing(x, radii, temperature, every=5, dt=2e-4, neck_ratio=0.05)
+    sim, state, params = packing(x, radii, temperature, every=5, dt=2e-4, neck_ratio=0.05, recent_start=recent_start)
     single = jax.tree_util.tree_map(lambda a: a.astype(jnp.float32) if a.dtype == jnp.float64 else a, state)
     params32 = simulate.Params(conductivity=jnp.array([KAPPA], jnp.float32), specific_heat=jnp.array([HEAT], jnp.float32),
                                sintering={k: jnp.float32(v) for k, v in KINETICS.items()})
@@ -563,3 +565,56 @@ def test_a_poured_bed_shrinks_as_from_rest_when_its_balances_start_from_the_rece
     assert shrinkage[1] > 0
     np.testing.assert_allclose(shrinkage[0], shrinkage[1], rtol=1e-9)
     assert int(warm.sintering.balance_iterations) < int(from_rest.sintering.balance_iterations)
+
+
+def test_a_balance_keeps_the_contact_values_of_its_blocks_times_its_displacements_until_their_self_stress_grows():
+    """A chain of four spheres held at both ends (a self-stress: equal contact values along it are in balance on
+    their own). A balance returns contact values ``y`` with ``sum_j y_ij n_ij = B u`` on every movable component;
+    given recent values with a self-stress 1e10 times its forces added (each solve adds some, and the starts carry
+    them on), the displacements are those from rest, and its values, whose round-off no longer gives its ``B u``,
+    are not kept (zeros: the recent ones are cleared, :func:`neck_growth.pushed`)."""
+    r = 40e-6
+    x = np.array([[2 * r * k, 0.0, 0.0] for k in range(4)])
+    pairs = np.array([[0, 1], [1, 2], [2, 3]])
+    weights, free = np.array([1.0, 3.0, 2.0]), np.array([2e-8, 1e-8, 3e-8])
+    supports = np.zeros((4, 3), bool)
+    supports[[0, 3]] = True
+    solve = jax.jit(neck_growth.balance_displacements, static_argnums=5)
+    args = (jnp.asarray(pairs), jnp.asarray(x), jnp.asarray(weights), jnp.asarray(free), jnp.asarray(supports))
+    u, _, _, balance = solve(*args, 1e-12)
+    u, balance = np.asarray(u), np.asarray(balance)
+    blocks, _ = neck_growth.balance_blocks(jnp.asarray(pairs), jnp.asarray(np.tile([1.0, 0.0, 0.0], (3, 1))),
+                                           jnp.asarray(weights), jnp.asarray(~supports))
+    b_u = np.where(~supports, np.einsum("nab,nb->na", np.asarray(blocks), u), 0.0)
+    on_particles = np.zeros((4, 3))
+    np.add.at(on_particles, pairs[:, 0], balance[:, None] * [1.0, 0.0, 0.0])
+    np.add.at(on_particles, pairs[:, 1], -balance[:, None] * [1.0, 0.0, 0.0])
+    on_particles[supports] = 0.0
+    assert np.abs(b_u).max() > 0
+    np.testing.assert_allclose(on_particles, b_u, rtol=0, atol=1e-12 * np.abs(b_u).max())
+    stressed = jnp.stack([jnp.asarray(balance + 1e10 * np.abs(balance).max()), jnp.zeros(3)])
+    u_stressed, unbalanced, _, kept = solve(*args, 1e-12, None, stressed)
+    assert not bool(unbalanced)
+    np.testing.assert_allclose(np.asarray(u_stressed), u, rtol=0, atol=1e-10 * np.abs(u).max())
+    assert np.all(np.asarray(kept) == 0.0)
+    recent = neck_growth.pushed(stressed, kept)
+    assert np.all(np.asarray(recent) == 0.0)
+    assert np.all(np.asarray(neck_growth.pushed(stressed, jnp.asarray(balance))[0]) == balance)
+
+
+def test_a_checkpoint_of_balances_kept_per_particle_is_refused_naming_the_leaf(tmp_path):
+    """Checkpoints written before the balances were kept as contact values hold them as ``[k, n, 3]``: refused on
+    resume with the "another version" message, not broadcast into the start."""
+    from sintercond.output.io import load_checkpoint, save_checkpoint
+
+    x, radii, temperature = hexagon((1300.0, 900.0))
+    _, state, _ = packing(x, radii, temperature)
+    carried = state.sintering
+    old = dataclasses.replace(state, sintering=dataclasses.replace(
+        carried, recent_balances=jnp.zeros((carried.recent_balances.shape[0], len(radii), 3))))
+    save_checkpoint(tmp_path, old)
+    with pytest.raises(ValueError, match=r"\.sintering\.recent_balances of shape \(4, 7, 3\).*another version"):
+        load_checkpoint(tmp_path / "checkpoint.npz", state)
+    save_checkpoint(tmp_path, state)
+    loaded = load_checkpoint(tmp_path / "checkpoint.npz", state)
+    assert loaded.sintering.recent_balances.shape == carried.recent_balances.shape

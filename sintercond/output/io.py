@@ -257,6 +257,9 @@ def load_checkpoint(path, like):
         name = jax.tree_util.keystr(key)
         if name not in saved:
             raise ValueError(f"{path} does not hold {name}: written by another version or scene")
+        if name.startswith(".sintering.") and saved[name].shape != np.shape(leaf):  # no capacity to carry over
+            raise ValueError(f"{path} holds {name} of shape {saved[name].shape}, not {np.shape(leaf)}: written by "
+                             "another version or scene")
         leaves.append(jnp.asarray(saved[name], dtype=jnp.asarray(leaf).dtype))
     return jax.tree_util.tree_unflatten(treedef, leaves)
 

@@ -166,7 +166,8 @@ def _nusselt(convection):
 
 
 def scene_physics(scene, walls=0) -> simulate.Physics:
-    """The static physics spec of a validated scene."""
+    """The static physics spec of a validated scene; ``run.integrator = "auto"`` resolved by the kind of physics
+    (:func:`sintercond.scene.integrator.scene_integrator`: :func:`build_model` then makes a short run explicit)."""
     scene = typed_scene(scene)
     c, s, ramp, m = scene.conduction, scene.sintering, scene.preheating, scene.material
     held = any(w.mode == "held" for w in _walls(scene)) or (ramp is not None and ramp.hold == "all")
@@ -379,10 +380,12 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         physics = dataclasses.replace(physics, conduction=dataclasses.replace(physics.conduction,
                                                                               integrator=integrator))
         sim = simulate.simulator(physics)
+    explicit_limit = min((bound for bound, _ in bounds.values()), default=np.inf)
     if integrator == "implicit" and scene.run.dt != "auto":
         # the adaptive step is bounded by its error estimate and ends on the ramp's jumps: run.dt is the output clock
         bounds = {kind: bound for kind, bound in bounds.items() if kind not in ("thermal", "preheating")}
     dt, n_steps, limit = _time_step(scene.run, bounds, physics.mechanics is None)
+    limit = min(limit, explicit_limit)  # reported as the stable step: the explicit one, whichever integrator runs
     check_sintering_every(scene, n_steps)
     state = simulate.init_state(particles, built.contacts, dt, mechanics=built.motion, sintering=built.necks,
                                 adaptive_step=0.0 if integrator == "implicit" else None)

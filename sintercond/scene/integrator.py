@@ -29,11 +29,13 @@ def scene_integrator(scene) -> tuple[str, str]:
         mechanics = bool((scene.get("physics") or {}).get("mechanics", False))
         coupling = (scene.get("conduction") or {}).get("coupling") or "none"
         beam = scene.get("beam")
+        scanning = beam is not None and beam.get("speed", 0.0) > 0
     else:
         asked, mechanics = scene.run.integrator, scene.physics.mechanics
         coupling, beam = scene.conduction.coupling or "none", scene.beam
+        scanning = beam is not None and beam.speed > 0
     if asked == "auto":
-        integrator, why = resolve_integrator(mechanics, coupling=coupling, beam=beam)
+        integrator, why = resolve_integrator(mechanics, coupling=coupling, beam="scanning" if scanning else None)
         return integrator, f"run.integrator = \"auto\": {why}"
     if asked == "implicit" and mechanics:
         raise SceneError('run.integrator = "implicit" steps the slow physics of a static packing; this scene has '

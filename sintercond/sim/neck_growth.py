@@ -151,14 +151,22 @@ balance."""
 
 RECENT_BALANCES = 4
 """How many of the last many-body updates the next balance starts from (:func:`recent_start`): two leave more
-iterations on the heated lattice of ``benchmarks/balance_iterations.py`` (56 against 45 an update at 10,648
-spheres), more than four add little; ``[4, c]`` floats carried in :class:`NeckState`."""
+iterations on the heated lattice of ``benchmarks/balance_iterations.py``, more than four add little (measured
+when the balances were kept as particle vectors: 56 against 45 an update at 10,648 spheres); ``[4, c]`` floats
+carried in :class:`NeckState`."""
 
 RAYLEIGH_FLOOR = 1e-8
 """A recent balance's remainder whose ``v^T A v / v^T B v`` is below this (:func:`recent_start`) is left out of
 the start, whose normalisation would blow up what little of it is not round-off. The starts lie in the range of the
 system (:func:`balance_displacements`), whose smooth modes have some ``1 / L^2`` for a packing ``L`` particles
 across, far above it."""
+
+RECENT_MISMATCH = 1.0
+"""A many-body balance is kept for the next starts only while its contact values give its ``B u`` to this fraction
+of the solve's tolerance (at least ``1e-3`` of the root of the machine epsilon, above the round-off of a balance
+solved from rest: 1.4e-12 of ``B u`` on the 40-sphere cluster of the tests at a tolerance of 1e-12;
+:func:`balance_displacements`); else the recent ones are cleared (:func:`pushed`) and the next balance starts from
+rest. The free motions a start can bring are of that size, relative to ``B u``."""
 
 GRADIENT_DRAG = 1e-8
 """The drag, relative to each particle's dashpots, that makes the reverse-mode solve of the many-body balance
@@ -542,7 +550,13 @@ def balance_displacements(pairs, positions, weights, free_approach, supports, to
     u, (iterations, balance) = jax.lax.custom_linear_solve(operator, rhs, solve, transpose_solve, has_aux=True)
     residual = jnp.linalg.norm(rhs - operator(u))
     converged = (residual <= 10.0 * tol * jnp.linalg.norm(rhs)) & jnp.all(jnp.isfinite(u))
-    return u, ~converged, iterations, jax.lax.stop_gradient(balance)
+    # y is defined up to the packing's self-stresses (contact values in balance on their own), which each solve adds
+    # to and the starts carry on; as they grow, so does their round-off in B u: such a balance is not kept
+    balance, u_held = jax.lax.stop_gradient((balance, u))
+    kept = jnp.where(movable, jnp.einsum("nab,nb->na", blocks, u_held), 0.0)
+    bound = max(RECENT_MISMATCH * tol, 1e-3 * float(jnp.finfo(positions.dtype).eps) ** 0.5) * jnp.linalg.norm(kept)
+    represents = jnp.linalg.norm(on_particles(balance) - kept) <= bound
+    return u, ~converged, iterations, jnp.where(represents, balance, 0.0)
 
 
 def _slot_signs(table, dtype):
@@ -658,10 +672,11 @@ def conjugate_gradients(matvec, b, x0, preconditioner, tol, maxiter, with_pull=N
 
 def _balanced_necks(spec: Sintering, params: dict, pairs, normal, active, a_start, r_i, r_j, temperature, duration,
                     positions, supports, recent, table):
-    """The many-body update of the pairs ``[c, 2]`` (module docstring): ``(a, u, unbalanced, iterations)``, the
-    necks ``[c]`` (m) after the interval, the displacements ``[n, 3]`` (m), whether the balance fell short and its
-    solve's iterations (started from the ``recent`` displacements, :func:`balance_displacements`). Only the
-    ``active`` pairs sinter and enter the balance; the others keep ``a_start``."""
+    """The many-body update of the pairs ``[c, 2]`` (module docstring): ``(a, u, unbalanced, iterations, balance)``,
+    the necks ``[c]`` (m) after the interval, the displacements ``[n, 3]`` (m), whether the balance fell short, its
+    solve's iterations (started from the ``recent`` balances) and its contact values for the next starts
+    (:func:`balance_displacements`). Only the ``active`` pairs sinter and enter the balance; the others keep
+    ``a_start``."""
     i, j = pairs[:, 0], pairs[:, 1]
     law = sintering.kinetic_law(spec.law)
     a_free = _grown(spec, params, a_start, r_i, r_j, temperature, duration)
@@ -716,8 +731,8 @@ def grow_necks(spec: Sintering, params: dict, carried: NeckState, pairs, neck, a
 class Grown(NamedTuple):
     """What :func:`grow_necks` returns. ``neck``, ``neck_overlap``: ``[c]`` the necks and their approaches ``H(a)``
     (m); with many-body shrinkage ``displacement`` ``[n, 3]`` (m), ``unbalanced`` (bool scalar, the balance fell
-    short), ``iterations`` (int scalar, its solve's) and ``balance`` (``[n, 3]``, ``B u``: what the next balances
-    start from, :func:`balance_displacements`), else None."""
+    short), ``iterations`` (int scalar, its solve's) and ``balance`` (``[c]``, the contact values of ``B u``: what
+    the next balances start from, :func:`balance_displacements`), else None."""
 
     neck: Any
     neck_overlap: Any
@@ -728,8 +743,8 @@ class Grown(NamedTuple):
 
 
 def with_displacement(carried: NeckState, grown: Grown) -> NeckState:
-    """``carried`` after a many-body update ``grown``: the displacement the newest of its recent ones, the balance's
-    iterations recorded, its shortfall flagged (``carried`` itself without many-body shrinkage)."""
+    """``carried`` after a many-body update ``grown``: its balance the newest of the recent ones (:func:`pushed`),
+    its iterations recorded, its shortfall flagged (``carried`` itself without many-body shrinkage)."""
     if grown.displacement is None:
         return carried
     return dataclasses.replace(
@@ -741,8 +756,8 @@ def with_displacement(carried: NeckState, grown: Grown) -> NeckState:
 
 def pushed(recent, balance):
     """``recent`` ``[k, c]`` (:attr:`NeckState.recent_balances`) with ``balance`` ``[c]`` the newest, the oldest
-    dropped."""
-    return jnp.concatenate([balance.astype(recent.dtype)[None], recent[:-1]])
+    dropped; all cleared by a balance of zeros (one not kept: :data:`RECENT_MISMATCH`)."""
+    return jnp.where(jnp.any(balance != 0), jnp.concatenate([balance.astype(recent.dtype)[None], recent[:-1]]), 0.0)
 
 
 def met_necks(geometry, neck, neck_overlap, moved, radii):
@@ -916,6 +931,7 @@ def next_interval_length(spec: Sintering, carried: NeckState, step, start_neck, 
 
 
 __all__ = ["BLOCK_FLOOR", "Grown", "NECK_STARTS", "NeckState", "POINT_CONTACT_GAP", "RAYLEIGH_FLOOR", "RECENT_BALANCES",
+           "RECENT_MISMATCH",
            "SHRINKAGE_MODES", "STIFF_CONTACT_RATIO", "Sintering", "balance_blocks", "balance_displacements",
            "check_stable", "check_table", "conjugate_gradients", "grow_necks", "law_params", "met_necks",
            "neck_state", "neck_statistics", "necks_at_cap", "pair_necks", "pair_necks_at_cap", "particle_neck_ratio",
