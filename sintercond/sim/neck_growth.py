@@ -199,7 +199,8 @@ class Sintering:
         The default is far below the error of updating every few steps (``benchmarks/sintering_step.py``); the
         solve's iterations, its whole cost, grow with the log of its inverse.
       recent_start: start each many-body balance on a static packing from the recent ones (:func:`recent_start`;
-        the same displacements as from rest, in 3x fewer iterations on a heated lattice); False solves each
+        the same displacements as from rest, in 3x fewer iterations an update on the heated 97,336-sphere
+        lattice of ``benchmarks/balance_iterations.py``); False solves each
         from rest. With the mechanics the balances start from rest (the half pair list reorders its pairs).
     """
 
