@@ -193,7 +193,8 @@ def effective_box(scene, bed, centres=None, radii=None, axis=2):
 
     A powder bed's box is its container: the side walls laterally, and from the
     floor to the bed's mean surface height vertically (the rough top above it
-    is cut off). Any other packing (listed, poured, read from a file): the
+    is cut off; :func:`sintercond.beds.packing.bed_box`, as the k* of a
+    sintering run's history). Any other packing (listed, poured, read from a file): the
     bounding box of its particles' surfaces (for a packing pressed against
     container walls, the container, whose cross-section is ``A``), its two
     faces along ``axis`` moved half a mean radius inward, so that each face
@@ -206,8 +207,9 @@ def effective_box(scene, bed, centres=None, radii=None, axis=2):
     if kind == "simple_cubic":
         return None
     if kind == "powder_bed":
-        lo, hi = bed.container
-        return lo, np.array([hi[0], hi[1], bed.height])
+        from sintercond.beds import packing
+
+        return packing.bed_box(bed.centres, bed.radii, float(bed.container[1][0]))
     from sintercond.sim.steady import face_layer_box
 
     return face_layer_box(centres, radii, axis)

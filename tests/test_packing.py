@@ -248,3 +248,21 @@ def test_a_few_thousand_sphere_bed_is_built_and_settled():
     assert bed.coordination == pytest.approx(coordination) and bed.coordination > 5.0  # 5.4-5.5 measured
     assert 0.85 < bed.height / 400e-6 < 1.1
     assert 0 < bed.max_overlap < 5e-3 and bed.residual_force < 2e-3
+
+
+def test_the_mean_surface_height_visits_each_sphere_on_its_footprint_as_over_the_whole_grid():
+    """surface_height against the brute force over every grid point and every sphere (spheres across the walls
+    and outside the container included)."""
+    rng = np.random.default_rng(3)
+    lateral, points = 5e-4, 64
+    centres = rng.uniform(-5e-5, lateral + 5e-5, (300, 3))
+    radii = rng.uniform(2e-5, 6e-5, 300)
+    g = (np.arange(points) + 0.5) * lateral / points
+    gx, gy = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
+    rho2 = (gx[:, None] - centres[:, 0]) ** 2 + (gy[:, None] - centres[:, 1]) ** 2
+    top = np.where(rho2 < radii**2, centres[:, 2] + np.sqrt(np.maximum(radii**2 - rho2, 0.0)), 0.0)
+    expected = float(np.maximum(top.max(axis=1), 0.0).mean())
+    assert packing.surface_height(centres, radii, lateral, points) == expected
+    lo, hi = packing.bed_box(centres, radii, lateral)
+    np.testing.assert_array_equal(lo, 0.0)
+    np.testing.assert_array_equal(hi, [lateral, lateral, expected])

@@ -7,7 +7,7 @@ import pytest
 
 from sintercond.laws import sintering
 from sintercond.output import io
-from sintercond.sim import neck_growth
+from sintercond.sim import neck_growth, steady
 from sintercond import run as runner
 from sintercond.output.observe import SINTERING_COLUMNS
 from sintercond.scene import SceneError, build, load_scene, validate_scene
@@ -290,3 +290,57 @@ def test_the_dump_carries_each_particles_neck_ratio_as_the_frames_do(tmp_path):
     assert np.all(frame["neck_ratio"] > 0)
     np.testing.assert_allclose(rows[order, columns.index("neck_ratio")], frame["neck_ratio"], rtol=1e-6)
     assert read_packing(tmp_path / "dump.lammpstrj")[1].shape == (16,)  # still a dump our reader takes
+
+
+def _central_slab_conductivity(centres, i, j, conductance, hot, cold, area):
+    """k* (W/(m K)) of a packing from the heat flow and the mean temperature gradient of its middle (the particles
+    between the 25th and 60th percentile of height), the face layers held at 1 and 0: an independent sparse direct
+    solve (SciPy), insensitive to where the face layers are drawn."""
+    import scipy.sparse as sparse
+    import scipy.sparse.linalg as sparse_linalg
+
+    n = len(centres)
+    off = sparse.coo_matrix((np.r_[conductance, conductance], (np.r_[i, j], np.r_[j, i])), (n, n)).tocsr()
+    laplacian = (sparse.diags(np.asarray(off.sum(axis=1)).ravel()) - off).tocsr()
+    fixed = hot | cold
+    temperature = np.where(hot, 1.0, 0.0)
+    free = ~fixed
+    temperature[free] = sparse_linalg.spsolve(laplacian[free][:, free].tocsc(),
+                                              -laplacian[free][:, fixed] @ temperature[fixed])
+    heat = float((laplacian @ temperature)[hot].sum())
+    z = centres[:, 2]
+    middle = (z > np.percentile(z, 25)) & (z < np.percentile(z, 60)) & free
+    gradient = np.polyfit(z[middle], temperature[middle], 1)[0]
+    return heat / area / abs(gradient)
+
+
+def test_a_bed_measures_k_star_from_its_floor_to_its_mean_surface_like_its_bulk():
+    """A rolled 1 mm bed with every neck at a fifth of the smaller radius: the history's k* (the face layers of the
+    floor and of the mean surface height, as `sintercond effective`) within 10 % of the bulk's (the middle's
+    gradient, independent solve). Before, the top face layer was the particles within half a mean radius of the
+    highest surface: two particles here, k* 7x too low."""
+    import dataclasses
+
+    from sintercond.contacts.network import contact_pairs
+    from sintercond.output import observe
+
+    scene = load_scene("ti6al4v_preheating_bed", duration=0.01)
+    scene["packing"] = {"kind": "powder_bed", "method": "roll", "lateral_size": 1e-3, "height": 6e-4,
+                        "diameter_range": [45e-6, 105e-6], "seed": 0}
+    scene.pop("mechanics")  # the pour's material: a rolled bed needs none
+    model = build.build_model(validate_scene(scene))
+    state = model.state
+    i, j = np.asarray(state.contacts.pairs).T
+    radii = model.radii
+    state = dataclasses.replace(state, contacts=dataclasses.replace(
+        state.contacts, neck=0.2 * np.minimum(radii[i], radii[j])))
+    k_star = observe.sintered_conductivity(model, state)
+
+    conductance = np.asarray(observe._pair_neck_conductance(model.physics, state, model.params))
+    pairs = contact_pairs(model.centres, radii)
+    assert np.array_equal(np.c_[pairs.i, pairs.j], np.c_[i, j])
+    box = observe.k_star_box(model, model.centres)
+    hot, cold, _, area = steady._hot_and_cold_faces(model.centres, radii, pairs, 2, box)
+    assert cold.sum() > 0.5 * hot.sum()  # about half the top layer against the floor's layer
+    bulk = _central_slab_conductivity(model.centres, i, j, conductance, hot, cold, area)
+    assert k_star == pytest.approx(bulk, rel=0.1)

@@ -246,17 +246,37 @@ def deposit_spheres(radii, lateral_size, rng, tries=1):
     return centres[:n]
 
 
-def _surface_height(centres, radii, lateral_size, points=64):
-    """Mean over a lateral grid of the highest sphere surface above each point (0 where none)."""
-    g = (np.arange(points) + 0.5) * lateral_size / points
-    gx, gy = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
-    best = np.zeros(len(gx))
-    for start in range(0, len(radii), 1024):
-        c, r = centres[start:start + 1024], radii[start:start + 1024]
-        rho2 = (gx[:, None] - c[None, :, 0]) ** 2 + (gy[:, None] - c[None, :, 1]) ** 2
-        above = np.where(rho2 < r**2, c[None, :, 2] + np.sqrt(np.maximum(r**2 - rho2, 0.0)), 0.0)
-        best = np.maximum(best, above.max(axis=1))
+def surface_height(centres, radii, lateral_size, points=64) -> float:
+    """Mean surface height (m) of a bed in ``[0, L]^2``: the mean over a ``points x points`` lateral grid (cell
+    centres) of the highest sphere surface above each grid point (0 where none), :attr:`Packing.height`.
+
+    Each sphere is visited on the grid points of its own footprint only, O(n (2 r points / L)^2)."""
+    centres, radii = np.asarray(centres, np.float64), np.asarray(radii, np.float64)
+    spacing = lateral_size / points
+    best = np.zeros((points, points))
+    if len(radii) == 0:
+        return 0.0
+    first = np.clip(np.ceil((centres[:, :2] - radii[:, None]) / spacing - 0.5), 0, points - 1).astype(np.int64)
+    width = int(np.ceil(2.0 * float(np.max(radii)) / spacing)) + 1
+    offsets = np.arange(width)
+    for start in range(0, len(radii), 4096):
+        c, r, k = centres[start:start + 4096], radii[start:start + 4096], first[start:start + 4096]
+        gx = np.minimum(k[:, 0, None] + offsets, points - 1)  # [m, width]; a repeated edge point is harmless
+        gy = np.minimum(k[:, 1, None] + offsets, points - 1)
+        rho2 = ((gx + 0.5) * spacing - c[:, 0, None])[:, :, None] ** 2 + ((gy + 0.5) * spacing - c[:, 1, None])[:, None, :] ** 2
+        above = np.where(rho2 < r[:, None, None] ** 2,
+                         c[:, 2, None, None] + np.sqrt(np.maximum(r[:, None, None] ** 2 - rho2, 0.0)), 0.0)
+        np.maximum.at(best, (np.broadcast_to(gx[:, :, None], above.shape), np.broadcast_to(gy[:, None, :], above.shape)),
+                      above)
     return float(best.mean())
+
+
+def bed_box(centres, radii, lateral_size):
+    """``(lo, hi)`` (m): the box a powder bed's ``k*`` is measured in (:func:`sintercond.sim.steady.steady_state_conductivity`'s
+    ``box``): its container ``[0, L]^2`` laterally, from the floor to its mean surface height (:func:`surface_height`)
+    vertically. The particles touching the floor are held hot, those whose surface reaches above the mean surface
+    (about half of the top layer) cold, whatever the roughness of the free surface."""
+    return np.zeros(3), np.array([lateral_size, lateral_size, surface_height(centres, radii, lateral_size)])
 
 
 METHODS = ("roll", "relax", "dem")
@@ -343,7 +363,7 @@ def _bed(centres, radii, lateral_size) -> Packing:
     on_wall = ((centres[:, 2] - radii < 0) | np.any(centres[:, :2] - radii[:, None] < 0, axis=1)
                | np.any(centres[:, :2] + radii[:, None] > lateral_size, axis=1))
     isolated = int(np.sum((degree == 0) & ~on_wall))
-    surface = _surface_height(centres, radii, lateral_size)
+    surface = surface_height(centres, radii, lateral_size)
     top = float(np.max(centres[:, 2] + radii))
     fraction = float(np.sum(4.0 / 3.0 * np.pi * radii**3) / (lateral_size**2 * surface))
     container = (np.zeros(3), np.array([lateral_size, lateral_size, top]))

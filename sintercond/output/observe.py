@@ -11,6 +11,7 @@ import jax
 import numpy as np
 
 from sintercond import simulate
+from sintercond.beds import packing
 from sintercond.contacts import network
 from sintercond.laws import forces, walls
 from sintercond.sim import mechanics, neck_growth, steady
@@ -48,8 +49,8 @@ _pair_neck_conductance = jax.jit(simulate.pair_neck_conductance, static_argnums=
 
 def sintered_conductivity(model, state) -> float:
     """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
-    (:func:`sintercond.sim.steady.steady_state_network_conductivity`), 0 while no contact conducts. A lattice's end
-    layers are held hot and cold; any other packing's face layers (:func:`sintercond.sim.steady.face_layer_box`)."""
+    (:func:`sintercond.sim.steady.steady_state_network_conductivity`), 0 while no contact conducts, in the box of
+    :func:`k_star_box`."""
     radii = model.radii
     axis = model.k_star_axis
     if state.mechanics is not None:  # the necks on the half pair list, the packing where it has moved to
@@ -61,16 +62,28 @@ def sintered_conductivity(model, state) -> float:
         i, j = np.asarray(geometry.i, np.int64)[keep], np.asarray(geometry.j, np.int64)[keep]
         centres = np.asarray(state.particles.positions, np.float64)
         pairs = network.ContactPairs(i, j, np.asarray(geometry.overlap)[keep], radii[i], radii[j], len(radii))
-        box = steady.face_layer_box(centres, radii, axis)
         return float(steady.steady_state_network_conductivity(centres, radii, pairs, np.asarray(pair_k)[keep],
-                                                              axis=axis, box=box))
+                                                              axis=axis, box=k_star_box(model, centres)))
     pair_k = np.asarray(_pair_neck_conductance(model.physics, state, model.params))
     if not np.any(pair_k > 0):
         return 0.0
     i, j = np.asarray(state.contacts.pairs, np.int64).T
     pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap), radii[i], radii[j], len(radii))
-    box = None if model.lattice else steady.face_layer_box(model.centres, radii, axis)
-    return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=axis, box=box))
+    return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=axis,
+                                                          box=k_star_box(model, model.centres)))
+
+
+def k_star_box(model, centres):
+    """The box the k* of ``model``'s packing at ``centres`` (m) is measured in: None for a lattice (its end layers
+    are held), a powder bed's container from its floor to its mean surface height
+    (:func:`sintercond.beds.packing.bed_box`; the rough top is cut off, so the cold face layer is the half of the top
+    layer that reaches above it), and any other packing's face layers
+    (:func:`sintercond.sim.steady.face_layer_box`)."""
+    if model.lattice:
+        return None
+    if model.bed_size is not None:
+        return packing.bed_box(centres, model.radii, model.bed_size)
+    return steady.face_layer_box(centres, model.radii, model.k_star_axis)
 
 
 class Observation(NamedTuple):

@@ -48,6 +48,7 @@ class Model:
     sized_speed: float | None = None  # with mechanics: the approach speed (m/s) the mechanical step is sized for
     k_star_axis: int | None = None  # with [sintering] k_star_axis: the axis of k* at each output
     lattice: bool = False  # a simple cubic packing (k* between its end layers)
+    bed_size: float | None = None  # a powder bed's lateral size (m): k* in sintercond.beds.packing.bed_box
     output_every: int = 1  # steps between outputs: run.output_every, or about DEFAULT_OUTPUTS over the run
     checkpoint_every: int = 1  # steps between checkpoints (run.checkpoint_every or DEFAULT_CHECKPOINT_OUTPUTS outputs)
     planes: tuple = ()  # the scene's walls as sintercond.laws.walls.PlaneWall at the packing built (scene_walls), once
@@ -260,6 +261,12 @@ def packing_box(scene):
     return np.zeros(3), np.array([p.lateral_size, p.lateral_size, np.inf])
 
 
+def packing_size(scene) -> float | None:
+    """A powder bed's lateral size (m) (its container ``[0, L]^2``), None for any other packing."""
+    box = packing_box(scene)
+    return None if box is None else float(box[1][0])
+
+
 def container_walls(scene) -> tuple:
     """With mechanics, the insulated walls of a powder bed's box (:func:`sintercond.beds.settle.box_walls`) on each face
     the scene gives no wall of its own (``physics.container``, true by default): without them the moving bed
@@ -394,7 +401,8 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                  _wall_heat_specs(planes, centres, radii),
                  {kind: bound for kind, (bound, _) in bounds.items()}, built.v_rel,
                  None if scene.sintering is None else scene.sintering.k_star_axis,
-                 scene.packing.kind == "simple_cubic", *output_interval(scene.run, n_steps), tuple(planes))
+                 scene.packing.kind == "simple_cubic", packing_size(scene), *output_interval(scene.run, n_steps),
+                 tuple(planes))
 
 
 class _Built(NamedTuple):
