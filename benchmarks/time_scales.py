@@ -96,15 +96,16 @@ def history(path: Path) -> dict[int, dict]:
     return {int(float(row.split(",")[0])): dict(zip(names, map(float, row.split(",")))) for row in lines[1:]}
 
 
-def face_layers(out: Path) -> str:
-    """How many particles hold k*'s two faces (:func:`sintercond.sim.steady.face_layer_box` along z)."""
-    from sintercond.sim.steady import face_layer_box
+def face_layers(out: Path, lateral_size: float) -> str:
+    """How many particles hold k*'s two faces (the powder bed's box, :func:`sintercond.beds.packing.bed_box`)."""
+    from sintercond.beds.packing import bed_box
 
     packed = np.load(out / "packing.npz")
     centres, radii = packed["centres"], packed["radii"]
-    lo, hi = face_layer_box(centres, radii, 2)
+    lo, hi = bed_box(centres, radii, lateral_size)
     bottom, top = int(np.sum(centres[:, 2] - radii <= lo[2])), int(np.sum(centres[:, 2] + radii >= hi[2]))
-    return f"k*'s face layers: {bottom} particles at the bottom, {top} at the top"
+    return (f"k*'s face layers: {bottom} particles on the floor, {top} reaching above the mean surface "
+            f"({1e6 * hi[2]:.0f} um)")
 
 
 def in_process(work: Path) -> dict:
@@ -153,7 +154,7 @@ def main(argv=None) -> None:
                      f"{he[step]['k_star_W_mK']:.4g}"))
     s_e, s_i = ex["summary"], im["summary"]
     lines = [f"packings identical: {same_packing}; {s_e['particles']} particles, {s_e['contacts']} contacts; "
-             f"{face_layers(ex['out'])}",
+             f"{face_layers(ex['out'], args.lateral_size or 500e-6)}",
              f"explicit: {s_e['steps']:,} steps of {s_e['dt_s']:.3g} s; process {ex['wall']:.1f} s, run phase "
              f"{s_e['wall_s']:.1f} s, of which outputs {s_e['outputs_s']:.1f} s, compile and stepping "
              f"{s_e['wall_s'] - s_e['outputs_s']:.1f} s",
@@ -190,10 +191,7 @@ def main(argv=None) -> None:
         if wide:
             body += ("\n\nThe auto run is faster than the explicit one here, but short of the issue's goal (1 min for "
                      "the whole process at 1e4): its steps cost some 0.1 s each (two stages of two fixed-point "
-                     "iterations, each a conjugate-gradient solve and a neck growth, and an error solve). k* is held "
-                     "between face layers (`face_layer_box`: the particles within half a mean radius of the outermost "
-                     "surfaces); on a free rough surface the top layer is a few particles (see the first line), so "
-                     "the absolute k* of this bed is not its conductivity; the two integrators' differences are.")
+                     "iterations, each a conjugate-gradient solve and a neck growth, and an error solve).")
             write_section("time_scales_wide", command_line(), body)
             return
         body += ("\n\nThe adaptive run takes some 200 times fewer steps, each of them two implicit stages (conjugate "

@@ -55,7 +55,7 @@ from sintercond.laws import conductance as cd
 from sintercond.laws import geometry
 from sintercond.laws import sintering as st
 from sintercond.laws import tortuosity as tt
-from sintercond.contacts.network import contact_pairs
+from sintercond.contacts.network import ContactPairs, contact_pairs
 from sintercond.sim.steady import steady_state_network_conductivity
 
 UM = 1e-6
@@ -591,9 +591,70 @@ def bed_conductivity_along_ramp(fit: SinteringFit, times=(0.5, 3.5, 6.5, 9.5)) -
     return {"time_s": times, **{k: np.array(v) for k, v in out.items()}}
 
 
+def preheat_conductivity_model(scene, saves: int, *, centres=None, radii=None):
+    """``(k_star, model)``: a sintering scene's bed along its preheat, stepped adaptively, as a function of its
+    kinetics, for fits of them to k*(t).
+
+    ``k_star(theta) -> (k [saves] W/(m K), failed)``: the scene's ``run.duration`` cut into ``saves`` equal
+    intervals; the run stepped by TR-BDF2 within ``run.rtol`` / ``run.atol``
+    (:func:`sintercond.sim.adaptive.rollout`; ``run.integrator`` is taken as ``"implicit"``) with the scene's
+    ``[sintering]`` law at ``A = exp(theta["log_A"])`` (m^4 K/s) and ``Q = theta["Q"]`` (kJ/mol); at the end of
+    each interval the k* of the bed along ``sintering.k_star_axis`` on the necks it has then (the steady solve and
+    box of a run's ``k_star_W_mK``, :func:`sintercond.output.observe.sintered_conductivity`, each particle at its
+    conductivity at its temperature there). ``failed`` is set when any adaptive interval did not finish: then
+    none of the values is to be used (``least_squares(..., invalid=True)`` raises on it). Forward mode
+    (``jax.jvp``, Levenberg-Marquardt in :func:`fitting.core.least_squares`) goes through the adaptive loop; jit
+    ``k_star`` once and call it for any ``theta``. The law must be ``"grain_boundary"`` (its ``A`` and ``Q``).
+
+    ``model``: the :class:`sintercond.scene.build.Model` (packing, state, parameters) the function runs on;
+    ``centres``, ``radii``: a packing to use instead of building the scene's (m).
+    """
+    from sintercond.output import observe
+    from sintercond.scene import validate_scene
+    from sintercond.scene.typed import typed_scene
+    from sintercond.scene.build import build_model
+    from sintercond.sim import adaptive, rollout
+    from sintercond.sim.contacts import pair_neck_conductance
+
+    if not (isinstance(saves, numbers.Integral) and saves >= 1):
+        raise ValueError(f"saves must be an integer >= 1 (the k* values along the run); got {saves!r}")
+    scene = validate_scene({**scene, "run": {**scene.get("run", {}), "integrator": "implicit"}})
+    typed = typed_scene(scene)
+    if typed.sintering is None or typed.sintering.k_star_axis is None:
+        raise ValueError("the scene needs [sintering] with k_star_axis (the axis of k*)")
+    if typed.sintering.law != "grain_boundary":
+        raise ValueError("preheat_conductivity_model fits (ln A, Q) of sintering.law = \"grain_boundary\"; the scene "
+                         f"has {typed.sintering.law!r}")
+    model = build_model(scene, centres, radii)
+    sim, state, params = model.sim, model.state, model.params
+    state = dataclasses.replace(state, dt=jnp.asarray(typed.run.duration / saves, state.dt.dtype))
+    x, r = model.centres, model.radii
+    i, j = np.asarray(state.contacts.pairs, np.int64).T
+    pairs = ContactPairs(i, j, np.asarray(state.contacts.overlap), r[i], r[j], len(r))
+    box = observe.k_star_box(model, x)
+    axis = typed.sintering.k_star_axis
+    saveat = rollout.SaveAt(every=1, fn=lambda s: (s.contacts, s.particles.temperature))
+
+    def k_star(theta):
+        p = dataclasses.replace(params, sintering={**params.sintering, "A": jnp.exp(theta["log_A"]),
+                                                   "activation_energy": theta["Q"]})
+        _, (contacts, temperature), stats = adaptive.rollout(sim, state, p, saves, saveat)
+
+        def conductivity(c, t):
+            there = dataclasses.replace(state, contacts=c, particles=dataclasses.replace(state.particles,
+                                                                                          temperature=t))
+            return steady_state_network_conductivity(x, r, pairs, pair_neck_conductance(sim.physics, there, p),
+                                                     axis=axis, box=box)
+
+        return jax.vmap(conductivity)(contacts, temperature), stats.failed
+
+    return k_star, model
+
+
 __all__ = [
     "IdentifiabilityWarning", "KineticsPosterior", "NeckSeries", "SERIES", "SinteringFit", "bed_conductivity_along_ramp",
     "conductivity_along_ramp", "exponent_valley",
-    "fit_kinetics", "grown_necks", "kinetics_posterior", "lattice_conductivity", "neck_series", "ramp_temperature_mean",
+    "fit_kinetics", "grown_necks", "kinetics_posterior", "lattice_conductivity", "neck_series", "preheat_conductivity_model",
+    "ramp_temperature_mean",
     "synthetic_series",
 ]

@@ -189,30 +189,21 @@ def _run(args) -> int:
 
 
 def effective_box(scene, bed, centres=None, radii=None, axis=2):
-    """The box ``k*`` is measured in, chosen from the scene; ``None`` for a lattice (its cell, see steady).
-
-    A powder bed's box is its container: the side walls laterally, and from the
-    floor to the bed's mean surface height vertically (the rough top above it
-    is cut off; :func:`sintercond.beds.packing.bed_box`, as the k* of a
-    sintering run's history). Any other packing (listed, poured, read from a file): the
-    bounding box of its particles' surfaces (for a packing pressed against
-    container walls, the container, whose cross-section is ``A``), its two
-    faces along ``axis`` moved half a mean radius inward, so that each face
-    layer (every particle whose surface comes within half a mean radius of the
-    outermost) is held. The particles
-    reaching a face of the box along the axis are held (hot at ``lo``, cold at
-    ``hi``).
+    """The box ``k*`` is measured in, chosen from the scene (:func:`sintercond.sim.steady.measurement_box`, as a
+    sintering run's history measures it): ``None`` for a lattice (its cell, see steady). A powder bed's box is
+    its container: the side walls laterally, and from the floor to the bed's mean surface height vertically (the
+    rough top above it is cut off). Any other packing (listed, poured, read from a file): the bounding box of its
+    particles' surfaces (for a packing pressed against container walls, the container, whose cross-section is
+    ``A``), its two faces along ``axis`` moved half a mean radius inward, so that each face layer (every particle
+    whose surface comes within half a mean radius of the outermost) is held. The particles reaching a face of the
+    box along the axis are held (hot at ``lo``, cold at ``hi``).
     """
+    from sintercond.sim.steady import measurement_box
+
     kind = scene["packing"]["kind"]
-    if kind == "simple_cubic":
-        return None
     if kind == "powder_bed":
-        from sintercond.beds import packing
-
-        return packing.bed_box(bed.centres, bed.radii, float(bed.container[1][0]))
-    from sintercond.sim.steady import face_layer_box
-
-    return face_layer_box(centres, radii, axis)
+        return measurement_box(bed.centres, bed.radii, axis, bed_size=float(bed.container[1][0]))
+    return measurement_box(centres, radii, axis, lattice=kind == "simple_cubic")
 
 
 def _effective(args) -> int:

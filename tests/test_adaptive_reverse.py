@@ -4,6 +4,7 @@ References: central differences of the adaptive run, forward mode through the sa
 parameters a synthetic k*(t) was made with (:mod:`sintercond.sim.adaptive`, module docstring: record and replay).
 """
 
+import copy
 import dataclasses
 import math
 
@@ -13,7 +14,10 @@ import numpy as np
 import pytest
 
 from fitting.core import least_squares
+from fitting.sintering import preheat_conductivity_model
+from sintercond import run as runner
 from sintercond.contacts.network import ContactPairs
+from sintercond.scene import load_scene
 from sintercond.sim import adaptive, rollout
 from sintercond.sim.contacts import pair_neck_conductance
 from sintercond.sim.steady import steady_state_network_conductivity
@@ -118,3 +122,40 @@ def test_a_kinetic_fit_through_the_preheat_recovers_the_law_from_its_conductivit
     # noise-free data: the truth within the adaptive solve's own tolerance (k* to about rtol)
     assert fit.params["log_A"] == pytest.approx(math.log(A_TRUE), abs=1e-3)
     assert fit.params["Q"] == pytest.approx(Q_TRUE, abs=1e-2)
+
+
+def small_preheating_bed(duration):
+    """The built-in ti6al4v_preheating_bed on a rolled 0.5 mm bed (321 particles) for ``duration`` (s)."""
+    scene = load_scene("ti6al4v_preheating_bed", duration=duration)
+    scene["packing"] = {"kind": "powder_bed", "method": "roll", "lateral_size": 5e-4, "height": 4e-4,
+                        "diameter_range": [45e-6, 105e-6], "seed": 0}
+    scene.pop("mechanics")  # the pour's material: a rolled bed needs none
+    return scene
+
+
+@pytest.mark.slow
+def test_a_kinetic_fit_through_a_bed_preheat_recovers_the_law_from_its_k_star(tmp_path):
+    """The preheating bed scene end to end at reduced size (issue: a 1e4 bed in notebooks/calibrate_preheat.ipynb):
+    its k*(t) at five times of the first 1.9 s of the ramp, the last equal to `sintercond run`'s history at the
+    end (the same adaptive run, other intervals: to its tolerance); synthetic data made with the scene's law,
+    fitted from ln A + 0.5 and Q - 4 kJ/mol by Levenberg-Marquardt (forward mode through the adaptive loop)."""
+    scene = small_preheating_bed(1.9)
+    k_star, model = preheat_conductivity_model(scene, 5)
+    law = model.params.sintering
+    truth = {"log_A": jnp.asarray(math.log(float(law["A"]))), "Q": jnp.asarray(float(law["activation_energy"]))}
+    observed, failed = jax.jit(k_star)(truth)
+    assert not bool(failed) and np.all(np.diff(np.asarray(observed)) > 0)
+
+    run_scene = copy.deepcopy(scene)
+    run_scene["run"]["integrator"] = "implicit"
+    runner.run_scene(run_scene, tmp_path, progress=False, pictures=False)
+    history = runner.read_history(tmp_path)
+    assert history["time"][-1] == pytest.approx(1.9, rel=1e-12)
+    # the same adaptive run in other intervals (the run's output clock): measured 5e-7 apart
+    assert history["k_star_W_mK"][-1] == pytest.approx(float(observed[-1]), rel=1e-5)
+
+    start = {"log_A": float(truth["log_A"]) + 0.5, "Q": float(truth["Q"]) - 4.0}
+    fit = least_squares(lambda theta, _: k_star(theta), None, observed, start, method="levenberg_marquardt",
+                        relative=True, max_steps=30, invalid=True)
+    assert fit.params["log_A"] == pytest.approx(float(truth["log_A"]), abs=1e-3)
+    assert fit.params["Q"] == pytest.approx(float(truth["Q"]), abs=1e-2)

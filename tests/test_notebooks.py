@@ -32,23 +32,36 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 # xdist hands out whole files (--dist loadfile), so in a file of its own it runs on one worker while the other
 # notebooks run on the other, instead of all seven one after another on one worker.
 ALONE = ("calibrate_softening.ipynb",)
+# committed with the outputs of their full size (a 1e4-particle preheat: half an hour of CPU), run here at the size
+# SINTERCOND_NOTEBOOK_SCALE=small asks of them: they must run top to bottom and print and plot the same lines, whose
+# numbers are those of the smaller case (the pipeline's values are tested in tests/test_adaptive_reverse.py)
+SCALED = ("calibrate_preheat.ipynb",)
 NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 RELATIVE = 1e-6
 
 
-def execute(path):
-    """The notebook at ``path`` executed by a fresh kernel that imports this checkout's sintercond and fitting."""
+def execute(path, small=False):
+    """The notebook at ``path`` executed by a fresh kernel that imports this checkout's sintercond and fitting
+    (``small``: with ``SINTERCOND_NOTEBOOK_SCALE=small``; a :data:`SCALED` notebook at full size has no time
+    limit)."""
     notebook = nbformat.read(path, as_version=4)
-    env_path = os.environ.get("PYTHONPATH", "")
+    saved = {name: os.environ.get(name) for name in ("PYTHONPATH", "SINTERCOND_NOTEBOOK_SCALE")}
+    env_path = saved["PYTHONPATH"] or ""
     os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + ([env_path] if env_path else []))
+    if small:
+        os.environ["SINTERCOND_NOTEBOOK_SCALE"] = "small"
+    else:
+        os.environ.pop("SINTERCOND_NOTEBOOK_SCALE", None)
     try:
-        client = nbclient.NotebookClient(notebook, timeout=600, kernel_name="python3",
-                                         resources={"metadata": {"path": str(path.parent)}})
+        client = nbclient.NotebookClient(notebook, timeout=None if path.name in SCALED and not small else 600,
+                                         kernel_name="python3", resources={"metadata": {"path": str(path.parent)}})
         client.execute()
     finally:
-        os.environ["PYTHONPATH"] = env_path
-        if not env_path:
-            del os.environ["PYTHONPATH"]
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
     for cell in notebook.cells:
         cell.metadata.pop("execution", None)
     return notebook
@@ -150,12 +163,62 @@ def check_current(path):
                           f"{path.name}` and commit it:\n" + "\n".join(problems[:20]))
 
 
-TOGETHER = [p for p in NOTEBOOKS if p.name not in ALONE]
+THOUSANDS = re.compile(r"(?<=\d),(?=\d{3}(?!\d))")
+
+
+def _words(line):
+    """``line`` with its numbers (counts printed with thousands separators too) replaced by ``#``."""
+    return NUMBER.sub("#", THOUSANDS.sub("", line))
+
+
+def same_shape(committed, current):
+    """Where two runs of a notebook differ in what they print and plot, numbers aside: per code cell, the number of
+    plots and of lines, and each line's words."""
+    problems = []
+    for k, ((lines_then, images_then), (lines_now, images_now)) in enumerate(
+            zip(text_outputs(committed), text_outputs(current), strict=True)):
+        if images_then != images_now or len(lines_then) != len(lines_now):
+            problems.append(f"code cell {k}: {images_then} plots and {len(lines_then)} lines committed, "
+                            f"{images_now} and {len(lines_now)} now")
+            continue
+        problems += [f"code cell {k}: {a!r} -> {b!r}" for a, b in zip(lines_then, lines_now) if _words(a) != _words(b)]
+    return problems
+
+
+def test_the_shape_of_outputs_ignores_numbers_only():
+    assert not same_shape_of_lines("bed: 9,762 particles, 25,784 contacts", "bed: 321 particles, 769 contacts")
+    assert not same_shape_of_lines("Q = 36.9 +- 1.7 kJ/mol, 1,234.5", "Q = -35.86 +- 0.7 kJ/mol, 2.5e-3")
+    assert same_shape_of_lines("Q = 36.9 kJ/mol", "Q = 36.9 kJ")
+    assert same_shape_of_lines("a, b 1", "a b 1")
+
+
+def same_shape_of_lines(then, now):
+    """:func:`same_shape`'s verdict on one line of one cell."""
+    cell = nbformat.v4.new_code_cell()
+    committed, current = nbformat.v4.new_notebook(cells=[cell]), nbformat.v4.new_notebook(cells=[copy.deepcopy(cell)])
+    committed.cells[0].outputs = [nbformat.v4.new_output("stream", name="stdout", text=then)]
+    current.cells[0].outputs = [nbformat.v4.new_output("stream", name="stdout", text=now)]
+    return same_shape(committed, current)
+
+
+TOGETHER = [p for p in NOTEBOOKS if p.name not in ALONE + SCALED]
 
 
 @pytest.mark.parametrize("path", TOGETHER, ids=[p.name for p in TOGETHER])
 def test_notebook_runs_and_committed_outputs_are_current(path):
     check_current(path)
+
+
+@pytest.mark.parametrize("path", [p for p in NOTEBOOKS if p.name in SCALED], ids=list(SCALED))
+def test_a_full_size_notebook_runs_small_and_prints_what_it_committed(path):
+    committed = nbformat.read(path, as_version=4)
+    assert any(c.get("outputs") for c in committed.cells if c.cell_type == "code"), (
+        f"{path.name} is committed without outputs; run `python tests/test_notebooks.py {path.name}`")
+    current = execute(path, small=True)
+    errors = [o for c in current.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"]
+    assert not errors
+    problems = same_shape(committed, current)
+    assert not problems, f"{path.name}: its outputs changed shape; rerun it at full size:\n" + "\n".join(problems[:20])
 
 
 if __name__ == "__main__":

@@ -254,15 +254,21 @@ def test_the_mean_surface_height_visits_each_sphere_on_its_footprint_as_over_the
     """surface_height against the brute force over every grid point and every sphere (spheres across the walls
     and outside the container included)."""
     rng = np.random.default_rng(3)
-    lateral, points = 5e-4, 64
-    centres = rng.uniform(-5e-5, lateral + 5e-5, (300, 3))
-    radii = rng.uniform(2e-5, 6e-5, 300)
-    g = (np.arange(points) + 0.5) * lateral / points
-    gx, gy = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
-    rho2 = (gx[:, None] - centres[:, 0]) ** 2 + (gy[:, None] - centres[:, 1]) ** 2
-    top = np.where(rho2 < radii**2, centres[:, 2] + np.sqrt(np.maximum(radii**2 - rho2, 0.0)), 0.0)
-    expected = float(np.maximum(top.max(axis=1), 0.0).mean())
-    assert packing.surface_height(centres, radii, lateral, points) == expected
+
+    def brute_force(centres, radii, lateral, points):
+        g = (np.arange(points) + 0.5) * lateral / points
+        gx, gy = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
+        rho2 = (gx[:, None] - centres[:, 0]) ** 2 + (gy[:, None] - centres[:, 1]) ** 2
+        top = np.where(rho2 < radii**2, centres[:, 2] + np.sqrt(np.maximum(radii**2 - rho2, 0.0)), 0.0)
+        return float(np.maximum(top.max(axis=1), 0.0).mean())
+
+    lateral = 5e-4
+    for n, points, r_max in ((300, 64, 6e-5), (300, 50, 6e-5), (3000, 64, 2.4e-4)):  # the last in several chunks
+        centres = rng.uniform(-5e-5, lateral + 5e-5, (n, 3))
+        radii = rng.uniform(2e-5, r_max, n)
+        expected = brute_force(centres, radii, lateral, points)
+        assert packing.surface_height(centres, radii, lateral, points) == expected, (n, points)
+    assert packing.surface_height(np.zeros((0, 3)), np.zeros(0), lateral) == 0.0
     lo, hi = packing.bed_box(centres, radii, lateral)
     np.testing.assert_array_equal(lo, 0.0)
-    np.testing.assert_array_equal(hi, [lateral, lateral, expected])
+    np.testing.assert_array_equal(hi, [lateral, lateral, packing.surface_height(centres, radii, lateral)])

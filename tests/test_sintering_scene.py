@@ -192,7 +192,7 @@ def test_bad_preheating_keys_are_named(mutate, message):
 
 
 @pytest.mark.slow
-def test_the_preheating_bed_scene_heats_from_its_ramped_plate_and_measures_k_star_between_face_layers(tmp_path):
+def test_the_preheating_bed_scene_heats_from_its_ramped_plate_and_its_k_star_rises(tmp_path):
     scene = load_scene("ti6al4v_preheating_bed", duration=0.01)
     scene["packing"].update(lateral_size=300e-6, height=250e-6)  # a smaller bed of the same kind
     scene["run"].update(output_every=100, checkpoint_every=100)

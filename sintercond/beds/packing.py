@@ -256,14 +256,17 @@ def surface_height(centres, radii, lateral_size, points=64) -> float:
     best = np.zeros((points, points))
     if len(radii) == 0:
         return 0.0
-    first = np.clip(np.ceil((centres[:, :2] - radii[:, None]) / spacing - 0.5), 0, points - 1).astype(np.int64)
-    width = int(np.ceil(2.0 * float(np.max(radii)) / spacing)) + 1
+    # the first grid point at or right of each footprint's edge, one earlier against round-off at the edge
+    first = np.clip(np.ceil((centres[:, :2] - radii[:, None]) / spacing - 0.5) - 1, 0, points - 1).astype(np.int64)
+    width = int(np.ceil(2.0 * float(np.max(radii)) / spacing)) + 2
     offsets = np.arange(width)
-    for start in range(0, len(radii), 4096):
-        c, r, k = centres[start:start + 4096], radii[start:start + 4096], first[start:start + 4096]
+    grid = (np.arange(points) + 0.5) * lateral_size / points
+    chunk = max(1, 2**22 // width**2)  # spheres at a time: temporaries of about 4e6 grid points
+    for start in range(0, len(radii), chunk):
+        c, r, k = centres[start:start + chunk], radii[start:start + chunk], first[start:start + chunk]
         gx = np.minimum(k[:, 0, None] + offsets, points - 1)  # [m, width]; a repeated edge point is harmless
         gy = np.minimum(k[:, 1, None] + offsets, points - 1)
-        rho2 = ((gx + 0.5) * spacing - c[:, 0, None])[:, :, None] ** 2 + ((gy + 0.5) * spacing - c[:, 1, None])[:, None, :] ** 2
+        rho2 = (grid[gx] - c[:, 0, None])[:, :, None] ** 2 + (grid[gy] - c[:, 1, None])[:, None, :] ** 2
         above = np.where(rho2 < r[:, None, None] ** 2,
                          c[:, 2, None, None] + np.sqrt(np.maximum(r[:, None, None] ** 2 - rho2, 0.0)), 0.0)
         np.maximum.at(best, (np.broadcast_to(gx[:, :, None], above.shape), np.broadcast_to(gy[:, None, :], above.shape)),

@@ -11,7 +11,6 @@ import jax
 import numpy as np
 
 from sintercond import simulate
-from sintercond.beds import packing
 from sintercond.contacts import network
 from sintercond.laws import forces, walls
 from sintercond.sim import mechanics, neck_growth, steady
@@ -74,16 +73,10 @@ def sintered_conductivity(model, state) -> float:
 
 
 def k_star_box(model, centres):
-    """The box the k* of ``model``'s packing at ``centres`` (m) is measured in: None for a lattice (its end layers
-    are held), a powder bed's container from its floor to its mean surface height
-    (:func:`sintercond.beds.packing.bed_box`; the rough top is cut off, so the cold face layer is the half of the top
-    layer that reaches above it), and any other packing's face layers
-    (:func:`sintercond.sim.steady.face_layer_box`)."""
-    if model.lattice:
-        return None
-    if model.bed_size is not None:
-        return packing.bed_box(centres, model.radii, model.bed_size)
-    return steady.face_layer_box(centres, model.radii, model.k_star_axis)
+    """The box the k* of ``model``'s packing at ``centres`` (m) is measured in
+    (:func:`sintercond.sim.steady.measurement_box`, as ``sintercond effective``'s)."""
+    return steady.measurement_box(centres, model.radii, model.k_star_axis, lattice=model.lattice,
+                                  bed_size=model.bed_size)
 
 
 class Observation(NamedTuple):

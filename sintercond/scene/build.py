@@ -387,7 +387,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
         physics = dataclasses.replace(physics, conduction=dataclasses.replace(physics.conduction,
                                                                               integrator=integrator))
         sim = simulate.simulator(physics)
-    explicit_limit = min((bound for bound, _ in bounds.values()), default=np.inf)
+    explicit_limit = _smallest_bound(bounds)
     if integrator == "implicit" and scene.run.dt != "auto":
         # the adaptive step is bounded by its error estimate and ends on the ramp's jumps: run.dt is the output clock
         bounds = {kind: bound for kind, bound in bounds.items() if kind not in ("thermal", "preheating")}
@@ -576,10 +576,15 @@ def _beam_bound(scene) -> dict:
     return {}
 
 
+def _smallest_bound(bounds) -> float:
+    """The smallest step bound (s) of ``{kind: (step, why)}``; inf for none (an implicit run at its run.dt)."""
+    return min((bound for bound, _ in bounds.values()), default=np.inf)
+
+
 def _explicit_steps(run, bounds) -> int:
     """The steps an explicit run of ``run.duration`` would take: at ``run.dt``, or 0.9 of the smallest bound where
     that is shorter (or ``run.dt`` is ``"auto"``)."""
-    limit = min((bound for bound, _ in bounds.values()), default=np.inf)
+    limit = _smallest_bound(bounds)
     dt = min(0.9 * limit, np.inf if run.dt == "auto" else run.dt)
     return max(1, int(np.ceil(run.duration / dt * (1 - 1e-12)))) if np.isfinite(dt) else 1
 
@@ -587,7 +592,7 @@ def _explicit_steps(run, bounds) -> int:
 def _time_step(run, bounds, thermal_only) -> tuple[float, int, float]:
     """``(dt, n_steps, limit)``: ``run.dt`` checked against every bound (``{kind: (step, why)}``, s) or 0.9 of the
     smallest, shortened to ``duration / n_steps`` so that the run ends exactly at ``run.duration``."""
-    limit = min((bound for bound, _ in bounds.values()), default=np.inf)  # none: an implicit run at its run.dt
+    limit = _smallest_bound(bounds)
     if run.dt == "auto":
         dt = 0.9 * limit if np.isfinite(limit) else run.duration
     else:

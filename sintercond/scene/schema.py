@@ -288,10 +288,11 @@ _SCHEMA = {
                                "no elastic load. Without the mechanics the necks start from the packing's overlaps"),
         "k_star_axis": Key(int, _choice(0, 1, 2), False,
                            doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
-                               "steady solve on the grown necks at each output (sintercond.sim.steady), in the box "
-                               "of sintercond effective: a powder bed's layer on its floor held hot and the particles "
-                               "reaching above its mean surface height cold, a lattice's end layers, any other "
-                               "packing's face layers; each particle at its conductivity "
+                               "steady solve on the grown necks at each output, in the box of sintercond effective "
+                               "(sintercond.sim.steady.measurement_box): a powder bed's container up to its mean "
+                               "surface height (along z its floor's layer held hot and the particles reaching above "
+                               "the mean surface cold), a lattice's end layers, any other packing's face layers; "
+                               "each particle at its conductivity "
                                "(material.conductivity_table at its temperature, or material.conductivity)"),
     },
     "preheating": {

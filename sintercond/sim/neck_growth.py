@@ -576,7 +576,12 @@ def _recent(recent, on_particles, precondition, operator, dtype, blocks):
     recent = jax.lax.stop_gradient(recent.astype(dtype))
     displacements = jax.vmap(lambda y: precondition(on_particles(y)))(recent)
     coefficients = recent_start(operator, displacements, dtype, blocks)
-    return lambda b: (jnp.einsum("k,kna->na", coefficients(b), displacements), coefficients(b) @ recent)
+
+    def start(b):
+        c = coefficients(b)
+        return jnp.einsum("k,kna->na", c, displacements), c @ recent
+
+    return start
 
 
 def balance_blocks(pairs, normal, weights, movable):
