@@ -189,7 +189,7 @@ def _run(args) -> int:
 
 
 def effective_box(scene, bed, centres=None, radii=None, axis=2):
-    """The box ``k*`` is measured in, chosen from the scene (:func:`sintercond.sim.steady.measurement_box`, as a
+    """The box ``k*`` is measured in, chosen from the scene (:func:`sintercond.beds.packing.measurement_box`, as a
     sintering run's history measures it): ``None`` for a lattice (its cell, see steady). A powder bed's box is
     its container: the side walls laterally, and from the floor to the bed's mean surface height vertically (the
     rough top above it is cut off). Any other packing (listed, poured, read from a file): the bounding box of its
@@ -198,7 +198,7 @@ def effective_box(scene, bed, centres=None, radii=None, axis=2):
     whose surface comes within half a mean radius of the outermost) is held. The particles reaching a face of the
     box along the axis are held (hot at ``lo``, cold at ``hi``).
     """
-    from sintercond.sim.steady import measurement_box
+    from sintercond.beds.packing import measurement_box
 
     kind = scene["packing"]["kind"]
     if kind == "powder_bed":

@@ -50,6 +50,7 @@ from sintercond.beds import rolling as _rolling
 from sintercond.beds import settle as _settle
 from sintercond._deprecation import old_names
 from sintercond.beds.settle import PackingError
+from sintercond.sim.steady import face_layer_box
 
 FILL_FRACTION = 0.62
 """Solid fraction assumed to size a bed: ``n = FILL_FRACTION L^2 H / mean volume`` spheres."""
@@ -280,6 +281,22 @@ def bed_box(centres, radii, lateral_size):
     vertically. The particles touching the floor are held hot, those whose surface reaches above the mean surface
     (about half of the top layer) cold, whatever the roughness of the free surface."""
     return np.zeros(3), np.array([lateral_size, lateral_size, surface_height(centres, radii, lateral_size)])
+
+
+def measurement_box(centres, radii, axis, *, lattice=False, bed_size=None):
+    """The box the k* of a packing at ``centres`` (m) is measured in
+    (:func:`sintercond.sim.steady.steady_state_conductivity`'s ``box``):
+    None for a simple-cubic lattice (its end layers are held); a powder bed of lateral size ``bed_size`` (m), its
+    container ``[0, L]^2`` from the floor to the mean surface height (:func:`bed_box`:
+    along z the floor's layer is held hot and the particles reaching above the mean surface, about half the top
+    layer, cold; across, the layers on two opposite side walls, ``A`` the wall's width times the mean height);
+    any other packing, the box of its face layers (:func:`sintercond.sim.steady.face_layer_box`). ``sintercond effective`` and a
+    sintering run's ``k_star_W_mK`` both measure in it."""
+    if lattice:
+        return None
+    if bed_size is not None:
+        return bed_box(centres, radii, bed_size)
+    return face_layer_box(centres, radii, axis)
 
 
 METHODS = ("roll", "relax", "dem")

@@ -11,6 +11,7 @@ import jax
 import numpy as np
 
 from sintercond import simulate
+from sintercond.beds import packing
 from sintercond.contacts import network
 from sintercond.laws import forces, walls
 from sintercond.sim import mechanics, neck_growth, steady
@@ -74,8 +75,8 @@ def sintered_conductivity(model, state) -> float:
 
 def k_star_box(model, centres):
     """The box the k* of ``model``'s packing at ``centres`` (m) is measured in
-    (:func:`sintercond.sim.steady.measurement_box`, as ``sintercond effective``'s)."""
-    return steady.measurement_box(centres, model.radii, model.k_star_axis, lattice=model.lattice,
+    (:func:`sintercond.beds.packing.measurement_box`, as ``sintercond effective``'s)."""
+    return packing.measurement_box(centres, model.radii, model.k_star_axis, lattice=model.lattice,
                                   bed_size=model.bed_size)
 
 

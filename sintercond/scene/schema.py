@@ -289,7 +289,7 @@ _SCHEMA = {
         "k_star_axis": Key(int, _choice(0, 1, 2), False,
                            doc="history.csv gains k_star_W_mK: the effective conductivity along this axis from a "
                                "steady solve on the grown necks at each output, in the box of sintercond effective "
-                               "(sintercond.sim.steady.measurement_box): a powder bed's container up to its mean "
+                               "(sintercond.beds.packing.measurement_box): a powder bed's container up to its mean "
                                "surface height (along z its floor's layer held hot and the particles reaching above "
                                "the mean surface cold), a lattice's end layers, any other packing's face layers; "
                                "each particle at its conductivity "

@@ -334,23 +334,6 @@ def face_layer_box(centres, radii, axis):
     return lo, hi
 
 
-def measurement_box(centres, radii, axis, *, lattice=False, bed_size=None):
-    """The box the k* of a packing at ``centres`` (m) is measured in (:func:`steady_state_conductivity`'s ``box``):
-    None for a simple-cubic lattice (its end layers are held); a powder bed of lateral size ``bed_size`` (m), its
-    container ``[0, L]^2`` from the floor to the mean surface height (:func:`sintercond.beds.packing.bed_box`:
-    along z the floor's layer is held hot and the particles reaching above the mean surface, about half the top
-    layer, cold; across, the layers on two opposite side walls, ``A`` the wall's width times the mean height);
-    any other packing, the box of its face layers (:func:`face_layer_box`). ``sintercond effective`` and a
-    sintering run's ``k_star_W_mK`` both measure in it."""
-    if lattice:
-        return None
-    if bed_size is not None:
-        from sintercond.beds.packing import bed_box  # the beds build on the simulator, not the other way
-
-        return bed_box(centres, radii, bed_size)
-    return face_layer_box(centres, radii, axis)
-
-
 def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, axis=0, box=None, tol=1e-13, *,
                                       coupling="none", kappa=None, neck_radii=None, periodic_box=None):
     """``k*`` (W/(m K)) of a packing whose contacts' conductances are given, from one steady solve.
