@@ -29,13 +29,14 @@ from sintercond._deprecation import old_names
 from sintercond.rollout import advance
 from sintercond.output.io import (append_lammps, load_checkpoint, save_checkpoint, truncate_lammps, write_network_vtp, write_pvd,
                                   write_vtp)
+from sintercond.beds.packing import packing_shrinkage
 from sintercond.beds.packing_files import write_table
 from sintercond.scene import SceneError, validate_scene
 from sintercond.scene.validate import held_temperatures
 
 from sintercond.scene.build import PackingBoxWarning, build_model, escaped_particles
 from sintercond.output.observe import (Observation, _history_row, _probe_fn, contact_network, coordination,
-                                       history_columns, observe, read_history, state_time)
+                                       history_columns, moves, observe, read_history, state_time)
 
 
 SLOW_OUTPUT_S = 2.0
@@ -230,12 +231,15 @@ def run_scene(scene, out_dir, progress=True, stop_after_chunks=None, _start=None
         summary.update({"implicit_steps": report.accepted, "rejected_steps": report.rejected})
     if model.physics.mechanics is not None:
         history = read_history(out)
-        summary.update({"thermal_step_s": model.limits["thermal"], "mechanical_step_s": model.limits["mechanical"],
+        summary.update({"quasi_static": model.physics.mechanics.quasi_static, "thermal_step_s": model.limits["thermal"],
+                        "mechanical_step_s": model.limits.get("mechanical"),  # None: quasi-static, no inertia
                         "kinetic_energy_J": float(history["kinetic_energy_J"][-1]),
                         "final_contacts": int(history["contacts"][-1]),
                         "max_overlap_m": float(history["max_overlap_m"][-1])})
     if model.physics.sintering is not None:
         summary.update({name: float(value) for name, value in neck_growth.neck_statistics(state).items()})
+        if moves(model):
+            summary.update(packing_shrinkage(state.sintering.start_positions, state.particles.positions))
         if state.sintering.balance_iterations is not None and model.physics.conduction.integrator == "explicit":
             summary["balance_iterations"] = int(state.sintering.balance_iterations)  # the last update's solve
     (out / "summary.json").write_text(json.dumps(summary, indent=1))

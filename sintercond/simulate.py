@@ -95,7 +95,7 @@ from sintercond.sim.state import (BeamParams, ConvectionParams, HeldRampParams, 
                                   params_in_precision)
 from sintercond.sim.step import simulator
 from sintercond.sim.terms.conduction import particle_capacity  # noqa: F401
-from sintercond.sim.terms.mechanics import contact_forces  # noqa: F401
+from sintercond.sim.terms.mechanics import contact_forces, resultant_forces  # noqa: F401
 from sintercond.sim.terms.walls import mechanical_wall_conductance  # noqa: F401
 from sintercond.sim.validation import (FLOAT32_OVERLAP_STEPS, MAX_INITIAL_OVERLAP, PrecisionWarning,  # noqa: F401
                                        validate_inputs)

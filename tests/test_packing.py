@@ -272,3 +272,26 @@ def test_the_mean_surface_height_visits_each_sphere_on_its_footprint_as_over_the
     lo, hi = packing.bed_box(centres, radii, lateral)
     np.testing.assert_array_equal(lo, 0.0)
     np.testing.assert_array_equal(hi, [lateral, lateral, packing.surface_height(centres, radii, lateral)])
+
+
+def test_packing_shrinkage_of_homogeneous_deformations_is_their_closed_form():
+    rng = np.random.default_rng(3)
+    start = rng.random((300, 3)) * 1e-3
+    centre = np.array([5e-4, 5e-4, 0.0])
+    for eps in (1e-4, 0.02):  # uniform contraction about a point on the floor: (1 - eps)^3 of the volume stays
+        now = centre + (1.0 - eps) * (start - centre)
+        got = packing.packing_shrinkage(start, now)
+        assert got["height_shrinkage"] == pytest.approx(eps, rel=1e-10)
+        assert got["volume_shrinkage"] == pytest.approx(1.0 - (1.0 - eps) ** 3, rel=1e-10)
+    settled = start * np.array([1.0, 1.0, 0.97])  # onto the floor only: the volume goes with the height
+    got = packing.packing_shrinkage(start, settled)
+    assert got["height_shrinkage"] == pytest.approx(0.03, rel=1e-10)
+    assert got["volume_shrinkage"] == pytest.approx(0.03, rel=1e-10)
+    angle = 0.4  # a rigid motion shrinks nothing
+    turn = np.array([[math.cos(angle), -math.sin(angle), 0.0], [math.sin(angle), math.cos(angle), 0.0], [0, 0, 1]])
+    got = packing.packing_shrinkage(start, start @ turn.T + 2e-4)
+    assert abs(got["height_shrinkage"]) < 1e-12 and abs(got["volume_shrinkage"]) < 1e-12
+    chain = np.zeros((5, 3))
+    chain[:, 0] = np.arange(5) * 1e-4  # no extent along z: no height to lose, the length measured
+    got = packing.packing_shrinkage(chain, 0.99 * chain)
+    assert got["height_shrinkage"] == 0.0 and got["volume_shrinkage"] == pytest.approx(0.01, rel=1e-10)

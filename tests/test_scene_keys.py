@@ -128,6 +128,8 @@ ELSEWHERE = {
     "sintering.shrinkage": "test_sintering_scene.py: test_many_body_shrinkage_holds_the_bottom_layer_on_its_floor...",
     "sintering.start_necks": "test_sintering_mechanics.py: test_the_start_of_the_necks_is_a_key_of_runs_with_the_"
                              "mechanics_only, and the coupled scene starts from point contacts",
+    "mechanics.quasi_static": "test_sintering_mechanics.py: test_quasi_static_sintering_steps_at_the_thermal_limit_"
+                              "not_the_elastic_one (the built step), and the quasi-static cell and bed runs",
     "run.contact_network": "test_contact_network.py: network frames written when asked, none otherwise",
     "material.conductivity_table": "test_conductivity_table.py: test_a_scenes_table_reaches_the_run",
     "material.specific_heat_table": "test_specific_heat_table.py: test_a_scenes_table_reaches_the_run...",

@@ -37,12 +37,12 @@ def mechanical_params(**kw):
 
 
 def coupled(x, radii, temperature, shrinkage="many_body", start="overlap", every=1, dt=1e-6, gravity=(0.0, 0.0, 0.0),
-            walls=(), supports=None, skin=0.1 * R, multiplier=2.0, kinetics=KINETICS):
+            walls=(), supports=None, skin=0.1 * R, multiplier=2.0, kinetics=KINETICS, quasi_static=False, e0=E0):
     """A coupled sintering run's ``(sim, state, params, neighbor_fns)``."""
     x, radii = np.asarray(x, np.float64), np.asarray(radii, np.float64)
     temperature = np.broadcast_to(np.asarray(temperature, np.float64), radii.shape)
     physics = simulate.Physics.create(law="rojek", neck_model="volume_conserving", conductance="lifted",
-                                      contacts="dynamic", mechanics=True, gravity=gravity, walls=walls,
+                                      contacts="dynamic", mechanics=True, gravity=gravity, walls=walls, quasi_static=quasi_static,
                                       sintering=neck_growth.Sintering(every=every, shrinkage=shrinkage,
                                                                       balance_tol=1e-12))
     particles = particle_state(x, radii, temperature, DENSITY)
@@ -54,7 +54,7 @@ def coupled(x, radii, temperature, shrinkage="many_body", start="overlap", every
     necks = neck_growth.neck_state(contacts, particles.temperature, supports=supports, positions=x)
     state = simulate.init_state(particles, contacts, dt, mechanics=motion, sintering=necks)
     params = simulate.Params(conductivity=[KAPPA], specific_heat=[HEAT], sintering=dict(kinetics),
-                             mechanics=mechanical_params())
+                             mechanics=mechanical_params(E0=e0))
     return simulate.simulator(physics, fns), state, params, fns
 
 
@@ -102,10 +102,10 @@ def test_one_contact_grows_as_the_law_tier_does_along_its_own_temperature_histor
     np.testing.assert_allclose(np.asarray(neck_growth.particle_neck_ratio(end)), expected / 30e-6, rtol=1e-12)
 
 
-def stack(shrinkage="many_body"):
+def stack(shrinkage="many_body", quasi_static=False, e0=E0, dt=1e-7):
     """Three equal spheres stacked on a floor at Hertz's overlaps under their weight, at rest, isothermal."""
     mass = 4.0 / 3.0 * math.pi * R**3 * DENSITY
-    e_pair, e_wall = E0 / (2 * (1 - NU**2)), E0 / (1 - NU**2)
+    e_pair, e_wall = e0 / (2 * (1 - NU**2)), e0 / (1 - NU**2)
 
     def hertz(force, e_star, r_star):  # Eq. 2 at rest: f = (4/3) sqrt(r*) E* delta^(3/2)
         return (3 * force / (4 * e_star * math.sqrt(r_star))) ** (2 / 3)
@@ -116,8 +116,8 @@ def stack(shrinkage="many_body"):
     supports = np.zeros((3, 3), bool)
     supports[0, 2] = True  # on the floor
     floor = PlaneWall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
-    return coupled(x, np.full(3, R), 1200.0, shrinkage, start="point", every=10, dt=1e-7, gravity=(0.0, 0.0, -G),
-                   walls=(floor,), supports=supports), overlaps
+    return coupled(x, np.full(3, R), 1200.0, shrinkage, start="point", every=10, dt=dt, gravity=(0.0, 0.0, -G),
+                   walls=(floor,), supports=supports, quasi_static=quasi_static, e0=e0), overlaps
 
 
 @pytest.mark.slow
@@ -143,6 +143,31 @@ def test_a_stack_under_its_weight_shrinks_onto_its_support_and_keeps_hertz_s_ove
     elastic = [R - z[0], 2 * R - (z[1] - z[0]) - h, 2 * R - (z[2] - z[1]) - h]
     np.testing.assert_allclose(elastic, overlaps, rtol=1e-3)
     assert float(np.max(np.abs(np.asarray(end.mechanics.velocity)))) < 1e-6
+    assert not bool(end.sintering.unbalanced) and not bool(end.sintering.unstable)
+
+
+@pytest.mark.slow
+def test_a_quasi_static_stack_at_the_real_modulus_closes_as_the_law_tier_says_at_the_thermal_step():
+    # Ti6Al4V's 110 GPa: the inertial step would be ~1e-8 s; without inertia the necks' interval is the step
+    (sim, state, params, _), overlaps = stack(quasi_static=True, e0=110e9, dt=4e-4)
+    n_steps, every = 10, 10
+    spec = sim.physics.sintering
+    end = jax.jit(lambda s, p: simulate.rollout(sim, s, p, n_steps, checkpoint=False)[0])(state, params)
+    expected = float(sintering.grow_neck("grain_boundary", 0.0, R, R, [1200.0], [every * float(state.dt)], KINETICS,
+                                         quadrature_nodes=spec.quadrature_nodes,
+                                         newton_iterations=spec.newton_iterations)[-1])
+    h = float(sintering.neck_overlap(expected, R, R))
+    assert h > 1e4 * max(overlaps)  # at the real modulus the weight presses in nothing the necks would notice
+    necks = by_pair(end, end.mechanics.neck)
+    assert set(necks) == {(0, 1), (1, 2)}
+    np.testing.assert_allclose(list(necks.values()), expected, rtol=1e-12)
+    z0, z = np.asarray(state.particles.positions)[:, 2], np.asarray(end.particles.positions)[:, 2]
+    np.testing.assert_allclose(z0 - z, [0.0, h, 2 * h], rtol=1e-9, atol=1e-9 * h)
+    # the elastic overlaps the stack started with (Hertz's under its weight) carry it still: nothing unbalanced
+    resultant, _ = simulate.resultant_forces(sim.physics, end, params)
+    weight = float(np.asarray(state.particles.mass)[0]) * G
+    assert float(np.max(np.abs(np.asarray(resultant)))) < 1e-6 * weight
+    assert float(np.max(np.abs(np.asarray(end.mechanics.velocity)))) == 0.0
     assert not bool(end.sintering.unbalanced) and not bool(end.sintering.unstable)
 
 
@@ -335,6 +360,76 @@ def test_a_coupled_sintering_scene_closes_its_columns_onto_the_floor_and_reports
     assert frames and b"neck_ratio" in frames[-1].read_bytes()
 
 
+def _cell_run(tmp_path, name, **mechanics_keys):
+    import copy
+
+    from sintercond.output import io
+    from sintercond import run as runner
+    from sintercond.scene import validate_scene
+
+    scene = coupled_cell(duration=1e-4, every=50)
+    scene["mechanics"].update(young_modulus=110e9, **mechanics_keys)
+    scene["run"].update(dt=1e-8, output_every=10_000, checkpoint_every=10_000)
+    scene = validate_scene(scene)
+    model = runner.build_model(copy.deepcopy(scene))
+    _, summary = runner.run_scene(scene, tmp_path / name, progress=False, pictures=False)
+    return model, io.load_checkpoint(tmp_path / name / "checkpoint.npz", model.state), summary
+
+
+@pytest.mark.slow
+def test_quasi_static_sintering_at_the_real_modulus_moves_as_the_inertial_step_less_hertz_s_static_overlaps(tmp_path):
+    # the same cell, steps and neck updates at Ti6Al4V's 110 GPa: with inertia (10,000 steps of 1e-8 s, the elastic
+    # limit) and without; they differ by the elastic overlaps the weight presses in, which the quasi-static run
+    # leaves out: Hertz's (Eq. 2) under the spheres above, 1e-11 m, against necks' approaches of ~1e-6 m
+    model, inertial, _ = _cell_run(tmp_path, "inertial")
+    _, quasi, summary = _cell_run(tmp_path, "quasi_static", quasi_static=True)
+    assert summary["quasi_static"] and summary["mechanical_step_s"] is None and summary["steps"] == 10_000
+    x0 = np.asarray(model.state.particles.positions)
+    sink = np.asarray(quasi.particles.positions) - np.asarray(inertial.particles.positions)
+    mass = float(np.asarray(model.state.particles.mass)[0])
+    e_wall, e_pair = 110e9 / (1 - NU**2), 110e9 / (2 * (1 - NU**2))
+
+    def hertz(force, e_star, r_star):
+        return (3 * force / (4 * e_star * math.sqrt(r_star))) ** (2 / 3)
+
+    floor = hertz(3 * mass * G, e_wall, R)
+    layers = np.cumsum([floor, hertz(2 * mass * G, e_pair, R / 2), hertz(mass * G, e_pair, R / 2)])
+    level = np.searchsorted(np.unique(x0[:, 2]), x0[:, 2])
+    # the bottom layer sits on the floor by Hertz's overlap; above it the inertial run's first neck update also took
+    # the elastic overlap its contacts had reached as neck (a point contact closed by the motion), so each layer's
+    # sink holds its elastic overlaps once or twice
+    np.testing.assert_allclose(sink[level == 0, 2], floor, rtol=0.02)
+    assert np.all(sink[:, 2] >= 0.98 * layers[level]) and np.all(sink[:, 2] <= 2.0 * layers[level])
+    np.testing.assert_allclose(sink[:, :2], 0.0, atol=0.05 * floor)
+    necks = by_pair(quasi, quasi.mechanics.neck)
+    assert min(necks.values()) > 0.15 * R
+    approach = float(np.max(np.asarray(quasi.mechanics.neck_overlap)))
+    assert float(np.max(np.abs(sink))) < 1e-4 * approach  # what the quasi-static run leaves out, against the necks
+    np.testing.assert_allclose(list(necks.values()), list(by_pair(inertial, inertial.mechanics.neck).values()),
+                               rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(quasi.particles.temperature), np.asarray(inertial.particles.temperature),
+                               atol=1e-3)
+    assert float(np.max(np.abs(np.asarray(quasi.mechanics.velocity)))) == 0.0
+
+
+def test_quasi_static_sintering_steps_at_the_thermal_limit_not_the_elastic_one():
+    # the built step against the elastic one of today's softened explicit runs (1e7 Pa) and of the real modulus
+    import copy
+
+    from sintercond import run as runner
+    from sintercond.scene import validate_scene
+
+    def step(**mechanics_keys):
+        scene = coupled_cell(duration=0.01)
+        scene["mechanics"].update(mechanics_keys)
+        return runner.build_model(validate_scene(copy.deepcopy(scene)))
+
+    quasi, soft, real = step(young_modulus=110e9, quasi_static=True), step(young_modulus=1e7), step(young_modulus=110e9)
+    assert quasi.dt == pytest.approx(0.01 / 31) and quasi.limits["thermal"] >= quasi.dt
+    assert "mechanical" not in quasi.limits and quasi.sized_speed is None
+    assert quasi.dt > 100 * soft.dt and quasi.dt > 1e4 * real.dt
+
+
 @pytest.mark.slow
 def test_a_coupled_sintering_run_killed_mid_way_resumes_bitwise(tmp_path):
     import copy
@@ -362,6 +457,76 @@ def test_the_start_of_the_necks_is_a_key_of_runs_with_the_mechanics_only():
         validate_scene(without)
     with pytest.raises(SceneError, match=r"sintering\.start_necks must be one of"):
         validate_scene(coupled_cell(start_necks="sintered"))
+
+
+@pytest.mark.slow
+def test_a_quasi_static_preheating_bed_at_110_gpa_sinters_in_its_container_and_reports_its_shrinkage(tmp_path):
+    # the built-in preheating bed (its ramp, its 110 GPa), rolled 0.5 mm wide, with the mechanics quasi-static:
+    # the step is the thermal one, the floor holds its layer, the bed shrinks away from its walls and new contacts join
+    import copy
+
+    from sintercond.output import io
+    from sintercond import run as runner
+    from sintercond.beds import packing
+    from sintercond.scene import load_scene, validate_scene
+
+    scene = load_scene("ti6al4v_preheating_bed", duration=0.05)
+    scene["packing"] = {"kind": "powder_bed", "method": "roll", "lateral_size": 5e-4, "height": 4e-4,
+                        "diameter_range": [45e-6, 105e-6], "seed": 0}
+    scene["physics"] = {"mechanics": True}
+    scene["mechanics"]["quasi_static"] = True
+    scene["sintering"]["shrinkage"] = "many_body"
+    scene["run"].update(output_every=250)
+    scene = validate_scene(scene)
+    model = runner.build_model(copy.deepcopy(scene))
+    assert model.dt == pytest.approx(0.05 / round(0.05 / (0.9 * model.limits["thermal"]) + 0.5), rel=0.02)
+    _, summary = runner.run_scene(scene, tmp_path, progress=False, pictures=False)  # warns if particles escape
+    end = io.load_checkpoint(tmp_path / "checkpoint.npz", model.state)
+    x0, x = np.asarray(model.state.particles.positions), np.asarray(end.particles.positions)
+    held = np.asarray(model.state.sintering.supports)[:, 2]
+    assert held.sum() > 10 and np.array_equal(x[held, 2], x0[held, 2])  # the floor's layer stays on it
+    assert np.all(x[:, :2] >= x0[:, :2].min(axis=0)) and np.all(x[:, :2] <= x0[:, :2].max(axis=0))
+    history = np.genfromtxt(tmp_path / "history.csv", delimiter=",", names=True)
+    assert np.all(history["kinetic_energy_J"] == 0.0) and summary["kinetic_energy_J"] == 0.0
+    assert np.all(np.diff(history["contacts"]) >= 0) and history["contacts"][-1] > history["contacts"][0]
+    for name in ("mean_neck_ratio", "height_shrinkage", "volume_shrinkage", "k_star_W_mK"):
+        assert np.all(np.diff(history[name]) > 0), name
+    strain = packing.packing_shrinkage(x0, x)
+    assert summary["height_shrinkage"] == pytest.approx(strain["height_shrinkage"], rel=1e-9)
+    assert summary["volume_shrinkage"] == pytest.approx(strain["volume_shrinkage"], rel=1e-9)
+    assert strain["volume_shrinkage"] > strain["height_shrinkage"] > 0  # the bed shrinks sideways too
+    assert 0.2 * (1 - packing.surface_height(x, model.radii, 5e-4) / packing.surface_height(x0, model.radii, 5e-4)) \
+        < strain["height_shrinkage"] < 1.0 * strain["volume_shrinkage"]
+
+
+def test_quasi_static_mechanics_is_refused_where_nothing_would_move_it():
+    from sintercond.scene import SceneError, validate_scene
+
+    def scene(sintering=None, walls=None, **mechanics_keys):
+        s = coupled_cell()
+        s["mechanics"].update({"quasi_static": True, **mechanics_keys})
+        if sintering is not None:
+            s["sintering"].update(sintering)
+        if walls is not None:
+            s["walls"] = walls
+        return s
+
+    independent = scene({"shrinkage": "independent"})
+    with pytest.raises(SceneError, match=r'mechanics\.quasi_static = true .* sintering\.shrinkage = "many_body"'):
+        validate_scene(independent)
+    no_sintering = scene()
+    del no_sintering["sintering"]
+    with pytest.raises(SceneError, match=r"mechanics\.quasi_static = true .* \(without sintering nothing would move"):
+        validate_scene(no_sintering)
+    moving = scene(walls=[{**coupled_cell()["walls"][0], "velocity": [0.0, 0.0, 1e-3]}])
+    with pytest.raises(SceneError, match=r"walls\[0\]\.velocity: .* drop mechanics\.quasi_static"):
+        validate_scene(moving)
+    with pytest.raises(SceneError, match=r"mechanics\.quasi_static must be"):
+        validate_scene(scene(quasi_static="yes"))
+    with pytest.raises(ValueError, match=r"Mechanics\(quasi_static=True\) .*=Sintering\(shrinkage='many_body'\)"):
+        coupled(np.zeros((1, 3)), [R], 1000.0, "independent", quasi_static=True)
+    with pytest.raises(ValueError, match=r"Mechanics\.quasi_static must be True or False"):
+        mechanics.Mechanics(quasi_static=1)
 
 
 def test_a_contact_the_shrinkage_closes_in_one_update_takes_its_overlap_as_a_neck_not_an_impact():

@@ -308,6 +308,32 @@ STARTS = ("rolled", "relaxed", "deposit")
 harmonically relaxed pile, or the loose ballistic deposit itself."""
 
 
+def best_fit_deformation(start, now) -> np.ndarray:
+    """The homogeneous deformation ``F`` ``[3, 3]`` that best maps a packing's ``start`` centres ``[n, 3]`` (m) onto
+    its centres ``now``: ``now_i - <now> ~ F (start_i - <start>)`` in least squares (the best-fit strain of a
+    particle assembly, Cundall & Strack's averaging of particle displacements). An axis along which the start has
+    no extent (a chain, a layer) keeps ``F``'s identity row and column there: nothing measures it."""
+    x0 = np.asarray(start, np.float64) - np.mean(start, axis=0)
+    x = np.asarray(now, np.float64) - np.mean(now, axis=0)
+    spread = np.sqrt(np.mean(x0**2, axis=0))
+    measured = spread > 1e-9 * max(float(np.max(spread, initial=0.0)), np.finfo(np.float64).tiny)
+    f = np.eye(3)
+    if measured.any():
+        m = np.flatnonzero(measured)
+        solution, *_ = np.linalg.lstsq(x0[:, m], x[:, m], rcond=None)  # x[:, m] ~ x0[:, m] @ solution
+        f[np.ix_(m, m)] = solution.T
+    return f
+
+
+def packing_shrinkage(start, now, axis=2) -> dict:
+    """``{"height_shrinkage", "volume_shrinkage"}`` of a packing whose centres moved from ``start`` to ``now``
+    ``[n, 3]`` (m), from their :func:`best_fit_deformation` ``F``: ``1 - F[axis, axis]``, the relative loss of height
+    along ``axis`` (the build direction, z), and ``1 - det F``, the relative loss of volume (both > 0 as the packing
+    shrinks; a rigid motion gives 0)."""
+    f = best_fit_deformation(start, now)
+    return {"height_shrinkage": float(1.0 - f[axis, axis]), "volume_shrinkage": float(1.0 - np.linalg.det(f))}
+
+
 def pour(radii, lateral_size, material=_DEFAULT_MATERIAL, seed=0, start="relaxed", temperature=300.0, walls=None,
          progress=None, **settle) -> Packing:
     """Pour spheres into an open square box ``[0, L]^2`` and settle them with the DEM (:func:`sintercond.beds.settle.dem_settle`).

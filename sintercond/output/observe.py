@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from sintercond import simulate
@@ -15,6 +16,7 @@ from sintercond.beds import packing
 from sintercond.contacts import network
 from sintercond.laws import forces, walls
 from sintercond.sim import mechanics, neck_growth, steady
+from sintercond.sim.terms import mechanics as mechanics_term
 from sintercond.laws.neck import NECK_MODELS
 
 from sintercond.scene.build import _walls, scene_walls
@@ -34,12 +36,27 @@ SINTERING_COLUMNS = ("mean_neck_ratio", "max_neck_ratio", "shrinkage")
 neck ratio ``a / min(r_i, r_j)`` over the contacts and the mean linear shrinkage of their approaches."""
 
 
+PACKING_SHRINKAGE_COLUMNS = ("height_shrinkage", "volume_shrinkage")
+"""Columns a sintering run whose particles move (many-body shrinkage, or the mechanics) adds: the relative loss of
+the packing's height (along z) and of its volume since the start, from the best-fit homogeneous deformation of its
+centres (:func:`sintercond.beds.packing.packing_shrinkage`)."""
+
+
+def moves(model) -> bool:
+    """Whether the particles of ``model``'s sintering run move (:data:`PACKING_SHRINKAGE_COLUMNS` apply)."""
+    physics = model.physics
+    return physics.sintering is not None and (physics.mechanics is not None
+                                              or physics.sintering.shrinkage == "many_body")
+
+
 def history_columns(model) -> tuple:
     """The columns of ``history.csv`` of ``model``: :data:`HISTORY_COLUMNS`, :data:`MECHANICS_COLUMNS` with
-    mechanics, :data:`SINTERING_COLUMNS` with sintering, and ``heat_wall{k}_W`` (the heat power into the packing
+    mechanics, :data:`SINTERING_COLUMNS` with sintering (and :data:`PACKING_SHRINKAGE_COLUMNS` where the particles
+    move), ``k_star_W_mK`` with ``sintering.k_star_axis``, and ``heat_wall{k}_W`` (the heat power into the packing
     through scene wall ``k``, W) for each held or conducting wall."""
     return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics is not None else ())
             + (SINTERING_COLUMNS if model.physics.sintering is not None else ())
+            + (PACKING_SHRINKAGE_COLUMNS if moves(model) else ())
             + (("k_star_W_mK",) if model.k_star_axis is not None else ())
             + tuple(spec[0] for spec in model.wall_heat))
 
@@ -101,14 +118,24 @@ def state_time(state) -> float:
 
 
 def _probe_fn(model):
-    """A jitted ``(state, params) -> (heat power [n] W, velocity after one step or None)`` for :func:`observe`."""
-    sim = model.sim
+    """A jitted ``(state, params) -> (heat power [n] W, contact force [n, 3] N or None)`` for :func:`observe`. The
+    contact force (gravity excluded): with inertia ``m (v(t + dt) - v(t)) / dt - m g``, one symplectic-Euler step of
+    the simulator (Eq. 43); quasi-static, the resultant of the step's laws less ``m g``
+    (:func:`sintercond.sim.terms.mechanics.resultant_forces`)."""
+    sim, spec = model.sim, model.physics.mechanics
 
     def probe(state, params):
         prep = sim.prepare_fn(state, params)
         power = sim.heat_power_fn(state, prep)
-        after = sim.advance_fn(state, prep).mechanics.velocity if model.physics.mechanics is not None else None
-        return power, after
+        if spec is None:
+            return power, None
+        m = state.particles.mass[:, None]
+        g = jnp.asarray(spec.gravity, m.dtype)
+        if spec.quasi_static:
+            resultant, _ = mechanics_term.resultant_forces(model.physics, state, params)
+            return power, resultant - m * g
+        after = sim.advance_fn(state, prep).mechanics.velocity
+        return power, m * ((after - state.mechanics.velocity) / state.dt - g)
 
     return jax.jit(probe)
 
@@ -138,7 +165,7 @@ def observe(scene, model, state, probe) -> Observation:
     kappa = np.asarray(conductivity)[np.asarray(index)]
     needs_power = (any(spec[2] == "held" for spec in model.wall_heat) or model.physics.mechanics is not None
                    or "vtp" in scene["run"]["formats"])
-    power, after = probe(state, model.params) if needs_power else (None, None)
+    power, motion = probe(state, model.params) if needs_power else (None, None)
     planes = list(model.planes) or scene_walls(scene, np.asarray(model.state.particles.positions), radii)
     if model.physics.mechanics is not None:
         planes = list(model.physics.mechanics.walls)
@@ -165,7 +192,7 @@ def observe(scene, model, state, probe) -> Observation:
     v, omega = np.asarray(state.mechanics.velocity), np.asarray(state.mechanics.spin)
     inertia = forces.SOLID_SPHERE_INERTIA * m * radii**2
     kinetic = float(0.5 * np.sum(m * np.sum(v * v, axis=1)) + 0.5 * np.sum(inertia * np.sum(omega * omega, axis=1)))
-    force = m[:, None] * ((np.asarray(after) - v) / float(state.dt) - np.asarray(model.physics.mechanics.gravity))
+    force = np.asarray(motion)
     pairs, overlap = _touching_pairs(positions, radii, np.asarray(state.contacts.neighbors))
     return Observation(heat, kinetic, pairs, overlap, np.stack(wall_h) if wall_h else np.zeros((0, len(radii))),
                        v, force, total)
@@ -198,6 +225,9 @@ def _history_row(model, state, obs: Observation) -> str:
     if model.physics.sintering is not None:
         stats = neck_growth.neck_statistics(state)
         values += [float(stats[name]) for name in SINTERING_COLUMNS]
+    if moves(model):
+        strain = packing.packing_shrinkage(state.sintering.start_positions, state.particles.positions)
+        values += [strain[name] for name in PACKING_SHRINKAGE_COLUMNS]
     if model.k_star_axis is not None:
         values.append(sintered_conductivity(model, state))
     values += list(obs.wall_heat)

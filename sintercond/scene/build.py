@@ -243,7 +243,7 @@ def mechanical_physics(scene, thermal_physics, planes) -> simulate.Physics:
         walls_, gravity=p.gravity, shear=p.shear, slip_direction=p.slip_direction,
         rolling_projection=p.rolling_projection, damping_clamp=p.damping_clamp, softening=scene.softening is not None,
         friction=c["mu"] > 0 or c["mu_wall"] > 0, rolling=c["mu_r"] > 0 or c["mu_r_wall"] > 0,
-        wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0)
+        wall_friction=c["mu_wall"] > 0, wall_rolling=c["mu_r_wall"] > 0, quasi_static=scene.mechanics.quasi_static)
     conduction = dataclasses.replace(thermal_physics.conduction, conductance="lifted", conducting_walls=0)
     return dataclasses.replace(thermal_physics, conduction=conduction, contacts="dynamic", mechanics=spec)
 
@@ -502,13 +502,16 @@ def _coupled_model(scene, physics, planes, particles, params, settled, log) -> _
     impact = scene.physics.impact_velocity
     wall_speed, fastest = _fastest_wall(scene)
     v_rel = impact + wall_speed
-    mechanical_limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors,
-                                                        params.mechanics, v_rel))
-    speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
-        f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")
-    bounds["mechanical"] = (mechanical_limit, f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and "
-                                              f"the symplectic-Euler bounds of the stiffest contact, unsoftened, "
-                                              f"at the approach speed {v_rel:g} m/s: {speed_source})")
+    if not physics.mechanics.quasi_static:  # quasi-static particles have no inertia to bound the step
+        mechanical_limit = float(mechanics.mechanical_time_step(physics.mechanics, particles, contacts.neighbors,
+                                                            params.mechanics, v_rel))
+        speed_source = f"physics.impact_velocity = {impact:g} m/s" + (
+            f" plus walls[{fastest}].velocity's normal speed {wall_speed:g} m/s" if wall_speed > 0 else "")
+        bounds["mechanical"] = (mechanical_limit, f"the mechanical time step {mechanical_limit:.6g} s (Eq. 47 and "
+                                                  f"the symplectic-Euler bounds of the stiffest contact, unsoftened, "
+                                                  f"at the approach speed {v_rel:g} m/s: {speed_source})")
+    else:
+        v_rel = None
     if wall_speed > 0:
         step = WALL_STEP_FRACTION * float(np.min(radii)) / wall_speed
         bounds["wall"] = (step, f"{step:.6g} s, in which walls[{fastest}] (walls[{fastest}].velocity, normal "
@@ -516,6 +519,9 @@ def _coupled_model(scene, physics, planes, particles, params, settled, log) -> _
     motion = mechanics.mechanical_state(physics.mechanics, centres, contacts)
     if settled is not None:
         motion = _settled_motion(settled, physics.mechanics, motion, contacts)
+        if physics.mechanics.quasi_static:  # the pour's last velocities: no inertia carries them on
+            motion = dataclasses.replace(motion, velocity=jnp.zeros_like(motion.velocity),
+                                         spin=jnp.zeros_like(motion.spin))
     necks, limiting = None, motion
     if physics.sintering is not None:  # the necks on the half pair list, carried as the springs are
         motion = neck_growth.with_pair_necks(motion, contacts, centres, radii,

@@ -83,7 +83,7 @@ def estimate_run(scene) -> RunEstimate:
     c_min = min([material["specific_heat"]] + [c for _, c in material.get("specific_heat_table", [])])
     capacity = material["density"] * c_min * 4 / 3 * math.pi * r**3
     dt = 0.9 * capacity / (z * k_pair + g)
-    if scene["physics"]["mechanics"]:
+    if scene["physics"]["mechanics"] and not scene["mechanics"]["quasi_static"]:  # quasi-static: no inertia
         wall_speed = max((advance_speed(w) for w in scene["walls"]), default=0.0)
         dt = min(dt, 0.9 * _mechanical_step_estimate(scene, r, wall_speed))
         if wall_speed > 0:

@@ -27,11 +27,15 @@ def scene_integrator(scene) -> tuple[str, str]:
     if isinstance(scene, dict):
         asked = scene["run"].get("integrator", "auto")
         mechanics = bool((scene.get("physics") or {}).get("mechanics", False))
+        if mechanics and (scene.get("mechanics") or {}).get("quasi_static"):
+            mechanics = "quasi_static"
         coupling = (scene.get("conduction") or {}).get("coupling") or "none"
         beam = scene.get("beam")
         scanning = beam is not None and beam.get("speed", 0.0) > 0
     else:
         asked, mechanics = scene.run.integrator, scene.physics.mechanics
+        if mechanics and scene.mechanics.quasi_static:
+            mechanics = "quasi_static"
         coupling, beam = scene.conduction.coupling or "none", scene.beam
         scanning = beam is not None and beam.speed > 0
     if asked == "auto":

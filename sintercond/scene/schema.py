@@ -249,6 +249,12 @@ _SCHEMA = {
                                "beta = -ln e / sqrt(pi^2 + ln^2 e) (Tsuji's form, as LAMMPS)"),
         "tangential_damping": Key(float, _parameter("xi_fric"), False, default=1.0, doc="xi_fric (Eq. 11)"),
         "rolling_damping": Key(float, _parameter("xi_rol"), False, default=0.0, doc="xi_rol (Eq. 18)"),
+        "quasi_static": Key(bool, None, False, default=False,
+                            doc="sintering at the material's real modulus (needs sintering.shrinkage = "
+                                "\"many_body\"): no inertia; the particles move at the neck updates by the necks' "
+                                "many-body balance, which leaves the elastic overlaps (and the weight they carry) as "
+                                "they were, and the step is the thermal one, not the elastic one (Eq. 47). false: "
+                                "Newton's law at the elastic step (docs/simulator.md, quasi-static sintering)"),
     },
     "softening": {
         "onset_temperature": Key(float, _parameter("theta_star"), True, "K",

@@ -320,8 +320,19 @@ def _check_sintering(scene):
             raise SceneError("preheating.hold = \"all\" holds every particle on the ramp from initial.temperature: "
                              "held or conducting walls (and boundary.floor_temperature) would be ignored; drop them "
                              "or use preheating.hold = \"walls\"")
-        if scene["physics"]["mechanics"]:
+        if scene["physics"]["mechanics"] and not scene.get("mechanics", {}).get("quasi_static"):
             raise SceneError("[preheating] needs physics.mechanics = false in this version")
+    if scene.get("mechanics", {}).get("quasi_static") and scene.get("sintering", {}).get(
+            "shrinkage") != "many_body":
+        raise SceneError("mechanics.quasi_static = true moves the particles by the many-body balance of the "
+                         "sintering necks: it needs [sintering] with sintering.shrinkage = \"many_body\" (without "
+                         "sintering nothing would move; drop mechanics.quasi_static)")
+    if scene.get("mechanics", {}).get("quasi_static"):
+        for k, wall in enumerate(scene["walls"]):
+            if any(wall.get("velocity", [0.0])):
+                raise SceneError(f"walls[{k}].velocity: a moving wall pushes by its contact forces, which need "
+                                 "inertia: drop mechanics.quasi_static (quasi-static particles move by the necks' "
+                                 "balance only)")
     if "sintering" not in scene:
         return
     s, conduction = scene["sintering"], scene["conduction"]

@@ -97,6 +97,12 @@ class Mechanics:
         positions, velocities and temperatures stay float64 (relative
         separations are formed in float64 first, so the overlap keeps its
         digits); tests/test_mechanics.py states the accuracy.
+      quasi_static: no inertia, for sintering at the material's real modulus (needs
+        ``Sintering(shrinkage="many_body")``): the particles move only at the neck updates, by the many-body
+        balance of the sintering necks, whose step moves each pair by its neck's approach and so leaves the elastic
+        overlaps, and the loads they carry, as they were; the step is the thermal one, not the elastic one
+        (:func:`sintercond.sim.terms.mechanics.quasi_static_advance`; docs/simulator.md). False: Newton's law,
+        symplectic Euler at the elastic step (Eqs. 43-47).
     """
 
     walls: tuple = ()
@@ -111,6 +117,7 @@ class Mechanics:
     slip_direction: str = "trial"
     rolling_projection: bool = False
     force_dtype: str | None = None
+    quasi_static: bool = False
 
     def __post_init__(self):
         from sintercond.laws.walls import PlaneWall
@@ -123,7 +130,7 @@ class Mechanics:
         if self.force_dtype not in (None, "float32", "float64"):
             raise ValueError(f"Mechanics.force_dtype must be None, 'float32' or 'float64'; got {self.force_dtype!r}")
         for name in ("friction", "rolling", "wall_friction", "wall_rolling", "softening", "damping_clamp",
-                     "rolling_projection"):
+                     "rolling_projection", "quasi_static"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"Mechanics.{name} must be True or False; got {getattr(self, name)!r}")
         if not (isinstance(self.gravity, tuple) and len(self.gravity) == 3

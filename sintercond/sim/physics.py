@@ -242,6 +242,10 @@ class Physics:
                     raise ValueError(f"Physics.mechanics needs {name}={want!r}; got {got!r}")
             if self.motion is not None:
                 raise ValueError("Physics.mechanics moves the particles itself; motion must be None")
+            if self.mechanics.quasi_static and (self.sintering is None
+                                                            or self.sintering.shrinkage != "many_body"):
+                raise ValueError("Mechanics(quasi_static=True) moves the particles by the many-body balance of "
+                                 "the sintering necks: it needs sintering=Sintering(shrinkage='many_body')")
             if c.conducting_walls:
                 raise ValueError("Physics.mechanics takes its walls as Mechanics.walls (PlaneWall, mode 'conducting' "
                                  "for heat); conduction.conducting_walls must be 0")
@@ -279,7 +283,8 @@ class Physics:
         static contacts, uncoupled necks and no beam, explicit otherwise.
         """
         if integrator == "auto":  # any other value is Conduction's to check
-            integrator = resolve_integrator(bool(mechanics), contacts, motion, coupling, beam)[0]
+            moving = "quasi_static" if mechanics and mechanical.get("quasi_static") else bool(mechanics)
+            integrator = resolve_integrator(moving, contacts, motion, coupling, beam)[0]
         if not isinstance(mechanics, (bool, np.bool_)):
             raise ValueError(f"Physics.create(mechanics=...) must be True or False; got {mechanics!r}")
         if mechanics:
@@ -311,7 +316,11 @@ def resolve_integrator(mechanics: bool, contacts: str = "static", motion=None, c
                        beam=None) -> tuple[str, str]:
     """``(integrator, why)``: what ``integrator="auto"`` means for a spec: ``"implicit"`` (adaptive TR-BDF2) where
     nothing is inertial, the contacts are static, the necks are not coupled and no beam scans, ``"explicit"``
-    otherwise; ``why`` says which case it is."""
+    otherwise; ``why`` says which case it is. ``mechanics``: a bool, or ``"quasi_static"`` (``Mechanics.quasi_static``)."""
+    if mechanics == "quasi_static":
+        return "explicit", ("the mechanics is quasi-static: the necks' balance moves the particles and the contacts "
+                            "follow them (the pair list rebuilds), and the implicit integrator needs static contacts; "
+                            "the step is the thermal one")
     if mechanics:
         return "explicit", ("the mechanics is inertial: its step is bounded by the contact stiffness, and the heat "
                             "follows it explicitly")
