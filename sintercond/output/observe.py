@@ -67,7 +67,8 @@ _pair_neck_conductance = jax.jit(simulate.pair_neck_conductance, static_argnums=
 def sintered_conductivity(model, state) -> float:
     """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
     (:func:`sintercond.sim.steady.steady_state_network_conductivity`), 0 while no contact conducts, in the box of
-    :func:`k_star_box`."""
+    :func:`k_star_box`; with the mechanics NaN while no particle touches one of the box's two faces (an inertial
+    bed bouncing off its floor: no heat to impose there)."""
     radii = model.radii
     axis = model.k_star_axis
     if state.mechanics is not None:  # the necks on the half pair list, the packing where it has moved to
@@ -79,8 +80,11 @@ def sintered_conductivity(model, state) -> float:
         i, j = np.asarray(geometry.i, np.int64)[keep], np.asarray(geometry.j, np.int64)[keep]
         centres = np.asarray(state.particles.positions, np.float64)
         pairs = network.ContactPairs(i, j, np.asarray(geometry.overlap)[keep], radii[i], radii[j], len(radii))
-        return float(steady.steady_state_network_conductivity(centres, radii, pairs, np.asarray(pair_k)[keep],
-                                                              axis=axis, box=k_star_box(model, centres)))
+        try:
+            return float(steady.steady_state_network_conductivity(centres, radii, pairs, np.asarray(pair_k)[keep],
+                                                                  axis=axis, box=k_star_box(model, centres)))
+        except steady.NoFaceLayer:  # the moving packing left a face of its box (a bed bouncing off its floor)
+            return float("nan")
     pair_k = np.asarray(_pair_neck_conductance(model.physics, state, model.params))
     if not np.any(pair_k > 0):
         return 0.0

@@ -39,6 +39,11 @@ from sintercond.contacts.sphere_coupling import (
 )
 
 
+class NoFaceLayer(ValueError):
+    """No particle touches one of the two faces of the box k* is measured in along its axis: no heat can be
+    imposed there."""
+
+
 def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
     """Steady temperatures with the ``fixed_mask`` particles held at ``fixed_temperature``.
 
@@ -315,7 +320,7 @@ def _hot_and_cold_faces(centres, radii, pairs, axis, box):
     hot = centres[:, axis] - radii <= lo[axis] + 1e-12 * (hi[axis] - lo[axis])
     cold = centres[:, axis] + radii >= hi[axis] - 1e-12 * (hi[axis] - lo[axis])
     if not hot.any() or not cold.any():
-        raise ValueError(f"no particle reaches the box faces along axis {axis}; check box")
+        raise NoFaceLayer(f"no particle reaches the box faces along axis {axis}; check box")
     if np.any(hot & cold):
         raise ValueError("a particle reaches both faces: the packing is too thin along the axis")
     length = float(np.mean(centres[cold, axis]) - np.mean(centres[hot, axis]))
