@@ -344,6 +344,13 @@ def resume(out_dir, progress=True, stop_after_chunks=None, pictures=True, durati
     if (out / "bed.json").exists():
         model = dataclasses.replace(model, bed=json.loads((out / "bed.json").read_text()))
     state = load_checkpoint(out / "checkpoint.npz", model.state)
+    if (out / "history.csv").exists():  # before anything in the folder changes
+        header = (out / "history.csv").read_text().partition("\n")[0].strip()
+        columns = ",".join(history_columns(model))
+        if header != columns:
+            raise SceneError(f"the run in {out} wrote history.csv with the columns {header!r}; this version writes "
+                             f"{columns!r} for it: run the scene anew (or resume it with the version that started "
+                             "it)")
     if duration is not None or float(state.dt) != model.dt:
         # the run keeps its own step (an extension, or the resume of an interrupted one): the steps taken stay valid
         dt = float(state.dt)

@@ -406,9 +406,9 @@ def test_quasi_static_sintering_at_the_real_modulus_moves_as_the_inertial_step_l
     approach = float(np.max(np.asarray(quasi.mechanics.neck_overlap)))
     assert float(np.max(np.abs(sink))) < 1e-4 * approach  # what the quasi-static run leaves out, against the necks
     np.testing.assert_allclose(list(necks.values()), list(by_pair(inertial, inertial.mechanics.neck).values()),
-                               rtol=1e-6)
+                               rtol=1e-7)
     np.testing.assert_allclose(np.asarray(quasi.particles.temperature), np.asarray(inertial.particles.temperature),
-                               atol=1e-3)
+                               atol=2e-4)
     assert float(np.max(np.abs(np.asarray(quasi.mechanics.velocity)))) == 0.0
 
 
@@ -448,6 +448,16 @@ def test_a_coupled_sintering_run_killed_mid_way_resumes_bitwise(tmp_path, quasi_
     resumed, _ = runner.resume(tmp_path / "cut", progress=False, pictures=False)
     np.testing.assert_array_equal(np.asarray(resumed), np.asarray(full))
     assert (tmp_path / "full" / "history.csv").read_bytes() == (tmp_path / "cut" / "history.csv").read_bytes()
+    if quasi_static:  # a run folder whose history has other columns (an earlier version's) is not appended to
+        from sintercond.scene import SceneError
+
+        runner.run_scene(copy.deepcopy(scene), tmp_path / "old", progress=False, pictures=False, stop_after_chunks=2)
+        history = tmp_path / "old" / "history.csv"
+        history.write_text(history.read_text().replace(",height_shrinkage,volume_shrinkage", "", 1))
+        before = sorted(p.name for p in (tmp_path / "old").rglob("*"))
+        with pytest.raises(SceneError, match="wrote history.csv with the columns"):
+            runner.resume(tmp_path / "old", progress=False, pictures=False)
+        assert sorted(p.name for p in (tmp_path / "old").rglob("*")) == before
 
 
 def test_the_start_of_the_necks_is_a_key_of_runs_with_the_mechanics_only():
@@ -492,6 +502,8 @@ def test_a_quasi_static_preheating_bed_at_110_gpa_sinters_in_its_container_and_r
     assert held.sum() > 10 and np.array_equal(x[held, 2], x0[held, 2])  # the floor's layer stays on it
     assert np.all(x[:, :2] >= x0[:, :2].min(axis=0)) and np.all(x[:, :2] <= x0[:, :2].max(axis=0))
     history = np.genfromtxt(tmp_path / "history.csv", delimiter=",", names=True)
+    # the plate's particles follow the ramp (Rizza & Galati's Eq. 6 with its erratum: 845 K + 17.12 K a 0.38 s step)
+    np.testing.assert_allclose(history["T_max_K"], 845.0 + 17.12 * np.ceil(history["time_s"] / 0.38), rtol=1e-12)
     assert np.all(history["kinetic_energy_J"] == 0.0) and summary["kinetic_energy_J"] == 0.0
     assert np.all(np.diff(history["contacts"]) >= 0) and history["contacts"][-1] > history["contacts"][0]
     for name in ("mean_neck_ratio", "height_shrinkage", "volume_shrinkage", "k_star_W_mK"):

@@ -159,7 +159,8 @@ def observe(scene, model, state, probe) -> Observation:
     wall: the power its held particles lose to the rest,
     ``-sum_i P_i`` over them (what holds them at their temperature).
     With mechanics: the contact force ``m (v(t + dt) - v(t)) / dt - m g``
-    (one symplectic-Euler step of the simulator, Eq. 43), kinetic energy
+    (one symplectic-Euler step of the simulator, Eq. 43; quasi-static, the
+    resultant of the step's laws less ``m g``, :func:`_probe_fn`), kinetic energy
     ``sum m v^2/2 + I omega^2/2`` (``I = (2/5) m r^2``), touching pairs and
     wall contacts.
     """

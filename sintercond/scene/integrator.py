@@ -41,6 +41,10 @@ def scene_integrator(scene) -> tuple[str, str]:
     if asked == "auto":
         integrator, why = resolve_integrator(mechanics, coupling=coupling, beam="scanning" if scanning else None)
         return integrator, f"run.integrator = \"auto\": {why}"
+    if asked == "implicit" and mechanics == "quasi_static":
+        raise SceneError('run.integrator = "implicit" steps the slow physics of static contacts; with '
+                         'mechanics.quasi_static = true the necks\' balance moves the particles and the pair list '
+                         'rebuilds: use "explicit" or "auto"')
     if asked == "implicit" and mechanics:
         raise SceneError('run.integrator = "implicit" steps the slow physics of a static packing; this scene has '
                          'physics.mechanics = true (inertial, bounded by the contact stiffness): use "explicit" or '

@@ -68,7 +68,8 @@ def scene_reference() -> str:
           "and the step in which a beam's spot advances a fifth of its radius; a larger `run.dt` is refused, "
           "naming the limit and its key. While it runs, a contact approaching faster than the step was sized for, "
           "or kinetic energy growing beyond what gravity and the initial overlaps can supply, stops the run "
-          "naming `physics.impact_velocity`.")
+          "naming `physics.impact_velocity`. With `mechanics.quasi_static = true` (sintering) nothing is inertial: "
+          "the mechanical bound, `impact_velocity` and that guard do not apply, and no wall pushes.")
     table("[mechanics]", _SCHEMA["mechanics"],
           "The contact material (Quintana-Ruiz & Campello 2020, Eqs. 2-20), with `physics.mechanics = true`. "
           "Walls are rigid (`E* = E/(1 - nu^2)`).")
@@ -81,7 +82,9 @@ def scene_reference() -> str:
           "balance also moves the particles (else the packing stays). Touching "
           "spheres (a lattice with `radius = spacing/2`) start from point contacts. `history.csv` gains the mean "
           "and largest neck ratio a/min(r_i, r_j) and the mean linear shrinkage (h - h_0)/(r_i + r_j) of the "
-          "contacts (h their approach H(a), or from the positions with many-body shrinkage); the "
+          "contacts (h their approach H(a), or from the positions with many-body shrinkage), and where the "
+          "particles move the packing's `height_shrinkage` and `volume_shrinkage` (its best-fit homogeneous "
+          "deformation F: 1 - F_zz and 1 - det F; docs/simulator.md, shrinkage of a packing); the "
           "VTP frames each particle's mean neck ratio. The automatic time step is taken on the necks at the law's "
           "cap (they only grow).")
     table("[sintering.params]", _SINTERING_PARAMS, "Keys the chosen law takes: " + "; ".join(

@@ -253,8 +253,10 @@ _SCHEMA = {
                             doc="sintering at the material's real modulus (needs sintering.shrinkage = "
                                 "\"many_body\"): no inertia; the particles move at the neck updates by the necks' "
                                 "many-body balance, which leaves the elastic overlaps (and the weight they carry) as "
-                                "they were, and the step is the thermal one, not the elastic one (Eq. 47). false: "
-                                "Newton's law at the elastic step (docs/simulator.md, quasi-static sintering)"),
+                                "they were, and the step is the thermal one, not the elastic one (Eq. 47). The "
+                                "tangential and damping laws, softening and physics.impact_velocity then do not act "
+                                "on the motion. false: Newton's law at the elastic step (docs/simulator.md, "
+                                "quasi-static sintering)"),
     },
     "softening": {
         "onset_temperature": Key(float, _parameter("theta_star"), True, "K",

@@ -172,6 +172,9 @@ def _check_mechanics(scene):
             raise SceneError(f"walls[{k}].velocity needs physics.mechanics = true (a wall moves only with mechanics)")
     if "gravity" in physics:
         physics["gravity"] = _numbers("physics.gravity", physics["gravity"], 3, _within(-1e3, 1e3, "m/s^2"))
+    if not on and scene.get("mechanics", {}).get("quasi_static"):
+        raise SceneError("mechanics.quasi_static = true needs physics.mechanics = true (the [mechanics] section "
+                         "alone is the contact material a packing is poured with; the run's packing stays put)")
     if not on:
         for key in physics:
             if key != "mechanics":
@@ -321,7 +324,9 @@ def _check_sintering(scene):
                              "held or conducting walls (and boundary.floor_temperature) would be ignored; drop them "
                              "or use preheating.hold = \"walls\"")
         if scene["physics"]["mechanics"] and not scene.get("mechanics", {}).get("quasi_static"):
-            raise SceneError("[preheating] needs physics.mechanics = false in this version")
+            raise SceneError("[preheating] with physics.mechanics = true needs mechanics.quasi_static = true (and "
+                             "sintering.shrinkage = \"many_body\"): the inertial step at the elastic limit would take "
+                             "hours for a preheat of seconds")
     if scene.get("mechanics", {}).get("quasi_static") and scene.get("sintering", {}).get(
             "shrinkage") != "many_body":
         raise SceneError("mechanics.quasi_static = true moves the particles by the many-body balance of the "

@@ -100,7 +100,8 @@ class Mechanics:
       quasi_static: no inertia, for sintering at the material's real modulus (needs
         ``Sintering(shrinkage="many_body")``): the particles move only at the neck updates, by the many-body
         balance of the sintering necks, whose step moves each pair by its neck's approach and so leaves the elastic
-        overlaps, and the loads they carry, as they were; the step is the thermal one, not the elastic one
+        overlaps, and the loads they carry, as they were (to first order: not where the balance pulls a pair
+        apart, or a neck stops at its cap); the step is the thermal one, not the elastic one
         (:func:`sintercond.sim.terms.mechanics.quasi_static_advance`; docs/simulator.md). False: Newton's law,
         symplectic Euler at the elastic step (Eqs. 43-47).
     """

@@ -246,6 +246,11 @@ class Physics:
                                                             or self.sintering.shrinkage != "many_body"):
                 raise ValueError("Mechanics(quasi_static=True) moves the particles by the many-body balance of "
                                  "the sintering necks: it needs sintering=Sintering(shrinkage='many_body')")
+            for k, wall in enumerate(self.mechanics.walls if self.mechanics.quasi_static else ()):
+                if any(wall.velocity):
+                    raise ValueError(f"Mechanics.walls[{k}].velocity must be (0, 0, 0) with quasi_static=True: a "
+                                     f"moving wall pushes by contact forces, which need the inertial step; got "
+                                     f"{wall.velocity}")
             if c.conducting_walls:
                 raise ValueError("Physics.mechanics takes its walls as Mechanics.walls (PlaneWall, mode 'conducting' "
                                  "for heat); conduction.conducting_walls must be 0")
@@ -312,7 +317,7 @@ class Physics:
         return self.conduction.neck
 
 
-def resolve_integrator(mechanics: bool, contacts: str = "static", motion=None, coupling: str = "none",
+def resolve_integrator(mechanics: bool | str, contacts: str = "static", motion=None, coupling: str = "none",
                        beam=None) -> tuple[str, str]:
     """``(integrator, why)``: what ``integrator="auto"`` means for a spec: ``"implicit"`` (adaptive TR-BDF2) where
     nothing is inertial, the contacts are static, the necks are not coupled and no beam scans, ``"explicit"``

@@ -36,15 +36,14 @@ def elastic_constants(physics: Physics, mp, particles: ParticleState):
 def contact_forces(physics: Physics, state: SimState, params: Params):
     """``(geometry, force [c, 3])`` of a mechanical state's listed pairs: the force on ``i`` from ``j`` (N) that the
     step's contact laws give at this state (Hertz with damping, Mindlin friction and its spring, Quintana-Ruiz &
-    Campello 2020 Eqs. 2-13), ``geometry`` the :class:`sintercond.sim.mechanics.PairGeometry` of the pairs."""
+    Campello 2020 Eqs. 2-13; with sintering on each overlap less its neck's approach, as the step's),
+    ``geometry`` the :class:`sintercond.sim.mechanics.PairGeometry` of the pairs."""
     if physics.mechanics is None:
         raise ValueError("contact_forces needs Physics.mechanics")
     particles, motion, mp = state.particles, state.mechanics, params.mechanics
-    geometry = mechanics.pair_geometry(particles.positions, particles.radii, state.contacts.pairs.pairs)
     modulus, nu = elastic_constants(physics, mp, particles)
-    f, *_ = mechanics.pair_loads(physics.mechanics, mp, geometry, particles.radii, particles.mass, modulus, nu,
-                                 motion.velocity, motion.spin, motion.spring, motion.rolling, state.dt,
-                                 particles.positions.dtype)
+    geometry, f, *_ = _pair_forces(physics, state, mp, motion, modulus, nu, state.contacts.pairs.pairs, motion.spring,
+                                   motion.rolling, motion.neck_overlap)
     return geometry, f
 
 
