@@ -127,6 +127,17 @@ def command_line() -> str:
     return " ".join(["python", f"benchmarks/{pathlib.Path(sys.argv[0]).name}", *sys.argv[1:]])
 
 
+def sintercond_process(argv):
+    """``(completed, wall)``: the ``sintercond`` command with ``argv`` run in a new Python process (its output
+    captured), and that process's wall time (s): what a user waits for."""
+    import subprocess
+
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", f"from sintercond.cli import main; raise SystemExit(main({argv!r}))"],
+                          capture_output=True, text=True)
+    return done, time.perf_counter() - start
+
+
 def write_section(name: str, command: str, body: str) -> None:
     """Replace (or append) the section ``name`` of RESULTS.md."""
     begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"

@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _common import sintercond_process  # noqa: E402
 
 SCENE = "ti6al4v_preheating_bed"
 TIMES = (1.0, 5.0, 9.5)
@@ -64,10 +66,7 @@ def run(integrator: str, work: Path, lateral_size: float | None = None, rtol: fl
     path, out = work / f"{integrator}.toml", work / integrator
     path.write_text(scene_text(integrator, lateral_size, rtol if integrator == "auto" else None))
     argv = ["run", str(path), "--out", str(out), "--no-progress", "--no-pictures"]
-    start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-c", f"from sintercond.cli import main; raise SystemExit(main({argv!r}))"],
-                          capture_output=True, text=True)
-    wall = time.perf_counter() - start
+    done, wall = sintercond_process(argv)
     (work / f"{integrator}.log").write_text(done.stdout + done.stderr)
     if done.returncode:
         raise SystemExit(f"the {integrator} run failed:\n{done.stderr[-3000:]}")
