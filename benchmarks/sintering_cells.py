@@ -7,7 +7,8 @@ corners; sintercond.laws.geometry.bcc_cell) is held on the stepped ramp (Eq. 6 w
 necks grown from point contacts by the grain-boundary law fitted to the 80-58.6 um couple (docs/laws.md), the
 solid at their Table 1's lambda_0(T). At Table 3's and Table 6's times the simulator's two necks (corner-corner,
 corner-centre) give k* along x of the infinite lattice (fitting.sintering.lattice_conductivity: a periodic block,
-Rojek's law or the FE-fitted neck law on each neck), set beside their FE conductivity (Table 6). Prints the
+Rojek's law or the FE-fitted neck law on each neck; the necks coupled through their spheres, and the isolated pipe
+network beside it), set beside their FE conductivity (Table 6). Prints the
 table (the SC cell's comparison is the rizza2024_sc_cell scene's, docs/examples.md).
 """
 
@@ -48,8 +49,9 @@ def main():
     times = 0.5 * np.arange(1, 20)
     t3, t6 = rizza_galati_table(3), rizza_galati_table(6)
     print("| t (s) | T (K) | corner-corner a (um) | Table 3 couple 1 (um) | corner-centre a (um) | Table 3 couple 2 "
-          "(um) | k*, Rojek's law (W/(m K)) | k*, FE-fitted law (W/(m K)) | Table 6 FE (W/(m K)) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "(um) | k* coupled, Rojek's law | k* coupled, FE-fitted law | k* isolated, Rojek's law | "
+          "k* isolated, FE-fitted law | Table 6 FE (W/(m K)) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     fe = dict(zip(t6["time_s"], t6["lambda_fe"]))
     for t, a1, a2 in zip(times, np.asarray(x1), np.asarray(x2)):
         row = np.flatnonzero(np.isclose(t3["time_s"], t))
@@ -58,10 +60,11 @@ def main():
         k = int(row[0])
         level = float(np.asarray(temperature)[int(round(t / 0.5)) - 1])
         k_star = [float(fs.lattice_conductivity(centres, radii, box, lambda ri, rj, a1=a1, a2=a2:
-                                                a1 if np.isclose(ri, rj) else a2, float(kappa(level)), law))
-                  for law in ("rojek", "fitted")]
+                                                a1 if np.isclose(ri, rj) else a2, float(kappa(level)), law,
+                                                coupling=coupling))
+                  for coupling in ("sphere", "none") for law in ("rojek", "fitted")]
         print(f"| {t:g} | {level:.0f} | {a1 / UM:.2f} | {t3['x_couple1_um'][k]:.2f} | {a2 / UM:.2f} | "
-              f"{t3['x_couple2_um'][k]:.2f} | {k_star[0]:.3f} | {k_star[1]:.3f} | {fe.get(t, '')} |")
+              f"{t3['x_couple2_um'][k]:.2f} | " + " | ".join(f"{v:.3f}" for v in k_star) + f" | {fe.get(t, '')} |")
 
 
 if __name__ == "__main__":

@@ -33,7 +33,8 @@ intervals scale with the residual standard deviation (``s^2 (J^T J)^-1``).
 
 Conductivity along the ramp (:func:`conductivity_along_ramp`): the fitted
 necks feed Rizza & Galati's tortuosity model on sintercond's SC and BCC cells
-and the steady pipe-network solve of those lattices with the Rojek and the
+and the steady network solve of those lattices (necks coupled through their
+spheres, and the isolated pipe network beside it) with the Rojek and the
 FE-fitted neck laws, the bulk conductivity from their Table 1.
 """
 
@@ -462,7 +463,7 @@ def grown_necks(fit: SinteringFit, r_i, r_j, times) -> np.ndarray:
 # conductivity along the ramp
 
 
-def lattice_conductivity(centres, radii, box, necks, kappa, law="rojek", axis=0, cells=2):
+def lattice_conductivity(centres, radii, box, necks, kappa, law="rojek", axis=0, cells=2, coupling="sphere"):
     """``k*`` (W/(m K)) of a lattice whose contacts have the given necks (first stage: centres fixed).
 
     The unit cell (``centres``, ``radii``, ``box``: touching spheres, as
@@ -472,25 +473,30 @@ def lattice_conductivity(centres, radii, box, necks, kappa, law="rojek", axis=0,
     ``necks(r_i, r_j)`` (m) through ``law`` at the overlap ``H(a)``
     (:func:`sintercond.laws.sintering.neck_overlap`); the steady pipe-network solve
     holds the first plane of spheres at 1 K and the last at 0 K
-    (:func:`sintercond.sim.steady.steady_state_network_conductivity`). For SC and
-    BCC (every site a centre of inversion symmetry) the linear field is then
-    the exact solution, so this is the infinite lattice's conductivity. The
-    approach ``H(a)`` (at most 2 % of the spacing on the ramp) is left out of
-    the lattice's size: the first stage of sintering, without shrinkage.
+    (:func:`sintercond.sim.steady.steady_state_network_conductivity`) on the
+    network ``coupling``: ``"sphere"`` (default), the necks that share a sphere
+    coupled through its surface, or ``"none"``, the isolated pipe network. For SC
+    and BCC (every site a centre of inversion symmetry) the isolated network's
+    linear field is then the exact solution, so this is the infinite lattice's
+    conductivity (the coupled network's held planes carry mirror images, exact
+    for such a lattice). The approach ``H(a)`` (at most 2 % of the spacing on the
+    ramp) is left out of the lattice's size: the first stage of sintering, without
+    shrinkage. A sphere whose necks' discs overlap keeps its pair laws' halves.
     """
     centres, radii = np.asarray(centres, float), np.asarray(radii, float)
     lo, hi = (np.asarray(b, float) for b in box)
     key = (centres.tobytes(), radii.tobytes(), lo.tobytes(), hi.tobytes(), int(axis), int(cells))
-    pairs, solve = _lattice(key, centres.shape[0])
+    pairs, solve = _lattice(key, centres.shape[0], coupling)
     a = jnp.stack([jnp.asarray(necks(ri, rj)) for ri, rj in zip(pairs.r_i, pairs.r_j)])
     h = st.neck_overlap(a, pairs.r_i, pairs.r_j)
     k_pairs = cd.conductance_from_neck(law, a, jnp.asarray(pairs.r_i), jnp.asarray(pairs.r_j), h, kappa, kappa)
-    return solve(k_pairs)
+    return solve(k_pairs, kappa=kappa, neck_radii=a) if coupling == "sphere" else solve(k_pairs)
 
 
 @functools.lru_cache(maxsize=16)
-def _lattice(key, n):
-    """The periodic block of a cell and its compiled steady solve ``K_ij -> k*`` (the geometry never changes)."""
+def _lattice(key, n, coupling):
+    """The periodic block of a cell and its compiled steady solve ``K_ij -> k*`` on the network ``coupling`` (the
+    geometry never changes; with ``"sphere"`` the solve takes ``kappa`` and ``neck_radii`` too)."""
     centres = np.frombuffer(key[0]).reshape(n, 3)
     radii, lo, hi = (np.frombuffer(b) for b in key[1:4])
     axis, cells = key[4], key[5]
@@ -508,8 +514,9 @@ def _lattice(key, n):
     pairs = contact_pairs(block, block_radii, periodic_box=periodic_box)
     faces_lo = np.where(lateral, 0.0, np.min(block[:, axis] - block_radii))
     faces_hi = np.where(lateral, 3 * size, np.max(block[:, axis] + block_radii))
+    extra = {"coupling": coupling} if coupling == "none" else {"beyond_domain": "isolated", "periodic_box": periodic_box}
     solve = jax.jit(functools.partial(steady_state_network_conductivity, block, block_radii, pairs, axis=axis,
-                                      box=(faces_lo, faces_hi)))
+                                      box=(faces_lo, faces_hi), **extra))
     return pairs, solve
 
 
@@ -524,7 +531,9 @@ def conductivity_along_ramp(fits: dict, times=None) -> dict:
       ``time_s``, ``temperature_K``, ``lambda0`` (Table 1, W/(m K)), the fitted necks ``x_80_80_um`` and
       ``x_80_58_um``, ``lambda_pow_sc`` (tortuosity model, phi = 3), ``lambda_pow_bcc`` (mean of the two
       couples, phi = 8, as their Table 6) and ``k_star_sc_rojek``, ``k_star_sc_fitted``,
-      ``k_star_bcc_rojek``, ``k_star_bcc_fitted`` (the pipe network), all ``[times]``.
+      ``k_star_bcc_rojek``, ``k_star_bcc_fitted`` (the coupled network, :func:`lattice_conductivity`), and
+      ``k_star_bcc_rojek_isolated``, ``k_star_bcc_fitted_isolated`` (the isolated pipe network; on SC the two are
+      equal), all ``[times]``.
     """
     t_table, temperature_table, lambda0_table = tt.ti6al4v_conductivity_table()
     times = t_table if times is None else np.asarray(times, float)
@@ -537,7 +546,8 @@ def conductivity_along_ramp(fits: dict, times=None) -> dict:
            "x_80_58_um": x2 / UM}
     sc_cell, bcc_cell = geometry.simple_cubic_cell(80.0 * UM), geometry.bcc_cell(80.0 * UM)
     lam_sc, lam_bcc = [], []
-    k = {f"k_star_{cell}_{law}": [] for cell in ("sc", "bcc") for law in ("rojek", "fitted")}
+    k = {f"k_star_{cell}_{law}{net}": [] for cell in ("sc", "bcc") for law in ("rojek", "fitted")
+         for net in ("", "_isolated") if cell == "bcc" or not net}
     for a1, a2, kappa in zip(x1, x2, lambda0):
         m_sc = geometry.rev_measures(*geometry.simple_cubic_cell(80.0), necks=a1 / UM)
         tau2 = tt.tortuosity_squared(m_sc.sss_over_s0, m_sc.gamma.max(), m_sc.n, 3.0)
@@ -554,6 +564,8 @@ def conductivity_along_ramp(fits: dict, times=None) -> dict:
         for law in ("rojek", "fitted"):
             k[f"k_star_sc_{law}"].append(float(lattice_conductivity(*sc_cell, necks, kappa, law)))
             k[f"k_star_bcc_{law}"].append(float(lattice_conductivity(*bcc_cell, necks, kappa, law)))
+            k[f"k_star_bcc_{law}_isolated"].append(float(lattice_conductivity(*bcc_cell, necks, kappa, law,
+                                                                              coupling="none")))
     out["lambda_pow_sc"], out["lambda_pow_bcc"] = np.array(lam_sc), np.array(lam_bcc)
     out.update({key: np.array(v) for key, v in k.items()})
     return out
@@ -599,9 +611,10 @@ def preheat_conductivity_model(scene, saves: int, *, centres=None, radii=None):
     intervals; the run stepped by TR-BDF2 within ``run.rtol`` / ``run.atol``
     (:func:`sintercond.sim.adaptive.rollout`; ``run.integrator`` is taken as ``"implicit"``) with the scene's
     ``[sintering]`` law at ``A = exp(theta["log_A"])`` (m^4 K/s) and ``Q = theta["Q"]`` (kJ/mol); at the end of
-    each interval the k* of the bed along ``sintering.k_star_axis`` on the necks it has then (the steady solve and
-    box of a run's ``k_star_W_mK``, :func:`sintercond.output.observe.sintered_conductivity`, each particle at its
-    conductivity at its temperature there). ``failed`` is set when any adaptive interval did not finish: then
+    each interval the k* of the bed along ``sintering.k_star_axis`` on the necks it has then (the steady solve,
+    network (``sintering.k_star_coupling``, default the necks coupled through their sphere) and box of a run's
+    ``k_star_W_mK``, :func:`sintercond.output.observe.sintered_conductivity`, each particle at its conductivity at
+    its temperature there). ``failed`` is set when any adaptive interval did not finish: then
     none of the values is to be used (``least_squares(..., invalid=True)`` raises on it). Forward mode
     (``jax.jvp``, Levenberg-Marquardt in :func:`fitting.core.least_squares`) goes through the adaptive loop; jit
     ``k_star`` once and call it for any ``theta``. The law must be ``"grain_boundary"`` (its ``A`` and ``Q``).
@@ -614,7 +627,7 @@ def preheat_conductivity_model(scene, saves: int, *, centres=None, radii=None):
     from sintercond.scene.typed import typed_scene
     from sintercond.scene.build import build_model
     from sintercond.sim import adaptive, rollout
-    from sintercond.sim.contacts import pair_neck_conductance
+    from sintercond.sim.contacts import pair_neck_conductance, particle_conductivity
 
     if not (isinstance(saves, numbers.Integral) and saves >= 1):
         raise ValueError(f"saves must be an integer >= 1 (the k* values along the run); got {saves!r}")
@@ -632,7 +645,7 @@ def preheat_conductivity_model(scene, saves: int, *, centres=None, radii=None):
     i, j = np.asarray(state.contacts.pairs, np.int64).T
     pairs = ContactPairs(i, j, np.asarray(state.contacts.overlap), r[i], r[j], len(r))
     box = observe.k_star_box(model, x)
-    axis = typed.sintering.k_star_axis
+    axis, coupling = typed.sintering.k_star_axis, typed.sintering.k_star_coupling
     saveat = rollout.SaveAt(every=1, fn=lambda s: (s.contacts, s.particles.temperature))
 
     def k_star(theta):
@@ -644,7 +657,9 @@ def preheat_conductivity_model(scene, saves: int, *, centres=None, radii=None):
             there = dataclasses.replace(state, contacts=c, particles=dataclasses.replace(state.particles,
                                                                                           temperature=t))
             return steady_state_network_conductivity(x, r, pairs, pair_neck_conductance(sim.physics, there, p),
-                                                     axis=axis, box=box)
+                                                     axis=axis, box=box, coupling=coupling,
+                                                     kappa=particle_conductivity(sim.physics, p, there.particles),
+                                                     neck_radii=c.neck, beyond_domain="isolated")
 
         return jax.vmap(conductivity)(contacts, temperature), stats.failed
 

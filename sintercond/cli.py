@@ -6,8 +6,9 @@
   checkpoints, a summary table. ``--duration`` replaces ``run.duration``.
   ``sintercond run --resume DIR`` continues an interrupted run.
 * ``sintercond scenes`` lists the built-in example scenes.
-* ``sintercond effective scene.toml [--axis k]``: the steady-state effective
-  conductivity of the scene's packing.
+* ``sintercond effective scene.toml [--axis k] [--coupling sphere|none]``: the
+  steady-state effective conductivity of the scene's packing (necks coupled
+  through their sphere by default).
 * ``sintercond demo`` (also the default with no arguments) prints the neck
   radii and pair conductances of the cases of Rojek et al. (2022).
 """
@@ -125,6 +126,9 @@ def main(argv=None) -> int:
     effective.add_argument("scene", nargs="?", default=None, help="scene TOML file (default: built-in default scene)")
     effective.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="heat-flow axis (default 2, z)")
     effective.add_argument("--out", default=None, metavar="DIR", help="also write the steady field to DIR/steady.vtp")
+    effective.add_argument("--coupling", default="sphere", choices=("sphere", "none"),
+                           help="the conductance network: necks coupled through their sphere (default), or each "
+                                "neck's pair law alone on its sphere, the isolated pipe network")
     args = parser.parse_args(argv)
     if cache_by_default():
         enable_compilation_cache()  # a second run of the same scene compiles nothing
@@ -224,7 +228,7 @@ def _effective(args) -> int:
     kappa = scene["material"]["conductivity"]
     k_star, temperature = steady.steady_state_conductivity(
         centres, radii, kappa, axis=args.axis, law=c["law"], params=c.get("params"), neck_model=c.get("neck_model"),
-        box=box, field=True)
+        box=box, field=True, coupling=args.coupling, beyond_domain="isolated")
     if box is None:
         where = "the lattice cell"
     elif bed is not None:
@@ -239,6 +243,14 @@ def _effective(args) -> int:
     print(f"k* = Q L / (A dT): particles reaching the two faces of {where} along axis {args.axis} held at "
           "dT apart, Q the steady heat flow, L the distance of the mean centre planes of the two held sets, "
           "A the box cross-section")
+    if args.coupling == "sphere":
+        beyond = int(np.count_nonzero(steady.spheres_beyond_domain(centres, radii, law=c["law"],
+                                                                   neck_model=c.get("neck_model"))))
+        print("network: necks that share a sphere coupled through its surface (--coupling none: the isolated pipe "
+              "network)" + (f"; {beyond} particles have two necks closer than their discs' half-widths: they keep "
+                            "the pair law's halves (isolated necks)" if beyond else ""))
+    else:
+        print("network: each neck's pair law alone on its sphere (the isolated pipe network)")
     if isolated:
         print(f"{isolated} particles are joined to neither held face by any chain of contacts: they carry no heat "
               "(no temperature in the field: NaN, and isolated = 1)")

@@ -84,8 +84,8 @@ from sintercond.sim.contacts import (affine_shrinkage, conducting_geometry, cond
                                      lifted_contacts,
                                      lifted_pair_conductance, list_region, merged_law_params, neck_conductance,
                                      pair_conductance, pair_heat_flow, pair_heat_power, pair_neck_conductance,
-                                     reallocate_neighbors, sintered_geometry,
-                                     sintered_pair_conductance, table_contacts)
+                                     particle_conductivity, reallocate_neighbors, sintered_geometry,
+                                     sintered_pair_conductance, sintered_pair_network, table_contacts)
 from sintercond.sim.physics import Conduction, Physics, Sources
 from sintercond.sim.rollout import (Observable, SaveAt, mean_temperature, probe_temperatures, rollout,  # noqa: F401
                                     segment_length)

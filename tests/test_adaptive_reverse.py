@@ -78,7 +78,9 @@ def cell_conductivity_model(reverse_steps):
         _, contacts, stats = adaptive.rollout(sim, state, p, SAVES, saveat, reverse_steps=reverse_steps)
         conductance = jax.vmap(lambda c: pair_neck_conductance(sim.physics, dataclasses.replace(state, contacts=c),
                                                                p))(contacts)
-        k = jax.vmap(lambda kk: steady_state_network_conductivity(x, radii, network, kk, axis=0))(conductance)
+        k = jax.vmap(lambda kk, c: steady_state_network_conductivity(
+            x, radii, network, kk, axis=0, kappa=p.conductivity[0], neck_radii=c.neck,
+            beyond_domain="isolated"))(conductance, contacts)
         return k, stats.failed
 
     return k_star

@@ -140,11 +140,18 @@ def test_lattice_conductivity_is_the_closed_form_of_the_lattice():
 
     sc_value = float(fs.lattice_conductivity(*geometry.simple_cubic_cell(80 * UM), necks, kappa))
     assert sc_value == pytest.approx(k(a1, 40 * UM) / (80 * UM), rel=1e-12)
-    bcc_value = float(fs.lattice_conductivity(*geometry.bcc_cell(80 * UM), necks, kappa))
+    bcc_value = float(fs.lattice_conductivity(*geometry.bcc_cell(80 * UM), necks, kappa, coupling="none"))
     assert bcc_value == pytest.approx((k(a1, 40 * UM) + 2 * k(a2, r_c)) / (80 * UM), rel=1e-12)
     for axis in (1, 2):
+        assert float(fs.lattice_conductivity(*geometry.bcc_cell(80 * UM), necks, kappa, axis=axis,
+                                             coupling="none")) == pytest.approx(bcc_value, rel=1e-12)
+    # the coupled network (the default): the SC chain unchanged, the BCC cell's 8 and 14 necks a sphere below the
+    # isolated sum (the cubic symmetry keeps the three axes equal)
+    coupled = float(fs.lattice_conductivity(*geometry.bcc_cell(80 * UM), necks, kappa))
+    assert 0.8 * bcc_value < coupled < 0.95 * bcc_value
+    for axis in (1, 2):
         assert float(fs.lattice_conductivity(*geometry.bcc_cell(80 * UM), necks, kappa, axis=axis)) == \
-            pytest.approx(bcc_value, rel=1e-12)
+            pytest.approx(coupled, rel=1e-9)
 
 
 @pytest.mark.slow
@@ -154,20 +161,32 @@ def test_conductivity_along_the_ramp_against_the_paper(fits):
     assert np.all(np.diff(out["x_80_80_um"]) > 0) and np.all(np.diff(out["k_star_bcc_rojek"]) > 0)
     # the fitted necks are the data to the fits' misfit
     assert np.max(np.abs(out["x_80_80_um"] - t2["x_um"])) < 0.7
-    # Table 2's lambda_pow (tortuosity model, phi = 3) from our SC cell and the fitted necks: up to 7 % above it,
+    # Table 2's lambda_pow (tortuosity model, phi = 3) from our SC cell and the fitted necks: up to 6 % above it,
     # because their phase-field cell's solid face fraction S_ss/S_0 is 1-6 % above the spheres' (lambda ~ 1/tau^2
     # ~ S_0/S_ss); with their S_ss the two agree to the necks' misfit
-    np.testing.assert_allclose(out["lambda_pow_sc"], t2["lambda_pow"], rtol=0.07)
+    np.testing.assert_allclose(out["lambda_pow_sc"], t2["lambda_pow"], rtol=0.06)
     ours = np.array([geometry.rev_measures(*geometry.simple_cubic_cell(80.0), necks=x).sss_over_s0
                      for x in out["x_80_80_um"]])
     np.testing.assert_allclose(out["lambda_pow_sc"] * ours / (t2["Sss_um2"] / 80.0**2 / 6), t2["lambda_pow"],
                                rtol=0.025)
-    # Table 6's FE conductivity of the BCC cell against our pipe network: the network is above it, more so as
-    # the necks grow (14-35 %): it sums each neck's pair law as if alone on its sphere, while the FE resolves the
+    # Table 6's FE conductivity of the BCC cell against the isolated pipe network: the network is above it, more so
+    # as the necks grow (14-35 %): it sums each neck's pair law as if alone on its sphere, while the FE resolves the
     # overlapping spreading regions of a corner sphere's 14 necks
     rows = [int(np.flatnonzero(np.isclose(out["time_s"], t))[0]) for t in t6["time_s"]]
-    ratio = out["k_star_bcc_rojek"][rows] / t6["lambda_fe"]
+    ratio = out["k_star_bcc_rojek_isolated"][rows] / t6["lambda_fe"]
+    print("isolated / Table 6 FE:", ratio)
     assert np.all((ratio > 1.0) & (ratio < 1.5)) and np.all(np.diff(ratio) > 0)
+    # the coupled network (the default) takes the overlap out: the isolated one is 10-19 % above it along the ramp,
+    # as much as the full-field solve of this cell (Table 3's necks, tests/data/fullfield_cells.md) puts it above
+    # the full field at 2.5 / 5.5 / 9.5 s (11.0 / 15.0 / 19.0 %; the fitted necks here differ from Table 3's by up
+    # to 0.1 um, the pair law's own error is 1-3 %); the coupled network is then within 2 % of Table 6 at 2.5 and
+    # 5.5 s and 13 % above it at 9.5 s
+    overlap = out["k_star_bcc_rojek_isolated"] / out["k_star_bcc_rojek"]
+    coupled = out["k_star_bcc_rojek"][rows] / t6["lambda_fe"]
+    print("isolated / coupled:", overlap, "coupled / Table 6 FE:", coupled)
+    assert np.all((overlap > 1.09) & (overlap < 1.2)) and np.all(np.diff(overlap) > 0)
+    np.testing.assert_allclose(overlap[rows], [1.110, 1.150, 1.190], atol=0.03)
+    assert np.all(np.abs(coupled[:2] - 1.0) < 0.02) and 1.1 < coupled[2] < 1.15
     # the FE-fitted law is a few per cent above the linear one at these a/r
     assert np.all(out["k_star_bcc_fitted"] > out["k_star_bcc_rojek"])
     assert np.all(out["k_star_bcc_fitted"] < 1.1 * out["k_star_bcc_rojek"])

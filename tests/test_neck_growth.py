@@ -258,6 +258,8 @@ def test_held_particles_on_a_ramp_take_each_level_at_its_end_and_bad_ramps_are_r
 
 @pytest.mark.slow
 def test_the_gradient_of_k_star_at_the_end_by_the_kinetic_parameters_equals_central_differences():
+    """k* of the 2 x 2 x 2 cell on the coupled network (three necks at right angles on each sphere, necks traced
+    through the run) after 100 steps of the ramp: its gradient in (ln A, Q) equals central differences."""
     from sintercond.contacts.network import contact_pairs
     from sintercond.sim.steady import steady_state_network_conductivity
 
@@ -280,7 +282,8 @@ def test_the_gradient_of_k_star_at_the_end_by_the_kinetic_parameters_equals_cent
                                  held_ramp=simulate.HeldRampParams(1273.0, 9.5, 25.0))
         end, _ = simulate.rollout(sim, state, params, 100)
         k = simulate.pair_neck_conductance(physics, end, params)
-        return steady_state_network_conductivity(x, np.full(8, r), pairs, k, axis=2)
+        return steady_state_network_conductivity(x, np.full(8, r), pairs, k, axis=2, kappa=KAPPA,
+                                                 neck_radii=end.contacts.neck, beyond_domain="isolated")
 
     log_a, q = jnp.log(1.2e-20), 37.0
     grad = jax.jit(jax.grad(k_star, argnums=(0, 1)))(log_a, q)

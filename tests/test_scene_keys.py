@@ -134,6 +134,8 @@ ELSEWHERE = {
     "material.conductivity_table": "test_conductivity_table.py: test_a_scenes_table_reaches_the_run",
     "material.specific_heat_table": "test_specific_heat_table.py: test_a_scenes_table_reaches_the_run...",
     "sintering.k_star_axis": "test_sintering_scene.py: the SC cell's k_star_W_mK against K_pair / spacing",
+    "sintering.k_star_coupling": "test_sintering_scene.py: test_a_bed_measures_k_star_from_its_floor_to_its_mean_"
+                                 "surface_like_its_bulk (none reaches the model; the default reads below it)",
     **{f"preheating.{key}": "test_sintering_scene.py: the SC cell on the ramp, test_a_held_wall_follows_the_ramp"
        for key in ("end_temperature", "duration", "steps", "hold")},
 }

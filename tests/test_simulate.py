@@ -230,19 +230,31 @@ class _Pulse:
 
 
 @pytest.mark.slow
-def test_steady_state_conductivity_is_differentiable():
-    """k* is linear in kappa and in Rojek's slope (exact for any packing without contact resistance);
-    its contact-resistance derivative equals central differences (implicit CG derivative)."""
+@pytest.mark.parametrize("coupling", ["none", "sphere"])
+def test_steady_state_conductivity_is_differentiable(coupling):
+    """k* is linear in kappa (both networks: the halves and the surface Green function both scale as 1/kappa); the
+    isolated network's is linear in Rojek's slope too (exact for any packing without contact resistance), the
+    coupled one's is not (its Green-function part does not scale with the slope) and its slope derivative equals
+    central differences; the contact-resistance derivative equals central differences (implicit CG
+    derivative)."""
     centres, radii = _packing()
-    k_star = steady.steady_state_conductivity(centres, radii, 7.0, axis=0)
-    d_kappa = jax.grad(lambda k: steady.steady_state_conductivity(centres, radii, k, axis=0))(7.0)
+    kw = {"axis": 0, "coupling": coupling}
+    k_star = steady.steady_state_conductivity(centres, radii, 7.0, **kw)
+    d_kappa = jax.grad(lambda k: steady.steady_state_conductivity(centres, radii, k, **kw))(7.0)
     assert float(d_kappa) == pytest.approx(float(k_star) / 7.0, rel=1e-9)
-    d_slope = jax.grad(lambda s: steady.steady_state_conductivity(centres, radii, 7.0, axis=0,
-                                                                   params={"slope": s}))(1.064)
-    assert float(d_slope) == pytest.approx(float(k_star) / 1.064, rel=1e-9)
+
+    def with_slope(s):
+        return steady.steady_state_conductivity(centres, radii, 7.0, params={"slope": s}, **kw)
+
+    d_slope = jax.grad(with_slope)(1.064)
+    if coupling == "none":
+        assert float(d_slope) == pytest.approx(float(k_star) / 1.064, rel=1e-9)
+    else:
+        assert float(d_slope) == pytest.approx(_central_difference(lambda s: float(with_slope(s)), 1.064), rel=1e-6)
+        assert abs(float(d_slope) / (float(k_star) / 1.064) - 1.0) > 1e-3  # not linear in the slope
 
     def with_resistance(r):
-        return steady.steady_state_conductivity(centres, radii, 7.0, axis=0, params={"contact_resistance": r})
+        return steady.steady_state_conductivity(centres, radii, 7.0, params={"contact_resistance": r}, **kw)
 
     g = jax.grad(with_resistance)(200.0)
     fd = _central_difference(lambda r: float(with_resistance(r)), 200.0)

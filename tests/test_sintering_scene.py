@@ -315,10 +315,12 @@ def _central_slab_conductivity(centres, i, j, conductance, hot, cold, area):
 
 
 def test_a_bed_measures_k_star_from_its_floor_to_its_mean_surface_like_its_bulk():
-    """A rolled 1 mm bed with every neck at a fifth of the smaller radius: the history's k* (the face layers of the
-    floor and of the mean surface height, as `sintercond effective`) within 10 % of the bulk's (the middle's
-    gradient, independent solve). Before, the top face layer was the particles within half a mean radius of the
-    highest surface: two particles here, k* 7x too low."""
+    """A rolled 1 mm bed with every neck at a fifth of the smaller radius, k* on the isolated network
+    (sintering.k_star_coupling = "none"): the history's k* (the face layers of the floor and of the mean surface
+    height, as `sintercond effective`) within 10 % of the bulk's (the middle's gradient, independent solve). Before,
+    the top face layer was the particles within half a mean radius of the highest surface: two particles here, k*
+    7x too low. The default network (necks coupled through their sphere) reads below the isolated one, and the
+    particles it keeps at their halves are those two of whose necks' discs overlap (counted here independently)."""
     import dataclasses
 
     from sintercond.contacts.network import contact_pairs
@@ -328,13 +330,29 @@ def test_a_bed_measures_k_star_from_its_floor_to_its_mean_surface_like_its_bulk(
     scene["packing"] = {"kind": "powder_bed", "method": "roll", "lateral_size": 1e-3, "height": 6e-4,
                         "diameter_range": [45e-6, 105e-6], "seed": 0}
     scene.pop("mechanics")  # the pour's material: a rolled bed needs none
+    scene["sintering"]["k_star_coupling"] = "none"
     model = build.build_model(validate_scene(scene))
+    assert model.k_star_coupling == "none"
     state = model.state
     i, j = np.asarray(state.contacts.pairs).T
     radii = model.radii
     state = dataclasses.replace(state, contacts=dataclasses.replace(
         state.contacts, neck=0.2 * np.minimum(radii[i], radii[j])))
     k_star = observe.sintered_conductivity(model, state)
+    assert observe.conductivity_and_uncoupled(model, state) == (k_star, 0)
+    coupled, uncoupled = observe.conductivity_and_uncoupled(dataclasses.replace(model, k_star_coupling="sphere"),
+                                                            state)
+    assert 0.8 * k_star < coupled < k_star
+    neck = np.asarray(state.contacts.neck)
+    outside = 0
+    for s in range(len(radii)):  # two necks of a sphere closer than their discs' angular half-widths
+        mine = np.flatnonzero((i == s) | (j == s))
+        d = model.centres[np.where(i[mine] == s, j[mine], i[mine])] - model.centres[s]
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        alpha = np.arcsin(neck[mine] / radii[s])
+        theta = np.arccos(np.clip(d @ d.T, -1, 1))
+        outside += bool(np.any((theta < alpha[:, None] + alpha[None, :]) & ~np.eye(len(mine), dtype=bool)))
+    assert uncoupled == outside
 
     conductance = np.asarray(observe._pair_neck_conductance(model.physics, state, model.params))
     pairs = contact_pairs(model.centres, radii)

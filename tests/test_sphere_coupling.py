@@ -301,11 +301,75 @@ def test_necks_too_close_are_refused():
         kstar(centres, radii, "sphere", **kw)
 
 
+def test_necks_beyond_the_domain_keep_the_isolated_halves():
+    """beyond_domain="isolated": the FCC block at a/r = 0.55 (every sphere's discs overlap) is the isolated network
+    to round-off; a block with one sphere's necks grown past the domain keeps that sphere's halves only: the host
+    check (spheres_beyond_domain) and the solve's mask (kept_green) name the same sphere, and k* lies between the
+    isolated network's and the in-domain coupled one's."""
+    from sintercond.contacts import sphere_coupling
+    from sintercond.contacts.network import ell_table
+
+    centres, radii, _, kw = lattice_block("FCC", 0.55, cells=1)
+    assert kstar(centres, radii, "sphere", beyond_domain="isolated", **kw) == pytest.approx(
+        kstar(centres, radii, "none", **kw), rel=1e-12)
+
+    centres, radii, _, kw = lattice_block("FCC", 0.22, cells=2)
+    periods = np.array(kw["periodic_box"], float)
+    periods[0] = 1e3  # no wrap along the flux axis (the steady solver does the same)
+    pairs = contact_pairs(centres, radii, periodic_box=periods)
+    k_pairs = pair_conductances("rojek", pairs, np.ones(len(pairs.i)), np.ones(len(pairs.i)))
+    a = 0.22 * radii[pairs.i]
+    middle = int(np.argmin(np.linalg.norm(centres - centres.mean(axis=0), axis=1)))
+    grown = np.where((pairs.i == middle) | (pairs.j == middle), 0.6 * radii[pairs.i], a)  # 60 deg apart: overlap
+    neighbors, neck = ell_table(len(radii), pairs.i, pairs.j, grown)
+    beyond = sphere_coupling.spheres_beyond_domain(centres, radii, neighbors, neck, periods)
+    assert np.flatnonzero(beyond).tolist() == [middle]
+
+    def k(coupling, neck_radii):
+        return float(steady_state_network_conductivity(centres, radii, pairs, k_pairs, box=kw["box"],
+                                                       periodic_box=periods, coupling=coupling, kappa=1.0,
+                                                       neck_radii=neck_radii, beyond_domain="isolated"))
+
+    with pytest.raises(ValueError, match=r"on particle \d+ the necks of contacts"):
+        steady_state_network_conductivity(centres, radii, pairs, k_pairs, box=kw["box"], periodic_box=periods,
+                                          kappa=1.0, neck_radii=grown)
+    assert k("sphere", a) < k("sphere", grown) < k("none", grown)
+    geometry = sphere_coupling.sphere_geometry(centres, radii, neighbors, ell_table(
+        len(radii), pairs.i, pairs.j, np.arange(1, len(pairs.i) + 1))[1], neck, periodic_box=periods,
+        beyond_domain="isolated")
+    kept = np.asarray(sphere_coupling.kept_green(geometry, jnp.asarray(neck), jnp.asarray(radii)))
+    assert not kept[middle].any() and np.all(kept[~beyond].any(axis=(1, 2)))
+    assert np.asarray(sphere_coupling.outside_domain(geometry, jnp.asarray(neck), jnp.asarray(radii))).tolist() == \
+        beyond.tolist()
+
+
+def test_traced_necks_decide_the_domain_in_the_solve():
+    """The network solve with neck radii under jit (necks grown in a differentiated function) equals the concrete
+    one, inside the domain and beyond it; under jit the host refusal cannot run, so it asks for
+    beyond_domain="isolated"."""
+    centres, radii, _, kw = lattice_block("BCC", 0.3, cells=1)
+    periods = np.array(kw["periodic_box"], float)
+    periods[0] = 1e3
+    pairs = contact_pairs(centres, radii, periodic_box=periods)
+    k_pairs = pair_conductances("rojek", pairs, np.ones(len(pairs.i)), np.ones(len(pairs.i)))
+    common = {"box": kw["box"], "periodic_box": periods, "kappa": 1.0}
+    for a_over_r in (0.3, 0.8):
+        a = a_over_r * radii[pairs.i]
+        concrete = steady_state_network_conductivity(centres, radii, pairs, k_pairs, beyond_domain="isolated",
+                                                     neck_radii=a, **common)
+        traced = jax.jit(lambda n: steady_state_network_conductivity(centres, radii, pairs, k_pairs, neck_radii=n,
+                                                                     beyond_domain="isolated", **common))(a)
+        assert float(traced) == pytest.approx(float(concrete), rel=1e-12)
+    with pytest.raises(ValueError, match=r"neck_radii are traced.*beyond_domain='isolated'"):
+        jax.jit(lambda n: steady_state_network_conductivity(centres, radii, pairs, k_pairs, neck_radii=n,
+                                                            **common))(a)
+
+
 def test_field_is_returned():
     """field=True with the coupling: held layers at 1 and 0, the SC field equal to the isolated network's."""
     centres, radii, _, kw = lattice_block("SC", 0.22)
     k1, t1 = steady_state_conductivity(centres, radii, 1.0, coupling="sphere", field=True, **kw)
-    k0, t0 = steady_state_conductivity(centres, radii, 1.0, field=True, **kw)
+    k0, t0 = steady_state_conductivity(centres, radii, 1.0, coupling="none", field=True, **kw)
     np.testing.assert_allclose(np.asarray(t1), np.asarray(t0), atol=1e-12)
     assert float(np.max(t1)) == 1.0 and float(np.min(t1)) == 0.0
 
@@ -333,8 +397,8 @@ def test_poured_bed_conducts_less_coupled():
     bed = powder_bed(500.0, 400.0, (60.0, 120.0), seed=1)
     centres, radii = 0.96 * np.asarray(bed.centres), np.asarray(bed.radii)
     box = face_layer_box(centres, radii, 2)
-    iso, iso_field = steady_state_conductivity(centres, radii, 1.0, axis=2, box=box, field=True)
-    cpl, field = steady_state_conductivity(centres, radii, 1.0, axis=2, box=box, coupling="sphere", field=True)
+    iso, iso_field = steady_state_conductivity(centres, radii, 1.0, axis=2, box=box, coupling="none", field=True)
+    cpl, field = steady_state_conductivity(centres, radii, 1.0, axis=2, box=box, field=True)  # the default network
     pairs = contact_pairs(centres, radii)
     print(f"bed of {len(radii)} spheres, {2 * len(pairs.i) / len(radii):.2f} contacts a sphere: coupled "
           f"{cpl:.5g}, isolated {iso:.5g} ({100 * (cpl / iso - 1):+.2f} %)")

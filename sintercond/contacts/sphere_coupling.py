@@ -72,7 +72,9 @@ the two differ only while the spheres store heat.
 **Domain.** The point-source form needs the necks' discs apart: necks ``i, j`` of a sphere of radius ``r``
 with neck radii ``a_i, a_j`` must satisfy ``theta_ij >= alpha_i + alpha_j``, ``alpha = arcsin(a / r)`` (the
 angular half-width of a neck's disc). :func:`sphere_geometry` refuses a packing where two discs overlap,
-naming the particle and both contacts. Measured against full-field solves: within 2 % up to a/r = 0.4 on
+naming the particle and both contacts, or (``beyond_domain="isolated"``, what the measurements of ``k*`` along a
+run use) keeps the pair law's halves on such a sphere, as the isolated network does, and flags it.
+Measured against full-field solves: within 2 % up to a/r = 0.4 on
 FCC (12 necks) and BCC (8 and 14 necks) once the pair law's own error is divided out (``docs/laws.md``).
 
 **Operator.** The unknowns are the sphere temperatures ``[n]`` and the neck temperatures ``[p]`` (one per
@@ -132,7 +134,9 @@ class SphereGeometry:
     Attributes:
       green: ``[n, m, m]`` dimensionless ``4 pi kappa r`` times the coupling part of ``R_s``: ``g(theta_ij)``
         off the diagonal, ``g(pi)`` on it (Eqs. 2-3), less the mirror images' ``g(theta*_ij)`` on held
-        spheres (Eq. 4); 0 on a held sphere that keeps the pair law's halves, and in every slot not coupled.
+        spheres (Eq. 4), with the net-flow term on free spheres (Eq. 5, ``net_flow``); 0 in every slot not
+        coupled. A sphere outside the domain at its necks now keeps the pair law's halves instead
+        (:func:`kept_green`).
       coupled: ``[n, m]`` bool, the slot is a neck of this sphere's block (a contact with a neck, not joining
         two spheres held at the same temperature).
       neck_index: ``[n, m]`` int32, the contact (neck unknown) of each slot, 0 on padding.
@@ -145,6 +149,9 @@ class SphereGeometry:
       packed_slots: ``[p, 2]`` int32, each contact's two slots in the packed per-slot layout (the buckets' slots
         one after the other, row-major).
       row_order: ``[n]`` int32, where each sphere is in the buckets' rows one after the other.
+      theta: ``[n, m, m]`` angles (rad) between the necks of each sphere, for the domain at the necks of the moment.
+      image_theta: ``[n, m, m]`` angles (rad) from each neck of a held sphere to the mirror images of its necks
+        (pi on free spheres), or None without held spheres.
     """
 
     green: jax.Array
@@ -156,6 +163,8 @@ class SphereGeometry:
     necks: tuple = ()
     packed_slots: jax.Array | None = None
     row_order: jax.Array | None = None
+    theta: jax.Array | None = None
+    image_theta: jax.Array | None = None
 
 
 BUCKET_WIDTHS = (2, 4, 6, 8, 10, 12, 16, 24, 32, 48, 64)
@@ -187,24 +196,38 @@ def _packed_layout(pair_id, neck_index, neck_slots):
             jnp.asarray(packed, jnp.int32), jnp.asarray(order, jnp.int32))
 
 
+BEYOND_DOMAIN = ("refuse", "isolated")
+"""What :func:`sphere_geometry` does with a sphere two of whose necks' discs overlap (outside the domain of point
+coupling): refuse the packing, or let it keep its pair-law halves (its necks isolated, as in the pipe network)."""
+
+
 def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis=0, periodic_box=None,
-                    net_flow=False):
+                    net_flow=False, beyond_domain="refuse"):
     """Host-side :class:`SphereGeometry` of a static packing, after checking the domain of point coupling.
+
+    The geometry holds the necks' directions only; which spheres are inside the domain is decided from the neck
+    radii at each use (:func:`kept_green`), so a geometry built once serves necks that grow.
 
     Args:
       centres: ``[n, 3]`` (m). radii: ``[n]`` (m).
       neighbors: ``[n, m]`` contact table (:func:`sintercond.contacts.network.ell_table`), padded with the row itself.
       pair_id: ``[n, m]`` the contact's index + 1 in each slot, 0 on padding (same layout).
-      neck: ``[n, m]`` neck radius ``a`` of each slot (m); slots with ``a <= 0`` carry no neck.
+      neck: ``[n, m]`` neck radius ``a`` of each slot (m); slots with ``a <= 0`` carry no neck (are not coupled).
       held: ``[n]`` int labels, 0 for a free sphere and equal non-zero labels for spheres held at the same
         temperature (e.g. 1 hot, 2 cold), or None.
       axis: the flux axis; held spheres get mirror images across the plane through their centre normal to it.
       periodic_box: ``[3]`` side lengths (m) for minimum-image directions, or None.
       net_flow: the transient's blocks: free spheres get the net-flow term ``-G(pi) 1 1^T`` (Eq. 5).
+      beyond_domain: ``"refuse"`` (default) or ``"isolated"``, :data:`BEYOND_DOMAIN`: at the necks ``neck``, a
+        sphere two of whose necks' discs overlap is refused, or accepted (it keeps the pair law's halves,
+        ``R_s = diag(1/K_half)``, the isolated network on that sphere, :func:`kept_green`).
 
     Raises:
-      ValueError: two necks of one sphere closer than their discs' angular half-widths (Domain).
+      ValueError: with ``beyond_domain="refuse"``, two necks of one sphere closer than their discs' angular
+        half-widths (Domain).
     """
+    if beyond_domain not in BEYOND_DOMAIN:
+        raise ValueError(f"beyond_domain must be one of {list(BEYOND_DOMAIN)}; got {beyond_domain!r}")
     centres = np.asarray(centres, np.float64)
     radii = np.asarray(radii, np.float64)
     neighbors = np.asarray(neighbors)
@@ -215,29 +238,21 @@ def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis
     rows = np.arange(n)[:, None]
     has_neck = (pair_id > 0) & (neck > 0)
     coupled = has_neck & ~((held[:, None] != 0) & (held[neighbors] == held[:, None]))
-    delta = centres[neighbors] - centres[:, None, :]
-    if periodic_box is not None:
-        box = np.asarray(periodic_box, np.float64)
-        delta = delta - box * np.round(delta / box)
-    length = np.linalg.norm(delta, axis=-1)
-    direction = delta / np.where(length > 0, length, 1.0)[..., None]
-    cos = np.clip(np.einsum("nik,njk->nij", direction, direction), -1.0, 1.0)
-    alpha = np.arcsin(np.clip(neck / radii[:, None], 0.0, 1.0))
+    direction, cos, alpha = _neck_angles(centres, radii, neighbors, neck, periodic_box)
     pair = coupled[:, :, None] & coupled[:, None, :]
     off = pair & ~np.eye(m, dtype=bool)
-    _check_discs_apart(np.arccos(cos), alpha, off, neighbors)
-    g = np.asarray(surface_green_factor(np.where(off, cos, -1.0)))
-    green = np.where(pair, g, 0.0)  # the diagonal holds g(pi) (Eq. 3)
+    theta = np.arccos(cos)
+    if beyond_domain == "refuse":
+        _refuse_overlap(_discs_overlap(theta, alpha, off), theta, alpha, neighbors)
+    green = np.where(pair, _host_green_factor(np.where(off, cos, -1.0)), 0.0)  # the diagonal holds g(pi), Eq. 3
     mirrored = held != 0
+    image_theta = None
     if mirrored.any():
         e = direction[..., axis]
         image_cos = np.clip(cos - 2.0 * e[:, :, None] * e[:, None, :], -1.0, 1.0)
-        # images overlapping a neck's disc: that held sphere keeps the pair law's halves
-        close = pair & (np.arccos(image_cos) < alpha[:, :, None] + alpha[:, None, :])
-        images = mirrored & ~close.any(axis=(1, 2))
-        image_g = np.asarray(surface_green_factor(np.where(pair, image_cos, -1.0)))
-        green = np.where(images[:, None, None], green - np.where(pair, image_g, 0.0), green)
-        green = np.where((mirrored & ~images)[:, None, None], 0.0, green)
+        image_g = _host_green_factor(np.where(pair, image_cos, -1.0))
+        green = np.where(mirrored[:, None, None], green - np.where(pair, image_g, 0.0), green)
+        image_theta = np.where(mirrored[:, None, None], np.arccos(image_cos), np.pi)
     if net_flow:
         green = np.where(pair & (held == 0)[:, None, None], green - GREEN_OPPOSITE, green)
     n_pairs = int(pair_id.max(initial=0))
@@ -249,20 +264,95 @@ def sphere_geometry(centres, radii, neighbors, pair_id, neck, *, held=None, axis
     neck_index = np.maximum(pair_id - 1, 0)
     return SphereGeometry(jnp.asarray(green), jnp.asarray(coupled), jnp.asarray(neck_index, jnp.int32),
                           jnp.asarray(neck_slots, jnp.int32), jnp.asarray(neck_fixed),
-                          *_packed_layout(pair_id, neck_index, neck_slots))
+                          *_packed_layout(pair_id, neck_index, neck_slots), jnp.asarray(theta),
+                          None if image_theta is None else jnp.asarray(image_theta))
 
 
-def _check_discs_apart(theta, alpha, off, neighbors):
-    """Raise unless every two coupled necks of a sphere are at least their discs' half-widths apart."""
+def _host_green_factor(cos_theta) -> np.ndarray:
+    """:func:`surface_green_factor` evaluated now, in NumPy, also while a caller is being traced (the geometry is
+    built on the host once)."""
+    with jax.ensure_compile_time_eval():
+        return np.asarray(surface_green_factor(cos_theta))
+
+
+def kept_green(geometry: SphereGeometry, neck, radii):
+    """``[n, m, m]``: :attr:`SphereGeometry.green` on the spheres inside the domain of point coupling at the necks
+    ``neck`` (``[n, m]`` table, m), 0 on the others, which keep the pair law's halves (``R_s = diag(1/K_half)``):
+    a sphere two of whose coupled necks' discs overlap (``theta_ij < arcsin(a_i/r) + arcsin(a_j/r)``), and a held
+    sphere a neck of which overlaps a mirror image's disc (the images are not point-like there).
+
+    The domain is a mask (no derivative flows through it): within it, the blocks are smooth in the necks.
+    """
+    reach = _reach(geometry, neck, radii)
+    pair = geometry.coupled[:, :, None] & geometry.coupled[:, None, :]
+    off = pair & ~jnp.eye(pair.shape[1], dtype=bool)
+    outside = jnp.any(off & (geometry.theta < reach), axis=(1, 2))
+    if geometry.image_theta is not None:
+        outside = outside | jnp.any(pair & (geometry.image_theta < reach), axis=(1, 2))
+    return jnp.where(pair & ~outside[:, None, None], geometry.green, 0.0)
+
+
+def outside_domain(geometry: SphereGeometry, neck, radii):
+    """``[n]`` bool: the free spheres two of whose coupled necks' discs overlap at the necks ``neck`` (``[n, m]``
+    table, m), which :func:`kept_green` leaves at the pair law's halves."""
+    reach = _reach(geometry, neck, radii)
+    pair = geometry.coupled[:, :, None] & geometry.coupled[:, None, :]
+    return jnp.any(pair & ~jnp.eye(pair.shape[1], dtype=bool) & (geometry.theta < reach), axis=(1, 2))
+
+
+def _reach(geometry, neck, radii):
+    """``[n, m, m]`` (rad): ``(arcsin(a_i/r) + arcsin(a_j/r)) (1 - 1e-12)`` of each two slots, without derivative."""
+    alpha = jnp.arcsin(jnp.clip(jax.lax.stop_gradient(neck) / radii[:, None], 0.0, 1.0))
+    return (alpha[:, :, None] + alpha[:, None, :]) * (1.0 - 1e-12)
+
+
+def spheres_beyond_domain(centres, radii, neighbors, neck, periodic_box=None) -> np.ndarray:
+    """``[n]`` bool (host): spheres two of whose necks' discs overlap, ``theta_ij < arcsin(a_i/r) + arcsin(a_j/r)``,
+    outside the domain of point coupling (:func:`sphere_geometry`'s ``beyond_domain``).
+
+    Args:
+      centres: ``[n, 3]`` (m). radii: ``[n]`` (m).
+      neighbors: ``[n, m]`` contact table padded with the row itself. neck: ``[n, m]`` neck radii (m), 0 on
+        padding and on contacts without a neck.
+      periodic_box: ``[3]`` side lengths (m) for minimum-image directions, or None.
+    """
+    neighbors, neck = np.asarray(neighbors), np.asarray(neck, np.float64)
+    _, cos, alpha = _neck_angles(centres, radii, neighbors, neck, periodic_box)
+    has = neck > 0
+    off = has[:, :, None] & has[:, None, :] & ~np.eye(neighbors.shape[1], dtype=bool)
+    return _discs_overlap(np.arccos(cos), alpha, off).any(axis=(1, 2))
+
+
+def _neck_angles(centres, radii, neighbors, neck, periodic_box):
+    """``(direction [n, m, 3], cos theta_ij [n, m, m], alpha [n, m])`` of each sphere's necks (host): the unit
+    vectors to its contacts, the cosines between them, and each disc's angular half-width ``arcsin(a / r)``."""
+    centres, radii = np.asarray(centres, np.float64), np.asarray(radii, np.float64)
+    delta = centres[neighbors] - centres[:, None, :]
+    if periodic_box is not None:
+        box = np.asarray(periodic_box, np.float64)
+        delta = delta - box * np.round(delta / box)
+    length = np.linalg.norm(delta, axis=-1)
+    direction = delta / np.where(length > 0, length, 1.0)[..., None]
+    cos = np.clip(np.einsum("nik,njk->nij", direction, direction), -1.0, 1.0)
+    return direction, cos, np.arcsin(np.clip(neck / radii[:, None], 0.0, 1.0))
+
+
+def _discs_overlap(theta, alpha, off):
+    """``[n, m, m]`` bool: two coupled necks of a sphere closer than their discs' angular half-widths."""
+    return off & (theta < (alpha[:, :, None] + alpha[:, None, :]) * (1.0 - 1e-12))
+
+
+def _refuse_overlap(bad, theta, alpha, neighbors):
+    """Raise where :func:`_discs_overlap` found two necks' discs overlapping, naming the first."""
     reach = alpha[:, :, None] + alpha[:, None, :]
-    bad = off & (theta < reach * (1.0 - 1e-12))
     if bad.any():
         s, i, j = (int(v) for v in np.argwhere(bad)[0])
         raise ValueError(
             f"coupling='sphere': on particle {s} the necks of contacts ({s}, {int(neighbors[s, i])}) and "
             f"({s}, {int(neighbors[s, j])}) are {np.degrees(theta[s, i, j]):.4g} deg apart, closer than their "
             f"discs' angular half-widths arcsin(a/r) sum to ({np.degrees(reach[s, i, j]):.4g} deg): point "
-            f"coupling needs theta_ij >= arcsin(a_i/r) + arcsin(a_j/r); use coupling='none' for this packing")
+            f"coupling needs theta_ij >= arcsin(a_i/r) + arcsin(a_j/r); use coupling='none' for this packing, or "
+            f"(steady solvers) beyond_domain='isolated' to keep such a sphere's pair-law halves")
 
 
 def half_resistances(law, radii, neighbors, neck, overlap, kappa, law_params, conductance):
@@ -291,8 +381,9 @@ def half_resistances(law, radii, neighbors, neck, overlap, kappa, law_params, co
     return safe_divide(other, (own + other) * conductance)
 
 
-def resistance_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
-    """``R_s`` ``[n, m, m]`` (K/W), Eqs. 2-4: ``diag(1/K_half) + G`` on the coupled slots.
+def resistance_blocks(geometry: SphereGeometry, half_resistance, radii, kappa, neck):
+    """``R_s`` ``[n, m, m]`` (K/W), Eqs. 2-4: ``diag(1/K_half) + G`` on the coupled slots, ``G`` on the spheres
+    inside the domain at the necks ``neck`` (:func:`kept_green`).
 
     Uncoupled slots get the identity scaled to the row's mean coupled diagonal (or ``1/(kappa r)`` on a
     sphere with none), so that the block stays invertible and well scaled; :func:`conductance_blocks` masks
@@ -301,10 +392,10 @@ def resistance_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
     Args:
       geometry: :func:`sphere_geometry`.
       half_resistance: ``[n, m]`` ``1/K_half`` (K/W), :func:`half_resistances`.
-      radii: ``[n]`` (m). kappa: ``[n]`` (W/(m K)).
+      radii: ``[n]`` (m). kappa: ``[n]`` (W/(m K)). neck: ``[n, m]`` neck radii (m) on the table.
     """
     coupled = geometry.coupled
-    green = jnp.where(coupled[:, :, None] & coupled[:, None, :], geometry.green, 0.0)
+    green = kept_green(geometry, neck, radii)
     scale = 1.0 / (4.0 * jnp.pi * kappa * radii)
     diag = jnp.where(coupled, half_resistance, 0.0)
     count = jnp.sum(coupled, axis=1).astype(diag.dtype)
@@ -381,9 +472,10 @@ def coupled_diagonal(geometry: SphereGeometry, conductance):
     return block_total(geometry, conductance), jnp.sum(at_necks(geometry, slot_diagonal(conductance)), axis=1)
 
 
-def coupled_blocks(geometry: SphereGeometry, half_resistance, radii, kappa):
-    """``C_s`` (W/K, packed) from the halves: :func:`conductance_blocks` of :func:`resistance_blocks`."""
-    return conductance_blocks(geometry, resistance_blocks(geometry, half_resistance, radii, kappa))
+def coupled_blocks(geometry: SphereGeometry, half_resistance, radii, kappa, neck):
+    """``C_s`` (W/K, packed) from the halves at the necks ``neck`` (``[n, m]``, m): :func:`conductance_blocks` of
+    :func:`resistance_blocks`."""
+    return conductance_blocks(geometry, resistance_blocks(geometry, half_resistance, radii, kappa, neck))
 
 
 def mean_flow(q_at_necks):

@@ -13,7 +13,7 @@ import numpy as np
 
 from sintercond import simulate
 from sintercond.beds import packing
-from sintercond.contacts import network
+from sintercond.contacts import network, sphere_coupling
 from sintercond.laws import forces, walls
 from sintercond.sim import mechanics, neck_growth, steady
 from sintercond.sim.terms import mechanics as mechanics_term
@@ -42,6 +42,12 @@ the packing's height (along z) and of its volume since the start, from the best-
 centres (:func:`sintercond.beds.packing.packing_shrinkage`)."""
 
 
+K_STAR_COLUMNS = ("k_star_W_mK", "k_star_uncoupled")
+"""Columns ``sintering.k_star_axis`` adds: the packing's k* (W/(m K), :func:`sintered_conductivity`) and how many
+particles it keeps at the pair laws' halves because two of their necks' discs overlap
+(:func:`conductivity_and_uncoupled`)."""
+
+
 def moves(model) -> bool:
     """Whether the particles of ``model``'s sintering run move (:data:`PACKING_SHRINKAGE_COLUMNS` apply)."""
     physics = model.physics
@@ -52,12 +58,12 @@ def moves(model) -> bool:
 def history_columns(model) -> tuple:
     """The columns of ``history.csv`` of ``model``: :data:`HISTORY_COLUMNS`, :data:`MECHANICS_COLUMNS` with
     mechanics, :data:`SINTERING_COLUMNS` with sintering (and :data:`PACKING_SHRINKAGE_COLUMNS` where the particles
-    move), ``k_star_W_mK`` with ``sintering.k_star_axis``, and ``heat_wall{k}_W`` (the heat power into the packing
+    move), :data:`K_STAR_COLUMNS` with ``sintering.k_star_axis``, and ``heat_wall{k}_W`` (the heat power into the packing
     through scene wall ``k``, W) for each held or conducting wall."""
     return (HISTORY_COLUMNS + (MECHANICS_COLUMNS if model.physics.mechanics is not None else ())
             + (SINTERING_COLUMNS if model.physics.sintering is not None else ())
             + (PACKING_SHRINKAGE_COLUMNS if moves(model) else ())
-            + (("k_star_W_mK",) if model.k_star_axis is not None else ())
+            + (K_STAR_COLUMNS if model.k_star_axis is not None else ())
             + tuple(spec[0] for spec in model.wall_heat))
 
 
@@ -66,32 +72,61 @@ _pair_neck_conductance = jax.jit(simulate.pair_neck_conductance, static_argnums=
 
 def sintered_conductivity(model, state) -> float:
     """k* (W/(m K)) of a sintering state along ``model.k_star_axis``: one steady solve on its grown necks
-    (:func:`sintercond.sim.steady.steady_state_network_conductivity`), 0 while no contact conducts, in the box of
-    :func:`k_star_box`; with the mechanics NaN while no particle touches one of the box's two faces (an inertial
-    bed bouncing off its floor: no heat to impose there)."""
+    (:func:`sintercond.sim.steady.steady_state_network_conductivity`, on the network of ``model.k_star_coupling``:
+    necks coupled through their sphere, those of a sphere whose necks' discs overlap at the pair law's halves), 0
+    while no contact conducts, in the box of :func:`k_star_box`; with the mechanics NaN while no particle touches one
+    of the box's two faces (an inertial bed bouncing off its floor: no heat to impose there). Each particle conducts
+    at its conductivity (at its temperature with a property table)."""
+    return conductivity_and_uncoupled(model, state)[0]
+
+
+def conductivity_and_uncoupled(model, state) -> tuple[float, int]:
+    """``(k*, uncoupled)``: :func:`sintered_conductivity`, and how many particles have two necks whose discs overlap
+    (outside point coupling, :func:`sintercond.contacts.sphere_coupling.spheres_beyond_domain`), whose pair laws'
+    halves the coupled ``k*`` keeps; ``uncoupled`` is 0 with ``k_star_coupling = "none"``."""
+    network_now = _conducting_network(model, state)
+    if network_now is None:
+        return 0.0, 0
+    centres, pairs, pair_k, neck, kappa = network_now
+    uncoupled = 0
+    if model.k_star_coupling == "sphere":
+        neighbors, neck_table = network.ell_table(len(model.radii), pairs.i, pairs.j, neck)
+        uncoupled = int(np.count_nonzero(sphere_coupling.spheres_beyond_domain(centres, model.radii, neighbors,
+                                                                               neck_table)))
+    try:
+        k_star = float(steady.steady_state_network_conductivity(
+            centres, model.radii, pairs, pair_k, axis=model.k_star_axis, box=k_star_box(model, centres),
+            coupling=model.k_star_coupling, kappa=kappa, neck_radii=neck, beyond_domain="isolated"))
+    except steady.NoFaceLayer:  # the moving packing left a face of its box (a bed bouncing off its floor)
+        k_star = float("nan")
+    return k_star, uncoupled
+
+
+_sintered_pair_network = jax.jit(simulate.sintered_pair_network, static_argnums=0)
+_particle_conductivity = jax.jit(simulate.particle_conductivity, static_argnums=0)
+
+
+def _conducting_network(model, state):
+    """``(centres [n, 3], pairs, K [c], neck [c], kappa [n])`` of the contacts that conduct in ``state`` (host), or
+    None while none does: the half pair list where the packing has moved to with the mechanics, else the static
+    table's pairs on their grown necks."""
     radii = model.radii
-    axis = model.k_star_axis
-    if state.mechanics is not None:  # the necks on the half pair list, the packing where it has moved to
-        geometry, pair_k = jax.jit(simulate.sintered_pair_conductance, static_argnums=0)(model.physics, state,
-                                                                                         model.params)
+    kappa = np.asarray(_particle_conductivity(model.physics, model.params, state.particles), np.float64)
+    if state.mechanics is not None:
+        geometry, neck, pair_k = _sintered_pair_network(model.physics, state, model.params)
         keep = np.asarray(geometry.touching) & (np.asarray(pair_k) > 0)
-        if not keep.any():
-            return 0.0
         i, j = np.asarray(geometry.i, np.int64)[keep], np.asarray(geometry.j, np.int64)[keep]
         centres = np.asarray(state.particles.positions, np.float64)
-        pairs = network.ContactPairs(i, j, np.asarray(geometry.overlap)[keep], radii[i], radii[j], len(radii))
-        try:
-            return float(steady.steady_state_network_conductivity(centres, radii, pairs, np.asarray(pair_k)[keep],
-                                                                  axis=axis, box=k_star_box(model, centres)))
-        except steady.NoFaceLayer:  # the moving packing left a face of its box (a bed bouncing off its floor)
-            return float("nan")
-    pair_k = np.asarray(_pair_neck_conductance(model.physics, state, model.params))
+        overlap, neck = np.asarray(geometry.overlap)[keep], np.asarray(neck, np.float64)[keep]
+        pair_k = np.asarray(pair_k)[keep]
+    else:
+        pair_k = np.asarray(_pair_neck_conductance(model.physics, state, model.params))
+        i, j = np.asarray(state.contacts.pairs, np.int64).T
+        centres, overlap, neck = model.centres, np.asarray(state.contacts.overlap), np.asarray(state.contacts.neck)
     if not np.any(pair_k > 0):
-        return 0.0
-    i, j = np.asarray(state.contacts.pairs, np.int64).T
-    pairs = network.ContactPairs(i, j, np.asarray(state.contacts.overlap), radii[i], radii[j], len(radii))
-    return float(steady.steady_state_network_conductivity(model.centres, radii, pairs, pair_k, axis=axis,
-                                                          box=k_star_box(model, model.centres)))
+        return None
+    pairs = network.ContactPairs(i, j, overlap, radii[i], radii[j], len(radii))
+    return centres, pairs, pair_k, np.where(pair_k > 0, neck, 0.0), kappa
 
 
 def k_star_box(model, centres):
@@ -234,7 +269,7 @@ def _history_row(model, state, obs: Observation) -> str:
         strain = packing.packing_shrinkage(state.sintering.start_positions, state.particles.positions)
         values += [strain[name] for name in PACKING_SHRINKAGE_COLUMNS]
     if model.k_star_axis is not None:
-        values.append(sintered_conductivity(model, state))
+        values += list(conductivity_and_uncoupled(model, state))
     values += list(obs.wall_heat)
     return f"{int(state.step)}," + ",".join(repr(v) if isinstance(v, float) else str(v) for v in values) + "\n"
 

@@ -52,6 +52,7 @@ class Model:
     output_every: int = 1  # steps between outputs: run.output_every, or about DEFAULT_OUTPUTS over the run
     checkpoint_every: int = 1  # steps between checkpoints (run.checkpoint_every or DEFAULT_CHECKPOINT_OUTPUTS outputs)
     planes: tuple = ()  # the scene's walls as sintercond.laws.walls.PlaneWall at the packing built (scene_walls), once
+    k_star_coupling: str = "sphere"  # sintering.k_star_coupling: the network k* is measured on
 
     @property
     def physics(self) -> simulate.Physics:
@@ -402,7 +403,7 @@ def build_model(scene, centres=None, radii=None, log=None) -> Model:
                  {kind: bound for kind, (bound, _) in bounds.items()}, built.v_rel,
                  None if scene.sintering is None else scene.sintering.k_star_axis,
                  scene.packing.kind == "simple_cubic", packing_size(scene), *output_interval(scene.run, n_steps),
-                 tuple(planes))
+                 tuple(planes), "sphere" if scene.sintering is None else scene.sintering.k_star_coupling)
 
 
 class _Built(NamedTuple):
@@ -477,12 +478,9 @@ def _static_model(scene, physics, planes, particles, params, conducting, log) ->
                                        positions=particles.positions if many_body else None)
         # growing necks only raise the conductances: the step is taken on the necks at the kinetic law's cap
         limiting = neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts, particles.radii)
-        if physics.conduction.coupling == "sphere":  # the domain of point coupling at the cap, all run long
-            try:
-                contacts = simulate.coupled_contacts(contacts, centres, radii, np.asarray(limiting.neck), held=held,
-                                                     held_axis=held_axis or 0)
-            except ValueError as err:
-                raise SceneError(f"conduction.coupling: at the kinetic law's cap: {err}") from None
+        if physics.conduction.coupling == "sphere":  # every contact that can grow a neck; the domain at each step
+            contacts = simulate.coupled_contacts(contacts, centres, radii, np.asarray(limiting.neck), held=held,
+                                                 held_axis=held_axis or 0)
             limiting = dataclasses.replace(limiting, sphere=contacts.sphere)
     return _Built(physics, simulate.simulator(physics), contacts, None, necks,
                   simulate.init_state(particles, limiting, 1.0, sintering=necks), len(pairs.i), {})

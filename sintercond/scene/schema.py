@@ -301,7 +301,16 @@ _SCHEMA = {
                                "surface height (along z its floor's layer held hot and the particles reaching above "
                                "the mean surface cold), a lattice's end layers, any other packing's face layers; "
                                "each particle at its conductivity "
-                               "(material.conductivity_table at its temperature, or material.conductivity)"),
+                               "(material.conductivity_table at its temperature, or material.conductivity); and "
+                               "k_star_uncoupled, the particles with two necks closer than their discs' half-widths "
+                               "(kept at the pair law's halves by the coupled network)"),
+        "k_star_coupling": Key(str, _choice("sphere", "none"), False, default="sphere",
+                               doc="the network k_star_W_mK is measured on, whatever conduction.coupling the run "
+                                   "steps with: sphere, the necks that share a sphere coupled through its surface "
+                                   "(sintercond.contacts.sphere_coupling; within 2 % of full-field solves where the "
+                                   "isolated network reads 12-18 % high on FCC and BCC cells), a particle whose necks' "
+                                   "discs overlap at its pair laws' halves; none, each neck's pair law alone on its "
+                                   "sphere (the isolated pipe network, as before 2026-12-08)"),
     },
     "preheating": {
         "end_temperature": Key(float, TEMPERATURE, True, "K", doc="the temperature the held particles reach"),

@@ -96,8 +96,14 @@ def pair_conductance(physics: Physics, radii, material, geometry, conductivity, 
 
     ``geometry``: :func:`sintercond.sim.mechanics.pair_geometry` of the list.
     """
-    return _law_on_pairs(physics, radii, material, (geometry.i, geometry.j, geometry.valid),
-                         _pair_neck(physics, radii, geometry), geometry.overlap, conductivity, law_params)
+    return _pair_neck_and_conductance(physics, radii, material, geometry, conductivity, law_params)[1]
+
+
+def _pair_neck_and_conductance(physics, radii, material, geometry, conductivity, law_params):
+    """``(neck [c] m, conductance [c] W/K)`` of the pairs of a half list from their current overlaps."""
+    neck = _pair_neck(physics, radii, geometry)
+    return neck, _law_on_pairs(physics, radii, material, (geometry.i, geometry.j, geometry.valid), neck,
+                               geometry.overlap, conductivity, law_params)
 
 
 def _pair_neck(physics, radii, g):
@@ -128,12 +134,28 @@ def conducting_geometry(geometry, neck_overlap):
 def sintered_pair_conductance(physics: Physics, state: SimState, params: Params):
     """``(geometry, conductance [c])`` of a mechanical sintering state's half pair list (W/K): what its step
     conducts through (:func:`conducting_geometry`)."""
+    geometry, _, conductance = sintered_pair_network(physics, state, params)
+    return geometry, conductance
+
+
+def sintered_pair_network(physics: Physics, state: SimState, params: Params):
+    """``(geometry, neck [c], conductance [c])`` of a mechanical sintering state's half pair list: the geometry its
+    step conducts through (:func:`conducting_geometry`), each pair's neck radius (m, 0 where not touching) and
+    conductance (W/K)."""
     p = state.particles
     geometry = conducting_geometry(mechanics.pair_geometry(p.positions, p.radii, state.contacts.pairs.pairs,
                                                            neck_growth.POINT_CONTACT_GAP),
                                    state.mechanics.neck_overlap)
     index, kappa = conductivity_lookup(physics, params, p)
-    return geometry, pair_conductance(physics, p.radii, index, geometry, kappa, merged_law_params(physics, params))
+    return geometry, *_pair_neck_and_conductance(physics, p.radii, index, geometry, kappa,
+                                                 merged_law_params(physics, params))
+
+
+def particle_conductivity(physics: Physics, params: Params, particles: ParticleState):
+    """``[n]`` conductivity (W/(m K)) of each particle: its material's, or at its temperature
+    (:func:`conductivity_lookup`)."""
+    index, kappa = conductivity_lookup(physics, params, particles)
+    return kappa[index]
 
 
 def pair_heat_power(conductance, pairs, temperature):
@@ -209,7 +231,7 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
                               neck=jnp.asarray(a), overlap=jnp.asarray(np.asarray(p.overlap, np.float64)))
     if physics.conduction.coupling == "sphere":
         contacts = coupled_contacts(contacts, centres, radii, a, held=held, held_axis=held_axis,
-                                    periodic_box=periodic_box)
+                                    periodic_box=periodic_box, beyond_domain="refuse")
     if walls:
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
         a = np.asarray(wall_neck_radius(physics.neck, radii, h))
@@ -219,21 +241,24 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
 
 
 def coupled_contacts(contacts: LiftedContacts, centres, radii, necks, *, held=None, held_axis=0,
-                     periodic_box=None) -> LiftedContacts:
+                     periodic_box=None, beyond_domain="isolated") -> LiftedContacts:
     """``contacts`` with the necks' directions on their spheres for ``Conduction.coupling="sphere"`` (host, once).
 
     :func:`sintercond.contacts.sphere_coupling.sphere_geometry` (with the transient's net-flow term, Eq. 5) on the
-    necks ``necks`` ``[c]`` (m): the contacts with a neck there are the ones coupled, and its domain check (raises
-    ``ValueError`` on two necks of a sphere closer than their discs' half-widths) is made on them. For necks that
-    stay, the contacts' own (:func:`lifted_contacts` does this); with ``Physics.sintering``, the largest necks the
-    run can reach (:func:`sintercond.sim.neck_growth.necks_at_cap`): the domain then holds all run long, and a
-    neck that grows from zero is coupled once it conducts. ``held``, ``held_axis``: as :func:`lifted_contacts`.
+    necks ``necks`` ``[c]`` (m): the contacts with a neck there are the ones coupled. For necks that stay, the
+    contacts' own (:func:`lifted_contacts` does this, and refuses, ``ValueError``, two necks of a sphere closer
+    than their discs' half-widths); with ``Physics.sintering``, the largest necks the run can reach
+    (:func:`sintercond.sim.neck_growth.necks_at_cap`), so that a neck that grows from zero is coupled once it
+    conducts; the domain is then taken at each step's necks (a sphere whose necks' discs have come to overlap
+    keeps the pair law's halves, :func:`sintercond.contacts.sphere_coupling.kept_green`). ``held``,
+    ``held_axis``: as :func:`lifted_contacts`.
     """
     count = int(contacts.pairs.shape[0])
     slot = np.asarray(contacts.slot_pair)
     padded = np.concatenate([np.asarray(necks, np.float64), [0.0]])[slot]
     geometry = sphere_geometry(centres, radii, np.asarray(contacts.neighbors), np.where(slot < count, slot + 1, 0),
-                               padded, held=held, axis=held_axis, periodic_box=periodic_box, net_flow=True)
+                               padded, held=held, axis=held_axis, periodic_box=periodic_box, net_flow=True,
+                               beyond_domain=beyond_domain)
     return dataclasses.replace(contacts, sphere=geometry, neck_correction=jnp.zeros(count, float))
 
 

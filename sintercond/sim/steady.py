@@ -29,7 +29,9 @@ from sintercond.laws.conductance import validate_pair_conductance_inputs
 from sintercond.laws.neck import neck_radius
 from sintercond.contacts.network import ContactTable, contact_pairs, ell_table, heat_inflow, laplacian, wall_inflow
 from sintercond.sim.thermal import held_solve
+from sintercond.contacts import sphere_coupling
 from sintercond.contacts.sphere_coupling import (
+    BEYOND_DOMAIN,
     SphereGeometry,
     coupled_apply,
     coupled_blocks,
@@ -94,7 +96,8 @@ COUPLINGS = ("none", "sphere")
 
 
 def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", params=None, neck_model=None,
-                              box=None, tol=1e-13, field=False, coupling="none", periodic_box=None):
+                              box=None, tol=1e-13, field=False, coupling="sphere", periodic_box=None,
+                              beyond_domain="refuse"):
     """Effective conductivity ``k*`` (W/(m K)) of a packing along ``axis``, from one steady solve.
 
     Definition: the box (default: the bounding box of the centres, widened on
@@ -107,14 +110,16 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     to ``axis``: ``k* = Q L / (A (T_hot - T_cold))``. For a simple-cubic
     lattice of spacing ``a`` this is ``K_pair / a`` exactly.
 
-    ``coupling``: ``"none"`` (default) sums each contact's pair law as if its neck were alone on its
-    sphere; ``"sphere"`` couples the necks that share a sphere through its surface Green function
+    ``coupling``: ``"sphere"`` (default) couples the necks that share a sphere through its surface Green function
     (:mod:`sintercond.contacts.sphere_coupling`: same pair law, chains and the simple-cubic cell unchanged, within
     2 % of full-field solves on FCC and BCC cells up to a/r = 0.4 where the isolated network is 2-39 %
-    high; held spheres by mirror images). It refuses (``ValueError``) a packing where two necks of a
-    sphere are closer than their discs' angular half-widths. float64 by default; in float32 (x64 off)
-    the coupled ``k*`` agrees with float64 to about 1e-5 relative (measured 4e-7 to 5e-6 on
-    the FCC and BCC cells), with ``tol`` of 1e-6 or looser.
+    high; held spheres by mirror images); ``"none"`` sums each contact's pair law as if its neck were alone on its
+    sphere (the pipe network of the peers). ``beyond_domain``: where two necks of a sphere are closer than their
+    discs' angular half-widths (outside point coupling), ``"refuse"`` (default) raises ``ValueError`` naming them,
+    ``"isolated"`` keeps that sphere's pair-law halves, as the isolated network
+    (:func:`sintercond.contacts.sphere_coupling.spheres_beyond_domain` finds them). float64 by default; in float32
+    (x64 off) the coupled ``k*`` agrees with float64 to about 1e-5 relative (measured 4e-7 to 5e-6 on the FCC and
+    BCC cells), with ``tol`` of 1e-6 or looser.
 
     ``periodic_box``: ``[3]`` side lengths (m) of a packing periodic across the axis (contacts and neck
     directions by minimum image); its entry along ``axis`` is ignored (the held faces bound the packing
@@ -131,7 +136,7 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     (``jax.scipy.sparse.linalg.cg``, a ``custom_linear_solve``). Returns a
     float for concrete input, a JAX scalar under a transformation.
     """
-    _check_coupling(coupling)
+    _check_coupling(coupling, beyond_domain)
     setup = _conductivity_setup(centres, radii, axis, law, neck_model, box, periodic_box)
     concrete = all_concrete(kappa, params)
     if concrete:
@@ -149,7 +154,7 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     hot = jnp.asarray(setup.hot)
     fixed = jnp.asarray(setup.hot | setup.cold)
     if coupling == "sphere":
-        geometry = _sphere_geometry(setup, contacts.neighbors, contacts.table_neck, axis)
+        geometry = _sphere_geometry(setup, contacts.neighbors, contacts.table_neck, axis, beyond_domain)
         q, temperature = _compiled(_compiled_coupled_solve, physics, tol)(geometry, radii, contacts, kappa,
                                                                            law_params, fixed, hot)
     else:
@@ -212,7 +217,7 @@ def _compiled_coupled_solve(physics, tol):
         conductance = _lift(physics, radii, contacts, kappa, law_params)
         half = half_resistances(law, radii, contacts.neighbors, contacts.table_neck, contacts.table_overlap, kappa,
                                 law_params, conductance)
-        return _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol)
+        return _coupled_heat(geometry, half, radii, kappa, contacts.table_neck, fixed, hot, tol)
 
     return jax.jit(solve)
 
@@ -220,29 +225,31 @@ def _compiled_coupled_solve(physics, tol):
 @functools.cache
 def _compiled_network_coupled_solve(tol):
     """The coupled solve of :func:`steady_state_network_conductivity` (``K_ij`` given), one compiled program."""
-    def solve(geometry, conductance, neighbors, radii, kappa, fixed, hot):
+    def solve(geometry, conductance, neighbors, radii, kappa, neck, fixed, hot):
         # Rojek's halves on a shared neck (Eq. 43, slope kappa_k pi a): the resistance in the proportion 1/kappa_k
         kappa_n = kappa[neighbors]
         half = safe_divide(kappa_n, (kappa[:, None] + kappa_n) * conductance)
         geometry = dataclasses.replace(geometry, coupled=geometry.coupled & (conductance > 0))
-        return _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol)
+        return _coupled_heat(geometry, half, radii, kappa, neck, fixed, hot, tol)
 
     return jax.jit(solve)
 
 
-def _coupled_heat(geometry, half, radii, kappa, fixed, hot, tol):
+def _coupled_heat(geometry, half, radii, kappa, neck, fixed, hot, tol):
     """``(Q, temperature [n])``: the heat leaving the ``hot`` spheres (held at 1, the rest of ``fixed`` at 0)."""
-    blocks = coupled_blocks(geometry, half, radii, kappa)
+    blocks = coupled_blocks(geometry, half, radii, kappa, neck)
     temperature, outflow = coupled_steady_state(geometry, blocks, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
     return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature
 
 
-def _check_coupling(coupling):
+def _check_coupling(coupling, beyond_domain):
     if not isinstance(coupling, str) or coupling not in COUPLINGS:
         raise ValueError(f"coupling must be one of {list(COUPLINGS)}; got {coupling!r}")
+    if not isinstance(beyond_domain, str) or beyond_domain not in BEYOND_DOMAIN:
+        raise ValueError(f"beyond_domain must be one of {list(BEYOND_DOMAIN)}; got {beyond_domain!r}")
 
 
-def _sphere_geometry(setup, neighbors, neck, axis):
+def _sphere_geometry(setup, neighbors, neck, axis, beyond_domain):
     """:func:`sintercond.contacts.sphere_coupling.sphere_geometry` of a steady setup: hot spheres labelled 1, cold 2."""
     pairs = setup.pairs
     id_neighbors, pair_id = ell_table(pairs.n_particles, pairs.i, pairs.j, np.arange(1, len(pairs.i) + 1))
@@ -250,7 +257,7 @@ def _sphere_geometry(setup, neighbors, neck, axis):
         raise AssertionError("the contact table and the pair numbering disagree")
     held = np.where(setup.hot, 1, np.where(setup.cold, 2, 0))
     return sphere_geometry(setup.centres, setup.radii, id_neighbors, pair_id, neck, held=held, axis=axis,
-                           periodic_box=setup.periodic_box)
+                           periodic_box=setup.periodic_box, beyond_domain=beyond_domain)
 
 
 def connected_components(n, i, j) -> np.ndarray:
@@ -285,12 +292,27 @@ def _conductivity_setup(centres, radii, axis, law, neck_model, box, periodic_box
     """Host-side geometry of :func:`steady_state_conductivity`: contacts, necks, faces, ``L`` and ``A``."""
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
-    physics = sim_module.Physics(conduction=sim_module.Conduction(law=law, neck_model=neck_model, conductance="lifted"))
     periodic_box = _across_axis(periodic_box, centres, radii, axis, box)
-    pairs = contact_pairs(centres, radii, periodic_box=periodic_box)
+    physics, pairs, contacts = _packing_contacts(centres, radii, law, neck_model, periodic_box)
     hot, cold, length, area = _hot_and_cold_faces(centres, radii, pairs, axis, box)
-    contacts = sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)
     return _ConductivitySetup(physics, centres, radii, pairs, contacts, hot, cold, length, area, periodic_box)
+
+
+def _packing_contacts(centres, radii, law, neck_model, periodic_box):
+    """``(physics, pairs, contacts)``: the lifted contacts of a packing under ``law``'s neck model (host)."""
+    physics = sim_module.Physics(conduction=sim_module.Conduction(law=law, neck_model=neck_model, conductance="lifted"))
+    pairs = contact_pairs(centres, radii, periodic_box=periodic_box)
+    return physics, pairs, sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)
+
+
+def spheres_beyond_domain(centres, radii, *, law="rojek", neck_model=None) -> np.ndarray:
+    """``[n]`` bool: the particles of a packing two of whose necks' discs overlap (under ``law``'s neck model),
+    which :func:`steady_state_conductivity` with ``coupling="sphere"`` refuses or, with
+    ``beyond_domain="isolated"``, leaves at the pair law's halves
+    (:func:`sintercond.contacts.sphere_coupling.spheres_beyond_domain`)."""
+    centres, radii = np.asarray(centres, np.float64), np.asarray(radii, np.float64)
+    _, _, contacts = _packing_contacts(centres, radii, law, neck_model, None)
+    return sphere_coupling.spheres_beyond_domain(centres, radii, np.asarray(contacts.neighbors), np.asarray(contacts.table_neck))
 
 
 def _across_axis(periodic_box, centres, radii, axis, box):
@@ -340,7 +362,8 @@ def face_layer_box(centres, radii, axis):
 
 
 def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, axis=0, box=None, tol=1e-13, *,
-                                      coupling="none", kappa=None, neck_radii=None, periodic_box=None):
+                                      coupling="sphere", kappa=None, neck_radii=None, periodic_box=None,
+                                      beyond_domain="refuse"):
     """``k*`` (W/(m K)) of a packing whose contacts' conductances are given, from one steady solve.
 
     As :func:`steady_state_conductivity` (same hot and cold sets, ``L`` and
@@ -352,18 +375,20 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
       pairs: :class:`sintercond.contacts.network.ContactPairs` of the packing.
       pair_conductance: ``[n_pairs]`` ``K_ij`` (W/K) in the order of ``pairs`` (differentiable).
       axis, box, tol: as :func:`steady_state_conductivity`.
-      coupling: ``"none"`` or ``"sphere"``, as :func:`steady_state_conductivity`. With ``"sphere"``, each
+      coupling: ``"sphere"`` (default) or ``"none"``, as :func:`steady_state_conductivity`. With ``"sphere"``, each
         ``1/K_ij`` is split between the two spheres as the halves of Rojek et al. (2022), Eq. 43 are
         (``slope kappa_k pi a`` on a shared neck: in the proportion ``1/kappa_k``; equal halves for one
         material), and a contact with ``K_ij = 0`` carries no neck.
       kappa: conductivity (W/(m K)), scalar or ``[n]`` (differentiable); needed by ``"sphere"`` (the Green
         function's scale).
-      neck_radii: ``[n_pairs]`` neck radii ``a`` (m) for the domain check of ``"sphere"``; default the
-        volume-conserving neck of each pair's overlap.
+      neck_radii: ``[n_pairs]`` neck radii ``a`` (m) for the domain of ``"sphere"``; default the
+        volume-conserving neck of each pair's overlap. They may be traced (necks grown inside a jitted or
+        differentiated function) with ``beyond_domain="isolated"``: the domain is then decided in the solve.
       periodic_box: ``[3]`` periods for minimum-image neck directions (``pairs`` found with the same box), as
         :func:`steady_state_conductivity`.
+      beyond_domain: ``"refuse"`` or ``"isolated"``, as :func:`steady_state_conductivity`.
     """
-    _check_coupling(coupling)
+    _check_coupling(coupling, beyond_domain)
     centres = np.asarray(centres, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
     pair_conductance = jnp.asarray(pair_conductance)
@@ -377,21 +402,30 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
     hot_mask = jnp.asarray(hot)
     if coupling == "sphere":
         if kappa is None:
-            raise ValueError("coupling='sphere' needs kappa (W/(m K)): the surface Green function scales as 1/kappa")
+            raise ValueError("coupling='sphere' (the default) needs kappa (W/(m K)): the surface Green function "
+                             "scales as 1/kappa; pass kappa=, or coupling='none' for the isolated pipe network")
         if all_concrete(kappa):
             require_positive("kappa (W/(m K))", np.asarray(kappa, np.float64))
         kappa = jnp.broadcast_to(jnp.asarray(kappa, pair_conductance.dtype), radii.shape)
         if neck_radii is None:
-            a = np.where(pairs.overlap > 0, np.asarray(neck_radius(pairs.r_i, pairs.r_j, pairs.overlap)), 0.0)
-        else:
-            a = np.asarray(neck_radii, np.float64)
-        neck = np.concatenate([[0.0], a])[slot]
+            neck_radii = np.where(pairs.overlap > 0, np.asarray(neck_radius(pairs.r_i, pairs.r_j, pairs.overlap)),
+                                  0.0)
+        if all_concrete(neck_radii):
+            host_neck = np.asarray(neck_radii, np.float64)
+        elif beyond_domain == "refuse":
+            raise ValueError("neck_radii are traced (under jit, vmap or grad): the domain of point coupling cannot "
+                             "be checked on the host; pass beyond_domain='isolated' (a sphere whose necks' discs "
+                             "overlap keeps the pair law's halves) or coupling='none'")
+        else:  # every pair may carry a neck; which do is decided from the traced necks in the solve
+            host_neck = np.ones(len(pairs.i))
         held = np.where(hot, 1, np.where(cold, 2, 0))
         box_periods = _across_axis(periodic_box, centres, radii, axis, box)
-        geometry = sphere_geometry(centres, radii, neighbors, slot, neck, held=held, axis=axis,
-                                   periodic_box=box_periods)
+        geometry = sphere_geometry(centres, radii, neighbors, slot, np.concatenate([[0.0], host_neck])[slot],
+                                   held=held, axis=axis, periodic_box=box_periods, beyond_domain=beyond_domain)
+        neck = jnp.concatenate([jnp.zeros((1,), pair_conductance.dtype),
+                                jnp.asarray(neck_radii, pair_conductance.dtype)])[slot]
         q, _ = _compiled_network_coupled_solve(tol)(geometry, conductance, jnp.asarray(neighbors), jnp.asarray(radii),
-                                                    kappa, jnp.asarray(hot | cold), hot_mask)
+                                                    kappa, neck, jnp.asarray(hot | cold), hot_mask)
         return q * length / area
     q, _ = _compiled_network_solve(tol)(jnp.asarray(neighbors, dtype=jnp.int32), conductance, jnp.asarray(hot | cold),
                                         hot_mask)

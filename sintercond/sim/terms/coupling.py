@@ -89,7 +89,7 @@ def neck_blocks(physics: Physics, state: SimState, params: Params) -> NeckNetwor
                             contacts.table_overlap, kappa, law_params, conductance)
     halves = half.reshape(-1)[geometry.neck_slots]
     split = safe_divide(halves[:, 0], halves[:, 0] + halves[:, 1], fill=0.5)
-    blocks = coupled_blocks(geometry, half, p.radii, kappa)
+    blocks = coupled_blocks(geometry, half, p.radii, kappa, contacts.table_neck)
     diagonal = jnp.sum(at_necks(geometry, slot_diagonal(blocks)), axis=1)
     return NeckNetwork(geometry, blocks, split, geometry.neck_slots // geometry.coupled.shape[1],
                        safe_divide(1.0, jnp.where(geometry.neck_fixed, 1.0, diagonal), fill=1.0))
