@@ -207,6 +207,44 @@ def test_heat_is_conserved_on_an_insulated_cluster_with_a_pulse(cluster):
     assert np.max(np.abs(ends["sphere"] - ends["none"])) > 1e-3
 
 
+@pytest.mark.slow
+def test_property_tables_with_coupled_necks(cluster):
+    """material tables with the coupled necks (the blocks follow kappa(T) at every step): a chain with a
+    conductivity and a specific-heat table is the isolated chain with the same tables to round-off (the coupling is
+    exact there); on a random cluster, tables flat at the constant values give the constant-property run to
+    round-off, and a conductivity table that varies keeps sum_i C_i T_i of the insulated cluster to round-off while
+    moving the field away from the constant run."""
+    from sintercond.laws import materials
+
+    kappa = materials.tabulated([300.0, 400.0, 600.0], [1.0, 1.6, 2.5])
+    heat = materials.tabulated([300.0, 600.0], [1.0, 1.3])
+    tables = Params(kappa, heat)
+    centres, radii = chain([1.0, 0.8, 1.2, 1.0, 0.9, 1.1], 0.08)
+    temperature = np.array([500.0, 300, 420, 310, 330, 590])
+    ends = {}
+    for coupling in ("none", "sphere"):
+        sim, state, limit = start(coupling, centres, radii, temperature, params=tables, conductivity_table=True,
+                                  specific_heat_table=True)
+        ends[coupling] = (limit, np.asarray(run(sim, state, 300, tables).particles.temperature))
+    assert ends["sphere"][0] == pytest.approx(ends["none"][0], rel=1e-13)
+    np.testing.assert_allclose(ends["sphere"][1], ends["none"][1], rtol=1e-13)
+    assert np.ptp(ends["none"][1]) < 0.5 * np.ptp(temperature)
+
+    centres, radii, temperature = cluster
+    flat = Params(materials.tabulated([200.0, 700.0], [1.0, 1.0]), materials.tabulated([200.0, 700.0], [1.0, 1.0]))
+    runs = {}
+    for name, params, kw in (("constant", PARAMS, {}),
+                             ("flat", flat, {"conductivity_table": True, "specific_heat_table": True}),
+                             ("varying", Params(kappa, PARAMS.specific_heat), {"conductivity_table": True})):
+        sim, state, _ = start("sphere", centres, radii, temperature, params=params, dt=0.01, **kw)
+        end = run(sim, state, 200, params)
+        runs[name] = np.asarray(end.particles.temperature)
+        capacity = np.asarray(end.particles.mass)
+    np.testing.assert_allclose(runs["flat"], runs["constant"], rtol=1e-12)
+    assert np.sum(capacity * runs["varying"]) == pytest.approx(np.sum(capacity * temperature), rel=1e-13)
+    assert np.max(np.abs(runs["varying"] - runs["constant"])) > 1e-2
+
+
 def dense_neck_solve(blocks, geometry, temperature):
     """``(necks, slot outflows [n, m])``: the neck temperatures balancing ``temperature``, by a dense solve
     assembled here from the packed blocks C_s, and each sphere's outflow through each table slot at them."""

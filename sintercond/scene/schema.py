@@ -146,12 +146,14 @@ _SCHEMA = {
                           doc="neck (contact) radius the law takes"),
         "params": Key(dict, None, False, default="the law's", doc="the law's parameters, see [conduction.params]"),
         "coupling": Key(str, _choice("none", "sphere"), False, default="none",
-                        doc="none: each neck's pair law as if it were alone on its sphere; sphere: the necks that "
+                        doc="the network the transient steps with (k* is measured on sintering.k_star_coupling's): "
+                            "none, each neck's pair law as if it were alone on its sphere; sphere, the necks that "
                             "share a sphere coupled through its surface (sintercond.contacts.sphere_coupling; the "
                             "run's conductances are lifted; static packings, necks that stay or grow independently "
-                            "(not sintering.shrinkage = \"many_body\"), no conducting walls, property tables or "
-                            "physics.mechanics, held walls on one axis; necks at the kinetic law's cap must stay in "
-                            "the point-coupling domain)"),
+                            "(not sintering.shrinkage = \"many_body\"), property tables, no conducting walls or "
+                            "physics.mechanics, held walls on one axis, the explicit integrator; a packing whose "
+                            "necks' discs overlap is refused, and a sphere whose growing necks' discs come to "
+                            "overlap keeps its pair laws' halves)"),
     },
     "initial": {"temperature": Key(float, TEMPERATURE, True, "K",
                                    doc="initial temperature of every particle (with from_file: of held particles "

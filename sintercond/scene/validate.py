@@ -383,15 +383,12 @@ def _check_property_table(material, key, symbol, low, high):
 
 def _check_coupling(scene):
     """``conduction.coupling = "sphere"``: only what the coupled transient supports (static packing, necks that
-    stay or grow independently, no conducting walls or property tables, held walls on one axis: their spheres'
-    mirror plane)."""
+    stay or grow independently, no conducting walls, held walls on one axis: their spheres' mirror plane)."""
     if scene["conduction"].get("coupling", "none") != "sphere":
         return
     walls = scene.get("walls", [])
     refused = {"physics.mechanics = true": scene["physics"].get("mechanics", False),
                "sintering.shrinkage = \"many_body\"": scene.get("sintering", {}).get("shrinkage") == "many_body",
-               "material.conductivity_table": "conductivity_table" in scene["material"],
-               "material.specific_heat_table": "specific_heat_table" in scene["material"],
                "a conducting wall": any(w["mode"] == "conducting" for w in walls),
                "run.integrator = \"implicit\" (the coupled necks are stepped explicitly)":
                    scene["run"].get("integrator") == "implicit"}

@@ -119,9 +119,7 @@ class Conduction:
             raise ValueError("Conduction.held_ramp ramps the held particles' temperatures: it needs held=True")
         if self.coupling == "sphere":
             needs = {"conductance": ("lifted", self.conductance), "integrator": ("explicit", self.integrator),
-                     "conducting_walls": (0, self.conducting_walls),
-                     "conductivity_table": (False, self.conductivity_table),
-                     "specific_heat_table": (False, self.specific_heat_table)}
+                     "conducting_walls": (0, self.conducting_walls)}
             for name, (want, got) in needs.items():
                 if got != want:
                     raise ValueError(f"Conduction.coupling='sphere' needs Conduction.{name}={want!r} (the coupled "

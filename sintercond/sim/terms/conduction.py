@@ -74,7 +74,7 @@ def prepare(physics: Physics, state: SimState, params: Params) -> Prepared:
         # computed once per rollout: reverse mode then accumulates their cotangents per particle
         rates = thermal.conduction_rates(scale, capacity)
     blocks = None
-    if coupling.on(physics) and physics.sintering is None:
+    if coupling.on(physics) and not coupling.blocks_change(physics):
         blocks = coupling.neck_blocks(physics, state, params)
     return Prepared(params, capacity, conductance, scale, wall_k, wall_t, rates, blocks)
 

@@ -7,7 +7,7 @@ temperatures ``x`` balance the sphere temperatures ``T``: ``A_nn x = -A_ns T`` (
 
 Why no per-sphere elimination: every neck belongs to two spheres, so ``A_nn`` couples the necks of neighbouring
 spheres and its inverse is dense over a connected packing; only the blocks ``C_s`` are per sphere (computed once
-per rollout in :func:`neck_blocks`, or at every step while necks grow).
+per rollout in :func:`neck_blocks`, or at every step while necks grow or the conductivities follow a table).
 
 The step. The neck temperatures are written ``x = x_iso(T) + d``: ``x_iso`` the isolated network's (each neck
 between its two spheres in the proportion of its halves' resistances, :func:`isolated_necks`), ``d`` the
@@ -95,9 +95,15 @@ def neck_blocks(physics: Physics, state: SimState, params: Params) -> NeckNetwor
                        safe_divide(1.0, jnp.where(geometry.neck_fixed, 1.0, diagonal), fill=1.0))
 
 
+def blocks_change(physics: Physics) -> bool:
+    """Whether the blocks change during a rollout: necks that grow, or conductivities at the temperatures now."""
+    return physics.sintering is not None or physics.conduction.conductivity_table
+
+
 def current_blocks(physics: Physics, state: SimState, prep):
-    """:func:`neck_blocks` at this step: the rollout's, or with growing necks the state's now."""
-    return neck_blocks(physics, state, prep.params) if physics.sintering is not None else prep.neck_blocks
+    """:func:`neck_blocks` at this step: the rollout's, or with growing necks or a conductivity table the
+    state's now."""
+    return neck_blocks(physics, state, prep.params) if blocks_change(physics) else prep.neck_blocks
 
 
 def isolated_necks(network: NeckNetwork, temperature):
