@@ -33,10 +33,15 @@ from sintercond.contacts import sphere_coupling
 from sintercond.contacts.sphere_coupling import (
     BEYOND_DOMAIN,
     SphereGeometry,
-    coupled_apply,
+    at_necks,
+    block_total,
     coupled_blocks,
-    coupled_diagonal,
     half_resistances,
+    neck_flows,
+    neck_system,
+    row_sums,
+    slot_diagonal,
+    slot_flows,
     sphere_geometry,
 )
 
@@ -62,8 +67,13 @@ def steady_state(table: ContactTable, fixed_mask, fixed_temperature, tol=1e-13):
 def coupled_steady_state(geometry: SphereGeometry, conductance, fixed_mask, fixed_temperature, tol=1e-13):
     """Steady state of the coupled neck network (:mod:`sintercond.contacts.sphere_coupling`) with held spheres.
 
-    The unknowns are the free spheres' and the necks' temperatures (a neck in no sphere's block is left
-    at 0); conjugate gradients with a Jacobi preconditioner, differentiated implicitly.
+    In float64 the free spheres are eliminated exactly (each touches only its necks:
+    :func:`sintercond.contacts.sphere_coupling.neck_system`) and the necks' temperatures solved alone: 2.7-3.5x
+    faster than the joint system of spheres and necks on rolled beds of 1e4-1e5 spheres (the iterations of the
+    isolated network's solve). In float32 the elimination's rank-one difference loses digits (k* up to 8e-4 off on
+    an FCC block at a/r = 0.4, against 5e-6 for the joint system), so float32 solves the joint system
+    (:func:`sintercond.contacts.sphere_coupling.slot_flows`). Jacobi-preconditioned conjugate gradients,
+    differentiated implicitly; a neck in no sphere's block is left at 0.
 
     Args:
       geometry: :func:`sintercond.contacts.sphere_coupling.sphere_geometry`.
@@ -76,17 +86,41 @@ def coupled_steady_state(geometry: SphereGeometry, conductance, fixed_mask, fixe
       its necks (W; 0 on free spheres at convergence).
     """
     fixed_mask = jnp.asarray(fixed_mask)
+    dtype = conductance[0].dtype
+    held = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, dtype), 0.0)
+    if dtype != jnp.float64:
+        return _joint_steady_state(geometry, conductance, fixed_mask, held, tol)
+    system = neck_system(geometry, conductance, ~fixed_mask)
+
+    def into_necks(neck_x, held_x=None):  # the net heat into each neck from its two spheres (W)
+        q, sphere_x = neck_flows(geometry, conductance, system, neck_x, held_x)
+        return jnp.sum(at_necks(geometry, q), axis=1), q, sphere_x
+
+    unknown = geometry.neck_fixed.shape[0]
+    inflow = into_necks(jnp.zeros(unknown, dtype), held)[0]  # from the held spheres, the necks at 0
+    inverse_diagonal = safe_divide(1.0, system.diagonal, fill=1.0)
+    necks = held_solve(lambda x: -into_necks(x)[0], geometry.neck_fixed, jnp.zeros(unknown, dtype), inflow, tol,
+                       preconditioner=lambda r: inverse_diagonal * r)
+    _, q, temperature = into_necks(necks, held)
+    return temperature, row_sums(geometry, q)
+
+
+def _joint_steady_state(geometry, conductance, fixed_mask, held, tol):
+    """:func:`coupled_steady_state` on the joint system of sphere and neck temperatures, ``A = sum_s B_s^T C_s B_s``
+    with ``B_s x = x_s 1 - x_N(s)`` (its diagonal: ``1^T C_s 1`` on the spheres, the blocks' diagonals summed on
+    the necks): the float32 path."""
     n = fixed_mask.shape[0]
     fixed = jnp.concatenate([fixed_mask, geometry.neck_fixed])
-    spheres = jnp.where(fixed_mask, jnp.asarray(fixed_temperature, conductance[0].dtype), 0.0)
-    held = jnp.concatenate([spheres, jnp.zeros(fixed.shape[0] - n, conductance[0].dtype)])
 
     def apply(x):
-        return jnp.concatenate(coupled_apply(geometry, conductance, x[:n], x[n:]))
+        q = slot_flows(geometry, conductance, x[:n], x[n:])
+        return jnp.concatenate([row_sums(geometry, q), -jnp.sum(at_necks(geometry, q), axis=1)])
 
-    diagonal = jnp.concatenate(coupled_diagonal(geometry, conductance))
+    diagonal = jnp.concatenate([block_total(geometry, conductance),
+                                jnp.sum(at_necks(geometry, slot_diagonal(conductance)), axis=1)])
     inverse_diagonal = safe_divide(1.0, diagonal, fill=1.0)
-    x = held_solve(apply, fixed, held, jnp.zeros_like(held), tol, preconditioner=lambda r: inverse_diagonal * r)
+    start = jnp.concatenate([held, jnp.zeros(fixed.shape[0] - n, held.dtype)])
+    x = held_solve(apply, fixed, start, jnp.zeros_like(start), tol, preconditioner=lambda r: inverse_diagonal * r)
     return x[:n], apply(x)[:n]
 
 
