@@ -7,7 +7,7 @@ network, alternating the networks so that the machine's drift falls on both:
 
 - ``sintercond run ti6al4v_preheating_bed``: the built-in 398-particle bed on its 9.5 s preheat (integrator auto),
   a k* row at every output, with ``sintering.k_star_coupling = "sphere"`` and ``"none"``;
-- ``sintercond effective`` of a rolled bed of about 10,000 particles (2.5 mm wide, 0.6 mm high, 45-105 um, the
+- ``sintercond effective`` of a rolled bed of about 14,000 particles (2.5 mm wide, 0.6 mm high, 45-105 um, the
   preheating bed's powder) with ``--coupling sphere`` and ``none``.
 
 Reports the whole process's wall time (min / max over the repeats), the k* each network gives (the run: its last

@@ -226,9 +226,9 @@ def _effective(args) -> int:
     box = effective_box(scene, bed, centres, radii, args.axis)
     c = scene["conduction"]
     kappa = scene["material"]["conductivity"]
-    k_star, temperature = steady.steady_state_conductivity(
+    k_star, temperature, outside = steady.steady_state_conductivity(
         centres, radii, kappa, axis=args.axis, law=c["law"], params=c.get("params"), neck_model=c.get("neck_model"),
-        box=box, field=True, coupling=args.coupling, beyond_domain="isolated")
+        box=box, field=True, coupling=args.coupling, beyond_domain="isolated", domain=True)
     if box is None:
         where = "the lattice cell"
     elif bed is not None:
@@ -244,8 +244,7 @@ def _effective(args) -> int:
           "dT apart, Q the steady heat flow, L the distance of the mean centre planes of the two held sets, "
           "A the box cross-section")
     if args.coupling == "sphere":
-        beyond = int(np.count_nonzero(steady.spheres_beyond_domain(centres, radii, law=c["law"],
-                                                                   neck_model=c.get("neck_model"))))
+        beyond = int(np.count_nonzero(np.asarray(outside)))
         print("network: necks that share a sphere coupled through its surface (--coupling none: the isolated pipe "
               "network)" + (f"; {beyond} particles have two necks closer than their discs' half-widths: they keep "
                             "the pair law's halves (isolated necks)" if beyond else ""))

@@ -118,7 +118,8 @@ class ConductivityEstimate:
 
     Attributes:
       k_steady: :func:`sintercond.sim.steady.steady_state_conductivity` (spheres
-        touching ``x = 0`` held hot, ``x = L`` cold, no wall resistance; ``A = L H``).
+        touching ``x = 0`` held hot, ``x = L`` cold, no wall resistance; ``A = L H``) on the isolated network, the
+        run's (its contacts move, which the coupled network does not follow yet).
       k_wall: the hot wall's power at the end of the run ``P L / (A (T_hot - T_cold))``
         (the wall contacts' resistance included; the steady flux once the run is long enough).
       k_paper: the paper's ``dQ / (grad T A dt)`` with ``dQ = sum m_i C dtheta_i`` the
@@ -208,7 +209,9 @@ def heat_run(centres, radii, lateral_size, height, duration=EXAMPLE_5_3["duratio
     temperature = np.asarray(final.particles.temperature)
     stored = float(np.sum(capacity * (temperature - d["initial_temperature"])))
     k_steady = steady.steady_state_conductivity(centres, radii, d["conductivity"], axis=0, law="conductivity",
-                                                 neck_model="hertz", box=(np.zeros(3), np.array([L, L, height])))
+                                                 neck_model="hertz", box=(np.zeros(3), np.array([L, L, height])),
+                                                 coupling="none")  # the run's network: its moving contacts step
+    # on the isolated one, so the three readings compare one network
     p_hot, p_cold = saved[-1]
     estimate = ConductivityEstimate(
         k_steady=float(k_steady), k_wall=float(p_hot * L / (area * dT)),

@@ -148,10 +148,10 @@ def test_lattice_conductivity_is_the_closed_form_of_the_lattice():
     # the coupled network (the default): the SC chain unchanged, the BCC cell's 8 and 14 necks a sphere below the
     # isolated sum (the cubic symmetry keeps the three axes equal)
     coupled = float(fs.lattice_conductivity(*geometry.bcc_cell(80 * UM), necks, kappa))
-    assert 0.8 * bcc_value < coupled < 0.95 * bcc_value
+    assert 0.82 * bcc_value < coupled < 0.9 * bcc_value  # measured 0.84-0.88 along the ramp
     for axis in (1, 2):
         assert float(fs.lattice_conductivity(*geometry.bcc_cell(80 * UM), necks, kappa, axis=axis)) == \
-            pytest.approx(coupled, rel=1e-9)
+            pytest.approx(coupled, rel=1e-11)
 
 
 @pytest.mark.slow

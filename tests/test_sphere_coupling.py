@@ -304,8 +304,9 @@ def test_necks_too_close_are_refused():
 def test_necks_beyond_the_domain_keep_the_isolated_halves():
     """beyond_domain="isolated": the FCC block at a/r = 0.55 (every sphere's discs overlap) is the isolated network
     to round-off; a block with one sphere's necks grown past the domain keeps that sphere's halves only: the host
-    check (spheres_beyond_domain) and the solve's mask (kept_green) name the same sphere, and k* lies between the
-    isolated network's and the in-domain coupled one's."""
+    check (the angles of every two necks of a sphere, computed here) and the solve's masks (outside_domain,
+    kept_green) name the same sphere, and k* lies between the isolated network's and the in-domain coupled one's
+    (the necks' conductances are left at a/r = 0.22: only the domain moves)."""
     from sintercond.contacts import sphere_coupling
     from sintercond.contacts.network import ell_table
 
@@ -322,18 +323,31 @@ def test_necks_beyond_the_domain_keep_the_isolated_halves():
     middle = int(np.argmin(np.linalg.norm(centres - centres.mean(axis=0), axis=1)))
     grown = np.where((pairs.i == middle) | (pairs.j == middle), 0.6 * radii[pairs.i], a)  # 60 deg apart: overlap
     neighbors, neck = ell_table(len(radii), pairs.i, pairs.j, grown)
-    beyond = sphere_coupling.spheres_beyond_domain(centres, radii, neighbors, neck, periods)
-    assert np.flatnonzero(beyond).tolist() == [middle]
 
     def k(coupling, neck_radii):
-        return float(steady_state_network_conductivity(centres, radii, pairs, k_pairs, box=kw["box"],
-                                                       periodic_box=periods, coupling=coupling, kappa=1.0,
-                                                       neck_radii=neck_radii, beyond_domain="isolated"))
+        return steady_state_network_conductivity(centres, radii, pairs, k_pairs, box=kw["box"], periodic_box=periods,
+                                                 coupling=coupling, kappa=1.0, neck_radii=neck_radii,
+                                                 beyond_domain="isolated", domain=True)
+
+    (k_in, outside_in), (k_grown, outside), (k_none, outside_none) = k("sphere", a), k("sphere", grown), k("none", grown)
+    beyond = np.asarray(outside)
+    expected = []
+    for s in range(len(radii)):  # two necks of a sphere closer than arcsin(a_i/r) + arcsin(a_j/r)
+        mine = np.flatnonzero((pairs.i == s) | (pairs.j == s))
+        d = centres[np.where(pairs.i[mine] == s, pairs.j[mine], pairs.i[mine])] - centres[s]
+        d -= periods * np.round(d / periods)
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        half = np.arcsin(grown[mine] / radii[s])
+        close = np.arccos(np.clip(d @ d.T, -1, 1)) < half[:, None] + half[None, :] - 1e-9
+        if np.any(close & ~np.eye(len(mine), dtype=bool)):
+            expected.append(s)
+    assert expected == [middle] and np.flatnonzero(beyond).tolist() == expected
+    assert not np.asarray(outside_in).any() and not outside_none.any()
 
     with pytest.raises(ValueError, match=r"on particle \d+ the necks of contacts"):
         steady_state_network_conductivity(centres, radii, pairs, k_pairs, box=kw["box"], periodic_box=periods,
                                           kappa=1.0, neck_radii=grown)
-    assert k("sphere", a) < k("sphere", grown) < k("none", grown)
+    assert float(k_in) < float(k_grown) < float(k_none)
     geometry = sphere_coupling.sphere_geometry(centres, radii, neighbors, ell_table(
         len(radii), pairs.i, pairs.j, np.arange(1, len(pairs.i) + 1))[1], neck, periodic_box=periods,
         beyond_domain="isolated")

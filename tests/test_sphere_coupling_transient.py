@@ -569,7 +569,7 @@ def sintering_chain(coupling, rebuild_at_cap=True):
     contacts = simulate.lifted_contacts(spec, x, radii)
     if coupling == "sphere" and rebuild_at_cap:
         cap = neck_growth.necks_at_cap(spec.sintering, params.sintering, contacts, radii)
-        contacts = simulate.coupled_contacts(contacts, x, radii, np.asarray(cap.neck))
+        contacts = simulate.coupled_contacts(contacts, x, radii, np.asarray(cap.neck), beyond_domain="isolated")
     state = simulate.init_state(particles, contacts, 2e-4,  # half the limit on the necks at the cap
                                 sintering=neck_growth.neck_state(contacts, particles.temperature))
     return simulate.simulator(spec), state, params
@@ -594,8 +594,9 @@ def test_growing_necks_of_a_chain_are_the_isolated_ones():
 @pytest.mark.slow
 def test_growing_necks_need_the_geometry_at_the_cap():
     """Built on the necks now (point contacts: none coupled) the run is refused before it compiles. An FCC block
-    whose necks at the kinetic law's cap overlap is accepted: the domain is taken at each step's necks (inside it
-    now, outside it at the cap), where a static packing's overlapping discs are refused."""
+    whose necks at the kinetic law's cap overlap is refused by default and accepted with beyond_domain="isolated"
+    (what the scene build passes for sintering): the domain is then taken at each step's necks (inside it now,
+    outside it at the cap)."""
     sim, state, params = sintering_chain("sphere", rebuild_at_cap=False)
     with pytest.raises(ValueError, match=r"contact \(0, 1\) is not in the coupled geometry.*necks_at_cap"):
         rollout(sim, state, params, 2)
@@ -604,13 +605,13 @@ def test_growing_necks_need_the_geometry_at_the_cap():
                           sintering=neck_growth.Sintering("grain_boundary"))
     contacts = simulate.lifted_contacts(spec, centres, radii)
     cap = neck_growth.necks_at_cap(spec.sintering, dict(KINETICS), contacts, radii)
-    contacts = simulate.coupled_contacts(contacts, centres, radii, np.asarray(cap.neck))
+    with pytest.raises(ValueError, match=r"closer than their discs' angular half-widths"):
+        simulate.coupled_contacts(contacts, centres, radii, np.asarray(cap.neck))
+    contacts = simulate.coupled_contacts(contacts, centres, radii, np.asarray(cap.neck), beyond_domain="isolated")
     outside = outside_domain(contacts.sphere, contacts.table_neck, jnp.asarray(radii))
     assert not np.asarray(outside).any()
     outside = outside_domain(contacts.sphere, cap.table_neck, jnp.asarray(radii))
     assert np.asarray(outside).all()
-    with pytest.raises(ValueError, match=r"closer than their discs' angular half-widths"):
-        simulate.coupled_contacts(contacts, centres, radii, np.asarray(cap.neck), beyond_domain="refuse")
 
 
 @pytest.mark.slow

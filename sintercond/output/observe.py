@@ -13,7 +13,7 @@ import numpy as np
 
 from sintercond import simulate
 from sintercond.beds import packing
-from sintercond.contacts import network, sphere_coupling
+from sintercond.contacts import network
 from sintercond.laws import forces, walls
 from sintercond.sim import mechanics, neck_growth, steady
 from sintercond.sim.terms import mechanics as mechanics_term
@@ -81,25 +81,20 @@ def sintered_conductivity(model, state) -> float:
 
 
 def conductivity_and_uncoupled(model, state) -> tuple[float, int]:
-    """``(k*, uncoupled)``: :func:`sintered_conductivity`, and how many particles have two necks whose discs overlap
-    (outside point coupling, :func:`sintercond.contacts.sphere_coupling.spheres_beyond_domain`), whose pair laws'
+    """``(k*, uncoupled)``: :func:`sintered_conductivity`, and how many particles have two coupled necks whose discs
+    overlap (outside point coupling, :func:`sintercond.contacts.sphere_coupling.outside_domain`), whose pair laws'
     halves the coupled ``k*`` keeps; ``uncoupled`` is 0 with ``k_star_coupling = "none"``."""
     network_now = _conducting_network(model, state)
     if network_now is None:
         return 0.0, 0
     centres, pairs, pair_k, neck, kappa = network_now
-    uncoupled = 0
-    if model.k_star_coupling == "sphere":
-        neighbors, neck_table = network.ell_table(len(model.radii), pairs.i, pairs.j, neck)
-        uncoupled = int(np.count_nonzero(sphere_coupling.spheres_beyond_domain(centres, model.radii, neighbors,
-                                                                               neck_table)))
     try:
-        k_star = float(steady.steady_state_network_conductivity(
+        k_star, outside = steady.steady_state_network_conductivity(
             centres, model.radii, pairs, pair_k, axis=model.k_star_axis, box=k_star_box(model, centres),
-            coupling=model.k_star_coupling, kappa=kappa, neck_radii=neck, beyond_domain="isolated"))
+            coupling=model.k_star_coupling, kappa=kappa, neck_radii=neck, beyond_domain="isolated", domain=True)
     except steady.NoFaceLayer:  # the moving packing left a face of its box (a bed bouncing off its floor)
-        k_star = float("nan")
-    return k_star, uncoupled
+        return float("nan"), 0
+    return float(k_star), int(np.count_nonzero(np.asarray(outside)))
 
 
 _sintered_pair_network = jax.jit(simulate.sintered_pair_network, static_argnums=0)
@@ -107,11 +102,14 @@ _particle_conductivity = jax.jit(simulate.particle_conductivity, static_argnums=
 
 
 def _conducting_network(model, state):
-    """``(centres [n, 3], pairs, K [c], neck [c], kappa [n])`` of the contacts that conduct in ``state`` (host), or
+    """``(centres [n, 3], pairs, K [c], neck [c], kappa [n] or None)`` of the contacts that conduct in ``state`` (host;
+    ``kappa`` with ``k_star_coupling = "sphere"``), or
     None while none does: the half pair list where the packing has moved to with the mechanics, else the static
     table's pairs on their grown necks."""
     radii = model.radii
-    kappa = np.asarray(_particle_conductivity(model.physics, model.params, state.particles), np.float64)
+    kappa = None
+    if model.k_star_coupling == "sphere":  # the coupled network's Green function scales as 1/kappa
+        kappa = np.asarray(_particle_conductivity(model.physics, model.params, state.particles), np.float64)
     if state.mechanics is not None:
         geometry, neck, pair_k = _sintered_pair_network(model.physics, state, model.params)
         keep = np.asarray(geometry.touching) & (np.asarray(pair_k) > 0)

@@ -480,7 +480,7 @@ def _static_model(scene, physics, planes, particles, params, conducting, log) ->
         limiting = neck_growth.necks_at_cap(physics.sintering, params.sintering, contacts, particles.radii)
         if physics.conduction.coupling == "sphere":  # every contact that can grow a neck; the domain at each step
             contacts = simulate.coupled_contacts(contacts, centres, radii, np.asarray(limiting.neck), held=held,
-                                                 held_axis=held_axis or 0)
+                                                 held_axis=held_axis or 0, beyond_domain="isolated")
             limiting = dataclasses.replace(limiting, sphere=contacts.sphere)
     return _Built(physics, simulate.simulator(physics), contacts, None, necks,
                   simulate.init_state(particles, limiting, 1.0, sintering=necks), len(pairs.i), {})

@@ -310,9 +310,9 @@ _SCHEMA = {
                                doc="the network k_star_W_mK is measured on, whatever conduction.coupling the run "
                                    "steps with: sphere, the necks that share a sphere coupled through its surface "
                                    "(sintercond.contacts.sphere_coupling; within 2 % of full-field solves where the "
-                                   "isolated network reads 12-18 % high on FCC and BCC cells), a particle whose necks' "
-                                   "discs overlap at its pair laws' halves; none, each neck's pair law alone on its "
-                                   "sphere (the isolated pipe network, as before 2026-12-08)"),
+                                   "isolated network reads 2-14 % high on BCC and 11-39 % on FCC cells at a/r "
+                                   "0.16-0.4), a particle whose necks' discs overlap at its pair laws' halves; none, "
+                                   "each neck's pair law alone on its sphere (the isolated pipe network)"),
     },
     "preheating": {
         "end_temperature": Key(float, TEMPERATURE, True, "K", doc="the temperature the held particles reach"),

@@ -231,7 +231,7 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
                               neck=jnp.asarray(a), overlap=jnp.asarray(np.asarray(p.overlap, np.float64)))
     if physics.conduction.coupling == "sphere":
         contacts = coupled_contacts(contacts, centres, radii, a, held=held, held_axis=held_axis,
-                                    periodic_box=periodic_box, beyond_domain="refuse")
+                                    periodic_box=periodic_box)
     if walls:
         h = np.stack([np.maximum(np.asarray(p, np.float64), 0.0) for p, _ in walls])
         a = np.asarray(wall_neck_radius(physics.neck, radii, h))
@@ -241,17 +241,17 @@ def lifted_contacts(physics: Physics, centres, radii, walls=(), periodic_box=Non
 
 
 def coupled_contacts(contacts: LiftedContacts, centres, radii, necks, *, held=None, held_axis=0,
-                     periodic_box=None, beyond_domain="isolated") -> LiftedContacts:
+                     periodic_box=None, beyond_domain="refuse") -> LiftedContacts:
     """``contacts`` with the necks' directions on their spheres for ``Conduction.coupling="sphere"`` (host, once).
 
     :func:`sintercond.contacts.sphere_coupling.sphere_geometry` (with the transient's net-flow term, Eq. 5) on the
     necks ``necks`` ``[c]`` (m): the contacts with a neck there are the ones coupled. For necks that stay, the
-    contacts' own (:func:`lifted_contacts` does this, and refuses, ``ValueError``, two necks of a sphere closer
-    than their discs' half-widths); with ``Physics.sintering``, the largest necks the run can reach
-    (:func:`sintercond.sim.neck_growth.necks_at_cap`), so that a neck that grows from zero is coupled once it
-    conducts; the domain is then taken at each step's necks (a sphere whose necks' discs have come to overlap
-    keeps the pair law's halves, :func:`sintercond.contacts.sphere_coupling.kept_green`). ``held``,
-    ``held_axis``: as :func:`lifted_contacts`.
+    contacts' own (:func:`lifted_contacts` does this); ``beyond_domain="refuse"`` (default) raises ``ValueError`` on
+    two necks of a sphere closer than their discs' half-widths there. With ``Physics.sintering``, the largest
+    necks the run can reach (:func:`sintercond.sim.neck_growth.necks_at_cap`) with ``beyond_domain="isolated"``,
+    so that a neck that grows from zero is coupled once it conducts; the domain is then taken at each step's necks
+    (a sphere whose necks' discs have come to overlap keeps the pair law's halves,
+    :func:`sintercond.contacts.sphere_coupling.kept_green`). ``held``, ``held_axis``: as :func:`lifted_contacts`.
     """
     count = int(contacts.pairs.shape[0])
     slot = np.asarray(contacts.slot_pair)

@@ -69,8 +69,8 @@ class Conduction:
         that share a sphere coupled through its surface Green function, :mod:`sintercond.contacts.sphere_coupling`,
         neck temperatures massless, :mod:`sintercond.sim.terms.coupling`). ``"sphere"`` needs
         ``conductance="lifted"`` and the explicit integrator, on static contacts (necks that stay, or grow by
-        ``Sintering(shrinkage="independent")``) without conducting walls, mechanics or temperature tables (not
-        supported yet).
+        ``Sintering(shrinkage="independent")``), property tables allowed, without conducting walls or mechanics (not
+        supported yet). The measurements of k* (:mod:`sintercond.sim.steady`) take their own ``coupling=``.
     """
 
     law: str = "rojek"

@@ -29,7 +29,6 @@ from sintercond.laws.conductance import validate_pair_conductance_inputs
 from sintercond.laws.neck import neck_radius
 from sintercond.contacts.network import ContactTable, contact_pairs, ell_table, heat_inflow, laplacian, wall_inflow
 from sintercond.sim.thermal import held_solve
-from sintercond.contacts import sphere_coupling
 from sintercond.contacts.sphere_coupling import (
     BEYOND_DOMAIN,
     SphereGeometry,
@@ -39,6 +38,7 @@ from sintercond.contacts.sphere_coupling import (
     half_resistances,
     neck_flows,
     neck_system,
+    outside_domain,
     row_sums,
     slot_diagonal,
     slot_flows,
@@ -131,7 +131,7 @@ COUPLINGS = ("none", "sphere")
 
 def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", params=None, neck_model=None,
                               box=None, tol=1e-13, field=False, coupling="sphere", periodic_box=None,
-                              beyond_domain="refuse"):
+                              beyond_domain="refuse", domain=False):
     """Effective conductivity ``k*`` (W/(m K)) of a packing along ``axis``, from one steady solve.
 
     Definition: the box (default: the bounding box of the centres, widened on
@@ -150,8 +150,9 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     high; held spheres by mirror images); ``"none"`` sums each contact's pair law as if its neck were alone on its
     sphere (the pipe network of the peers). ``beyond_domain``: where two necks of a sphere are closer than their
     discs' angular half-widths (outside point coupling), ``"refuse"`` (default) raises ``ValueError`` naming them,
-    ``"isolated"`` keeps that sphere's pair-law halves, as the isolated network
-    (:func:`sintercond.contacts.sphere_coupling.spheres_beyond_domain` finds them). float64 by default; in float32
+    ``"isolated"`` keeps that sphere's pair-law halves, as the isolated network (``domain=True`` adds to the result,
+    last, the ``[n]`` bool mask of those particles: :func:`sintercond.contacts.sphere_coupling.outside_domain`; all
+    False with ``"none"``). float64 by default; in float32
     (x64 off) the coupled ``k*`` agrees with float64 to about 1e-5 relative (measured 4e-7 to 5e-6 on the FCC and
     BCC cells), with ``tol`` of 1e-6 or looser.
 
@@ -187,21 +188,24 @@ def steady_state_conductivity(centres, radii, kappa, axis=0, *, law="rojek", par
     radii = jnp.asarray(setup.radii)
     hot = jnp.asarray(setup.hot)
     fixed = jnp.asarray(setup.hot | setup.cold)
+    outside = np.zeros(n, bool)
     if coupling == "sphere":
         geometry = _sphere_geometry(setup, contacts.neighbors, contacts.table_neck, axis, beyond_domain)
-        q, temperature = _compiled(_compiled_coupled_solve, physics, tol)(geometry, radii, contacts, kappa,
-                                                                           law_params, fixed, hot)
+        q, temperature, outside = _compiled(_compiled_coupled_solve, physics, tol)(geometry, radii, contacts, kappa,
+                                                                                    law_params, fixed, hot)
     else:
         q, temperature = _compiled(_compiled_lifted_solve, physics, tol)(radii, contacts, kappa, law_params, fixed,
                                                                           hot)
     k_star = q * setup.length / setup.area
-    k_star = float(k_star) if concrete else k_star
-    if not field:
-        return k_star
-    held = setup.hot | setup.cold
-    label = connected_components(n, setup.pairs.i, setup.pairs.j)
-    reached = np.isin(label, label[held])
-    return k_star, jnp.where(jnp.asarray(reached), temperature, jnp.nan)
+    out = [float(k_star) if concrete else k_star]
+    if field:
+        held = setup.hot | setup.cold
+        label = connected_components(n, setup.pairs.i, setup.pairs.j)
+        reached = np.isin(label, label[held])
+        out.append(jnp.where(jnp.asarray(reached), temperature, jnp.nan))
+    if domain:
+        out.append(outside)
+    return out[0] if len(out) == 1 else tuple(out)
 
 
 def _compiled(program, physics, tol):
@@ -270,10 +274,11 @@ def _compiled_network_coupled_solve(tol):
 
 
 def _coupled_heat(geometry, half, radii, kappa, neck, fixed, hot, tol):
-    """``(Q, temperature [n])``: the heat leaving the ``hot`` spheres (held at 1, the rest of ``fixed`` at 0)."""
+    """``(Q, temperature [n], outside [n])``: the heat leaving the ``hot`` spheres (held at 1, the rest of ``fixed``
+    at 0), and the spheres outside the domain of point coupling at the necks ``neck``, kept at their halves."""
     blocks = coupled_blocks(geometry, half, radii, kappa, neck)
     temperature, outflow = coupled_steady_state(geometry, blocks, fixed, jnp.where(hot, 1.0, 0.0), tol=tol)
-    return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature
+    return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature, outside_domain(geometry, neck, radii)
 
 
 def _check_coupling(coupling, beyond_domain):
@@ -339,16 +344,6 @@ def _packing_contacts(centres, radii, law, neck_model, periodic_box):
     return physics, pairs, sim_module.lifted_contacts(physics, centres, radii, pairs=pairs)
 
 
-def spheres_beyond_domain(centres, radii, *, law="rojek", neck_model=None) -> np.ndarray:
-    """``[n]`` bool: the particles of a packing two of whose necks' discs overlap (under ``law``'s neck model),
-    which :func:`steady_state_conductivity` with ``coupling="sphere"`` refuses or, with
-    ``beyond_domain="isolated"``, leaves at the pair law's halves
-    (:func:`sintercond.contacts.sphere_coupling.spheres_beyond_domain`)."""
-    centres, radii = np.asarray(centres, np.float64), np.asarray(radii, np.float64)
-    _, _, contacts = _packing_contacts(centres, radii, law, neck_model, None)
-    return sphere_coupling.spheres_beyond_domain(centres, radii, np.asarray(contacts.neighbors), np.asarray(contacts.table_neck))
-
-
 def _across_axis(periodic_box, centres, radii, axis, box):
     """The periods of a packing periodic across ``axis`` (``[3]``, m), its entry along ``axis`` replaced by
     one no contact wraps around (four times the packing's extent); None stays None."""
@@ -397,7 +392,7 @@ def face_layer_box(centres, radii, axis):
 
 def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, axis=0, box=None, tol=1e-13, *,
                                       coupling="sphere", kappa=None, neck_radii=None, periodic_box=None,
-                                      beyond_domain="refuse"):
+                                      beyond_domain="refuse", domain=False):
     """``k*`` (W/(m K)) of a packing whose contacts' conductances are given, from one steady solve.
 
     As :func:`steady_state_conductivity` (same hot and cold sets, ``L`` and
@@ -421,6 +416,8 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
       periodic_box: ``[3]`` periods for minimum-image neck directions (``pairs`` found with the same box), as
         :func:`steady_state_conductivity`.
       beyond_domain: ``"refuse"`` or ``"isolated"``, as :func:`steady_state_conductivity`.
+      domain: return ``(k*, outside [n] bool)``, the particles outside the domain of point coupling (kept at their
+        halves; all False with ``"none"``), as :func:`steady_state_conductivity`.
     """
     _check_coupling(coupling, beyond_domain)
     centres = np.asarray(centres, dtype=np.float64)
@@ -458,9 +455,10 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
                                    held=held, axis=axis, periodic_box=box_periods, beyond_domain=beyond_domain)
         neck = jnp.concatenate([jnp.zeros((1,), pair_conductance.dtype),
                                 jnp.asarray(neck_radii, pair_conductance.dtype)])[slot]
-        q, _ = _compiled_network_coupled_solve(tol)(geometry, conductance, jnp.asarray(neighbors), jnp.asarray(radii),
-                                                    kappa, neck, jnp.asarray(hot | cold), hot_mask)
-        return q * length / area
+        q, _, outside = _compiled_network_coupled_solve(tol)(geometry, conductance, jnp.asarray(neighbors),
+                                                             jnp.asarray(radii), kappa, neck, jnp.asarray(hot | cold),
+                                                             hot_mask)
+        return (q * length / area, outside) if domain else q * length / area
     q, _ = _compiled_network_solve(tol)(jnp.asarray(neighbors, dtype=jnp.int32), conductance, jnp.asarray(hot | cold),
                                         hot_mask)
-    return q * length / area
+    return (q * length / area, np.zeros(len(radii), bool)) if domain else q * length / area
