@@ -3,6 +3,7 @@
 Usage: PYTHONPATH=. python benchmarks/coupling_cost.py [--sizes 1000 10000]
        PYTHONPATH=. python benchmarks/coupling_cost.py --cells     (the docs/laws.md table: cells vs full field)
        PYTHONPATH=. python benchmarks/coupling_cost.py --transient [--sizes 10000]   (the explicit step)
+       PYTHONPATH=. python benchmarks/coupling_cost.py --outputs [--sizes 100000]   (k* rows along a run)
 
 Beds: rolled random beds (``sintercond.beds.packing.powder_bed``, diameters 60-120, seed 0) of about the given
 number of spheres, densified by 4 % about the origin (sintered necks, 5-6 contacts a sphere), k* along z
@@ -17,6 +18,11 @@ network's stable step: the milliseconds a step of a compiled 200-step rollout ta
 3), the stable steps, and for ``"sphere"`` the memory of the per-sphere blocks ``C_s`` (packed by row width, what
 a step streams twice). The coupled step takes ``NECK_SWEEPS`` (1) conjugate-gradient sweeps on the neck balance a
 step (sintercond.sim.terms.coupling).
+
+``--outputs``: what a run's history pays per k* row on a static bed whose necks grow: k* from
+``steady_state_network_conductivity`` (the path of ``observe.sintered_conductivity``) on the same bed with its
+necks scaled by 1.0, 1.1, 1.2 (Rojek's law at unit conductivity), each network in turn; the first call builds
+(and, coupled, caches) the geometry and compiles, the later ones reuse them.
 """
 
 from __future__ import annotations
@@ -75,6 +81,27 @@ def time_bed(n_target):
         blocks_mb = 2 * len(radii) * width * width * 8 / 1e6 if coupling == "sphere" else 0.0
         rows.append((len(radii), 2 * len(pairs.i) / len(radii), width, coupling, times[0], times[1], iterations,
                      blocks_mb, k))
+    return rows
+
+
+def time_outputs(n_target):
+    """Rows ``(n, row, coupling, seconds, k*)`` of three k* rows of a static bed with growing necks."""
+    from sintercond.laws.neck import neck_radius
+
+    centres, radii = bed(n_target)
+    box = steady.face_layer_box(centres, radii, 2)
+    pairs = contact_pairs(centres, radii)
+    start = np.asarray(neck_radius(pairs.r_i, pairs.r_j, pairs.overlap))
+    rows = []
+    for k, scale in enumerate((1.0, 1.1, 1.2)):
+        a = scale * start
+        conductance = 1.064 * np.pi * a / 2  # Rojek's linear law, unit conductivity, equal halves in series
+        for coupling in ("sphere", "none"):
+            t0 = time.perf_counter()
+            value = steady.steady_state_network_conductivity(centres, radii, pairs, conductance, axis=2, box=box,
+                                                             coupling=coupling, kappa=1.0, neck_radii=a,
+                                                             beyond_domain="isolated")
+            rows.append((len(radii), k, coupling, time.perf_counter() - t0, float(value)))
     return rows
 
 
@@ -147,6 +174,7 @@ def main():
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000])
     parser.add_argument("--cells", action="store_true")
     parser.add_argument("--transient", action="store_true")
+    parser.add_argument("--outputs", action="store_true")
     args = parser.parse_args()
     if args.transient:
         print("| n | coupling | ms per step | stable step (s) | block memory (MiB) |")
@@ -154,6 +182,13 @@ def main():
         for n in args.sizes:
             for r in time_transient(n):
                 print(f"| {r[0]} | {r[1]} | {r[2]:.3f} | {r[3]:.4g} | {r[4]:.1f} |", flush=True)
+        return
+    if args.outputs:
+        print("| n | k* row | coupling | seconds | k* |")
+        print("|---|---|---|---|---|")
+        for n in args.sizes:
+            for r in time_outputs(n):
+                print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.3f} | {r[4]:.6g} |", flush=True)
         return
     if args.cells:
         sys.path.insert(0, str(ROOT / "benchmarks"))

@@ -379,6 +379,33 @@ def test_traced_necks_decide_the_domain_in_the_solve():
                                                             **common))(a)
 
 
+def test_the_cached_geometry_follows_the_packing():
+    """steady_state_network_conductivity with beyond_domain="isolated" keeps the last packing's geometry (a run's k*
+    rows): alternating two packings, and growing the necks of one, gives what a cold cache gives."""
+    from sintercond import sim
+    from sintercond.laws.neck import neck_radius
+
+    def k(block, scale):
+        centres, radii, _, kw = block
+        periods = np.array(kw["periodic_box"], float)
+        periods[0] = 1e3
+        pairs = contact_pairs(centres, radii, periodic_box=periods)
+        a = scale * np.asarray(neck_radius(pairs.r_i, pairs.r_j, pairs.overlap))
+        return float(steady_state_network_conductivity(centres, radii, pairs, 1.064 * np.pi * a / 2, box=kw["box"],
+                                                       periodic_box=periods, kappa=1.0, neck_radii=a,
+                                                       beyond_domain="isolated"))
+
+    blocks = [lattice_block("FCC", 0.22), lattice_block("BCC", 0.3)]
+    cold = []
+    for block, scale in ((0, 1.0), (1, 1.0), (0, 1.2), (1, 1.1)):
+        sim.steady._GEOMETRY.clear()
+        cold.append(k(blocks[block], scale))
+    warm = [k(blocks[block], scale) for block, scale in ((0, 1.0), (1, 1.0), (0, 1.2), (1, 1.1))]
+    warm += [k(blocks[1], 1.1)]  # the same packing again: from the cache
+    np.testing.assert_allclose(warm[:4], cold, rtol=1e-13)
+    assert warm[4] == pytest.approx(cold[3], rel=1e-13)
+
+
 def test_field_is_returned():
     """field=True with the coupling: held layers at 1 and 0, the SC field equal to the isolated network's."""
     centres, radii, _, kw = lattice_block("SC", 0.22)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import typing
 
 import jax
@@ -281,6 +282,25 @@ def _coupled_heat(geometry, half, radii, kappa, neck, fixed, hot, tol):
     return jnp.sum(jnp.where(hot, outflow, 0.0)), temperature, outside_domain(geometry, neck, radii)
 
 
+_GEOMETRY = {}
+"""The last geometry :func:`_network_geometry` built, by a digest of what it depends on: a run measures k* of the
+same static packing at every output, its necks growing (one entry: a geometry of 1e5 spheres is hundreds of MB)."""
+
+
+def _network_geometry(centres, radii, neighbors, pair_id, held, axis, periods):
+    """:func:`sintercond.contacts.sphere_coupling.sphere_geometry` with every pair a possible neck (the domain and
+    the necks that conduct are decided in the solve), cached while the packing stays."""
+    digest = hashlib.blake2b(digest_size=16)
+    for part in (centres, radii, neighbors, pair_id, held, np.asarray(axis), periods):
+        digest.update(np.ascontiguousarray(np.asarray(part if part is not None else np.nan, np.float64)).tobytes())
+    key = digest.digest()
+    if key not in _GEOMETRY:
+        _GEOMETRY.clear()
+        _GEOMETRY[key] = sphere_geometry(centres, radii, neighbors, pair_id, (pair_id > 0).astype(np.float64),
+                                         held=held, axis=axis, periodic_box=periods, beyond_domain="isolated")
+    return _GEOMETRY[key]
+
+
 def _check_coupling(coupling, beyond_domain):
     if not isinstance(coupling, str) or coupling not in COUPLINGS:
         raise ValueError(f"coupling must be one of {list(COUPLINGS)}; got {coupling!r}")
@@ -441,18 +461,18 @@ def steady_state_network_conductivity(centres, radii, pairs, pair_conductance, a
         if neck_radii is None:
             neck_radii = np.where(pairs.overlap > 0, np.asarray(neck_radius(pairs.r_i, pairs.r_j, pairs.overlap)),
                                   0.0)
-        if all_concrete(neck_radii):
-            host_neck = np.asarray(neck_radii, np.float64)
-        elif beyond_domain == "refuse":
+        held = np.where(hot, 1, np.where(cold, 2, 0))
+        box_periods = _across_axis(periodic_box, centres, radii, axis, box)
+        if beyond_domain == "isolated":  # every pair may carry a neck; which do, and the domain, in the solve
+            geometry = _network_geometry(centres, radii, neighbors, slot, held, axis, box_periods)
+        elif all_concrete(neck_radii):
+            geometry = sphere_geometry(centres, radii, neighbors, slot,
+                                       np.concatenate([[0.0], np.asarray(neck_radii, np.float64)])[slot], held=held,
+                                       axis=axis, periodic_box=box_periods)
+        else:
             raise ValueError("neck_radii are traced (under jit, vmap or grad): the domain of point coupling cannot "
                              "be checked on the host; pass beyond_domain='isolated' (a sphere whose necks' discs "
                              "overlap keeps the pair law's halves) or coupling='none'")
-        else:  # every pair may carry a neck; which do is decided from the traced necks in the solve
-            host_neck = np.ones(len(pairs.i))
-        held = np.where(hot, 1, np.where(cold, 2, 0))
-        box_periods = _across_axis(periodic_box, centres, radii, axis, box)
-        geometry = sphere_geometry(centres, radii, neighbors, slot, np.concatenate([[0.0], host_neck])[slot],
-                                   held=held, axis=axis, periodic_box=box_periods, beyond_domain=beyond_domain)
         neck = jnp.concatenate([jnp.zeros((1,), pair_conductance.dtype),
                                 jnp.asarray(neck_radii, pair_conductance.dtype)])[slot]
         q, _, outside = _compiled_network_coupled_solve(tol)(geometry, conductance, jnp.asarray(neighbors),
