@@ -404,6 +404,18 @@ def test_the_cached_geometry_follows_the_packing():
     warm += [k(blocks[1], 1.1)]  # the same packing again: from the cache
     np.testing.assert_allclose(warm[:4], cold, rtol=1e-13)
     assert warm[4] == pytest.approx(cold[3], rel=1e-13)
+    # built first inside a traced function (a fit's jit), the cached geometry serves the next trace too
+    centres, radii, _, kw = blocks[1]
+    periods = np.array(kw["periodic_box"], float)
+    periods[0] = 1e3
+    pairs = contact_pairs(centres, radii, periodic_box=periods)
+    a = 1.1 * np.asarray(neck_radius(pairs.r_i, pairs.r_j, pairs.overlap))
+    sim.steady._GEOMETRY.clear()
+    for _ in range(2):
+        traced = jax.jit(lambda n: steady_state_network_conductivity(
+            centres, radii, pairs, 1.064 * np.pi * n / 2, box=kw["box"], periodic_box=periods, kappa=1.0,
+            neck_radii=n, beyond_domain="isolated"))(a)
+        assert float(traced) == pytest.approx(cold[3], rel=1e-13)
 
 
 def test_field_is_returned():

@@ -296,8 +296,9 @@ def _network_geometry(centres, radii, neighbors, pair_id, held, axis, periods):
     key = digest.digest()
     if key not in _GEOMETRY:
         _GEOMETRY.clear()
-        _GEOMETRY[key] = sphere_geometry(centres, radii, neighbors, pair_id, (pair_id > 0).astype(np.float64),
-                                         held=held, axis=axis, periodic_box=periods, beyond_domain="isolated")
+        with jax.ensure_compile_time_eval():  # concrete arrays even while a caller is traced: the cache outlives it
+            _GEOMETRY[key] = sphere_geometry(centres, radii, neighbors, pair_id, (pair_id > 0).astype(np.float64),
+                                             held=held, axis=axis, periodic_box=periods, beyond_domain="isolated")
     return _GEOMETRY[key]
 
 
